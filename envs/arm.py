@@ -1,0 +1,248 @@
+"""The shared logic of the arm tasks (the paper's abstract `Env`): physics stepping with collision
+checks, action mapping, sampling of initial pose and target, observation assembly, metrics.
+
+Tasks (`envs.tasks`) subclass `ArmEnv` and add what is theirs (the obstacle of reach-avoid).
+Robots (`envs.robots`) supply model, limits, kinematics and collision geometry.
+
+One environment step = `config.substeps` MJX steps of 2 ms holding one position target per joint.
+MJX contacts are disabled: after every substep the robot's geom poses are checked analytically
+against the model's collision pairs, so a collision anywhere inside the step ends the episode.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from mujoco import mjx
+
+from envs import rewards, workspaces
+from envs.base import Env, State
+from envs.config import ReachConfig
+from envs.robots import Robot, first_valid
+
+LAST_DISTANCES = 10
+"""Steps over which the final distance to the target is averaged (paper: last 10 steps)."""
+
+METRICS = (
+    "distance", "distance_last10", "in_target", "target_reached", "steps_in_target", "times_left_target",
+    "self_collision", "obstacle_collision", "physics_nan", "reset_fallback",
+)
+"""Per-step metrics; on the last step of an episode they describe the whole episode."""
+
+
+def _take(tree, index):
+    return jax.tree.map(lambda x: x[index], tree)
+
+
+class ArmEnv(Env):
+    """A robot arm that must bring its end effector to a target. See `ReachConfig`."""
+
+    def __init__(self, robot: Robot, config: ReachConfig):
+        config.validate()
+        if config.target_sampling == "reachable" and config.workspace == "pandagym":
+            raise ValueError(
+                "target_sampling='reachable' is invalid with workspace='pandagym': random poses rarely put "
+                "the end effector in the 30 cm cube (and every point of it is reachable); allowed is "
+                "target_sampling='uniform' there.")
+        self.robot = robot
+        self.config = config
+        self.d_max = config.d_max if config.d_max is not None else robot.reach
+        self.dt = float(robot.mj_model.opt.timestep) * config.substeps
+        self._init_low, self._init_high = robot.joint_range(config.init_range)
+        self._obs_size = sum(self._observation_sizes()[p] for p in config.observation)
+
+    # ----------------------------------------------------------------------------------------
+    # Interface
+
+    @property
+    def observation_size(self) -> int:
+        return self._obs_size
+
+    @property
+    def action_size(self) -> int:
+        return self.robot.nq
+
+    def reset(self, rng: jax.Array) -> State:
+        # Physics and kinematics in full float32: TF32 matmuls on recent GPUs change MJX results.
+        with jax.default_matmul_precision("highest"):
+            return self._reset(rng)
+
+    def step(self, state: State, action: jax.Array) -> State:
+        with jax.default_matmul_precision("highest"):
+            return self._step(state, action)
+
+    def _reset(self, rng: jax.Array) -> State:
+        cfg, robot = self.config, self.robot
+        k_pose, k_target, k_task = jax.random.split(rng, 3)
+        qpos, kin, free = robot.sample_poses(k_pose, cfg.sampling_candidates, self._init_low, self._init_high)
+        index, pose_ok = first_valid(free)
+        q0, kin0 = qpos[index], _take(kin, index)
+        target, target_qpos, target_ok = self.sample_target(k_target)
+        task_info, task_ok = self.sample_task(k_task, kin0, target)
+
+        data = robot.data_template
+        mocap = data.mocap_pos.at[robot.target_mocap].set(target)
+        if "obstacle_pos" in task_info:
+            mocap = mocap.at[robot.obstacle_mocap].set(task_info["obstacle_pos"])
+        # Kinematic fields filled in, so the initial state can be rendered or inspected as is.
+        data = data.replace(qpos=q0, ctrl=q0, mocap_pos=mocap, xpos=kin0.xpos, geom_xpos=kin0.geom_xpos,
+                            geom_xmat=kin0.geom_xmat, site_xpos=kin0.site_xpos)
+        distance = jnp.linalg.norm(kin0.ee_pos - target)
+        fallback = 1.0 - (pose_ok & target_ok & task_ok).astype(jnp.float32)
+        info = {
+            "target_pos": target,
+            "target_qpos": target_qpos,
+            "prev_action": jnp.zeros(robot.nq),
+            "prev_ee_pos": kin0.ee_pos,
+            "in_target": jnp.zeros(()),
+            "reached": jnp.zeros(()),
+            "steps_in_target": jnp.zeros(()),
+            "times_left_target": jnp.zeros(()),
+            "recent_distances": jnp.full((LAST_DISTANCES,), distance),
+            "num_steps": jnp.zeros((), jnp.int32),
+            "reset_fallback": fallback,
+            **task_info,
+        }
+        obs = self.observation(data, kin0.xpos, kin0.ee_pos, info)
+        zero = jnp.zeros(())
+        metrics = {name: zero for name in METRICS}
+        metrics.update(distance=distance, distance_last10=distance, reset_fallback=fallback)
+        return State(pipeline_state=data, obs=obs, reward=zero, done=zero, metrics=metrics, info=info)
+
+    def _step(self, state: State, action: jax.Array) -> State:
+        cfg, robot = self.config, self.robot
+        action = jnp.clip(action, -1.0, 1.0)
+        data = state.pipeline_state.replace(ctrl=self.action_to_ctrl(action, state.pipeline_state.qpos))
+
+        def substep(carry, _):
+            data, closest = carry
+            data = mjx.step(robot.mjx_model, data)
+            # geom poses of the configuration this substep started from
+            closest = jnp.minimum(closest, self.collision_distances(data.geom_xpos, data.geom_xmat, state.info))
+            return (data, closest), None
+
+        (data, closest), _ = jax.lax.scan(substep, (data, jnp.full(2, jnp.inf)), length=cfg.substeps)
+        # Poses of the final configuration (mjx.step computed those of the last substep's start).
+        kin = robot.kinematics(data.qpos)
+        data = data.replace(xpos=kin.xpos, geom_xpos=kin.geom_xpos, geom_xmat=kin.geom_xmat, site_xpos=kin.site_xpos)
+        closest = jnp.minimum(closest, self.collision_distances(data.geom_xpos, data.geom_xmat, state.info))
+
+        nan = ~(jnp.all(jnp.isfinite(data.qpos)) & jnp.all(jnp.isfinite(data.qvel)))
+        self_collision = (closest[0] < 0) & ~nan
+        obstacle_collision = (closest[1] < 0) & ~nan
+        collided = self_collision | obstacle_collision
+        failed = collided | nan
+
+        info = dict(state.info)
+        ee = data.site_xpos[robot.ee_site]
+        distance = jnp.linalg.norm(ee - info["target_pos"])
+        in_target = (distance < cfg.target_radius) & ~failed
+        reached = jnp.maximum(info["reached"], in_target)
+        left = (info["in_target"] > 0) & ~in_target & ~failed
+        recent = jnp.roll(info["recent_distances"], 1).at[0].set(distance)
+        num_steps = info["num_steps"] + 1
+
+        reward = self.reward(data, distance, in_target.astype(jnp.float32), info)
+        reward = jnp.where(failed, -cfg.collision_penalty * collided, reward)
+        done = failed | ((cfg.success == "reach_and_terminate") & in_target)
+
+        info.update(
+            prev_action=action,
+            prev_ee_pos=jnp.where(nan, info["prev_ee_pos"], ee),
+            in_target=in_target.astype(jnp.float32),
+            reached=reached,
+            steps_in_target=info["steps_in_target"] + in_target,
+            times_left_target=info["times_left_target"] + left,
+            recent_distances=recent,
+            num_steps=num_steps,
+        )
+        obs = self.observation(data, data.xpos, ee, {**info, "prev_ee_pos": state.info["prev_ee_pos"]})
+        obs = jnp.where(nan, state.obs, obs)  # NaN never reaches an observation
+        count = jnp.minimum(num_steps, LAST_DISTANCES)
+        last10 = jnp.sum(jnp.where(jnp.arange(LAST_DISTANCES) < count, recent, 0.0)) / count
+        metrics = {
+            **state.metrics,  # keys added by outer wrappers (Brax adds some) are kept
+            "distance": distance,
+            "distance_last10": last10,
+            "in_target": in_target.astype(jnp.float32),
+            "target_reached": reached * ~failed,
+            "steps_in_target": info["steps_in_target"],
+            "times_left_target": info["times_left_target"],
+            "self_collision": self_collision.astype(jnp.float32),
+            "obstacle_collision": obstacle_collision.astype(jnp.float32),
+            "physics_nan": nan.astype(jnp.float32),
+            "reset_fallback": info["reset_fallback"],
+        }
+        return state.replace(pipeline_state=data, obs=obs, reward=reward, done=done.astype(jnp.float32),
+                             metrics=metrics, info=info)
+
+    # ----------------------------------------------------------------------------------------
+    # Pieces a task or a researcher may change
+
+    def action_to_ctrl(self, action: jax.Array, qpos: jax.Array) -> jax.Array:
+        """Joint position targets from an action in [-1, 1], clipped to the joint range."""
+        low, high = self.robot.joint_low, self.robot.joint_high
+        if self.config.action == "absolute":
+            target = low + 0.5 * (action + 1.0) * (high - low)
+        else:
+            target = qpos + self.config.action_scale * action
+        return jnp.clip(target, low, high)
+
+    def sample_target(self, key):
+        """Target position, the joint configuration that reaches it (zeros if unknown) and whether
+        sampling succeeded."""
+        cfg, robot = self.config, self.robot
+        center = robot.workspace_center
+        if cfg.target_sampling == "uniform":
+            points, valid = workspaces.sample_uniform(cfg.workspace, key, cfg.sampling_candidates, center, robot.reach)
+            index, ok = first_valid(valid)
+            return points[index], jnp.zeros(robot.nq), ok
+        # Reachable: the end effector of a random collision-free pose over the full joint range.
+        qpos, kin, free = robot.sample_poses(key, cfg.sampling_candidates, robot.joint_low, robot.joint_high)
+        valid = free & workspaces.contains(cfg.workspace, kin.ee_pos, center, robot.reach)
+        index, ok = first_valid(valid)
+        return kin.ee_pos[index], qpos[index], ok
+
+    def sample_task(self, key, kin0, target):
+        """Task-specific episode data (the reach task has none) and whether sampling succeeded."""
+        return {}, jnp.array(True)
+
+    def collision_distances(self, geom_xpos, geom_xmat, info) -> jax.Array:
+        """Closest signed distance of (self-collision pairs, obstacle pairs); < 0 is a collision."""
+        self_min = jnp.min(self.robot.self_distances(geom_xpos, geom_xmat))
+        return jnp.stack([self_min, jnp.inf])
+
+    def reward(self, data, distance, in_target, info) -> jax.Array:
+        """Reward of a step that did not collide."""
+        cfg = self.config
+        if cfg.reward == "sparse":
+            return rewards.sparse(in_target, cfg.w_reach)
+        if cfg.reward == "semi_sparse":
+            base = rewards.semi_sparse(in_target, distance, cfg.w_reach, cfg.w_dist, self.d_max)
+        else:
+            base = rewards.dense(distance, cfg.w_dist, cfg.alpha)
+        penalty = rewards.l2_penalty(data.qvel, cfg.w_joint_vel) + rewards.l2_penalty(data.qacc, cfg.w_joint_acc)
+        return base - penalty
+
+    def _observation_sizes(self) -> dict[str, int]:
+        n = self.robot.nq
+        return {"joint_pos": n, "joint_vel": n, "joint_acc": n, "ee_pos": 3, "ee_vel": 3, "target_pos": 3,
+                "ee_to_target": 3, "prev_action": n}
+
+    def observation_parts(self, data, xpos, ee, info) -> dict:
+        """Functions computing each observation part (only the configured ones are called)."""
+        return {
+            "joint_pos": lambda: data.qpos,
+            "joint_vel": lambda: data.qvel,
+            "joint_acc": lambda: data.qacc,
+            "ee_pos": lambda: ee,
+            "ee_vel": lambda: (ee - info["prev_ee_pos"]) / self.dt,
+            "target_pos": lambda: info["target_pos"],
+            "ee_to_target": lambda: info["target_pos"] - ee,
+            "prev_action": lambda: info["prev_action"],
+        }
+
+    def observation(self, data, xpos, ee, info) -> jax.Array:
+        parts = self.observation_parts(data, xpos, ee, info)
+        return jnp.concatenate([jnp.ravel(parts[p]()) for p in self.config.observation]).astype(jnp.float32)

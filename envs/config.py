@@ -1,0 +1,171 @@
+"""Options of the reach and reach-avoid tasks: one frozen dataclass each, defaults = the paper's
+best configuration for that task (paper sections "Experiments" and "Results").
+
+`validate()` runs at `envs.make()`, before anything is traced, and raises a `ValueError` naming
+the field, the value and what is allowed.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Literal, Optional
+
+ACTIONS = ("relative", "absolute")
+REWARDS = ("sparse", "semi_sparse", "dense")
+SUCCESS_MODES = ("reach_and_stay", "reach_and_terminate")
+WORKSPACES = ("full", "front", "upper", "pandagym")
+TARGET_SAMPLINGS = ("reachable", "uniform")
+INIT_RANGES = ("full", "limited")
+LINK_DISTANCES = ("origin", "surface")
+REACH_OBSERVATIONS = (
+    "joint_pos", "joint_vel", "joint_acc", "ee_pos", "ee_vel", "target_pos", "ee_to_target", "prev_action",
+)
+OBSTACLE_OBSERVATIONS = ("obstacle_pos", "obstacle_size", "link_obstacle_dist")
+
+
+def _choice(name, value, allowed):
+    if value not in allowed:
+        raise ValueError(f"{name}={value!r} is invalid: allowed are {', '.join(map(repr, allowed))}.")
+
+
+def _positive(name, value, strict=True):
+    ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+    if not ok or (value <= 0 if strict else value < 0):
+        raise ValueError(f"{name}={value!r} is invalid: allowed is a finite number {'>' if strict else '>='} 0.")
+
+
+def _integer(name, value, minimum):
+    if not isinstance(value, int) or isinstance(value, bool) or value < minimum:
+        raise ValueError(f"{name}={value!r} is invalid: allowed is an integer >= {minimum}.")
+
+
+@dataclasses.dataclass(frozen=True)
+class ReachConfig:
+    """Reach task: move the end effector to a sampled target and stay there."""
+
+    action: Literal["relative", "absolute"] = "relative"
+    """Joint position control: `relative` adds `action_scale * action` to the current joint
+    positions; `absolute` maps [-1, 1] onto the joint range. Targets are clipped to the range."""
+    action_scale: float = 0.1
+    """Radians per step commanded by a relative action of magnitude 1 (ignored for absolute)."""
+    observation: tuple[str, ...] = ("joint_pos", "ee_pos", "target_pos", "ee_to_target")
+    """Observation parts, concatenated in this order. Reach: joint_pos, joint_vel, joint_acc,
+    ee_pos, ee_vel, target_pos, ee_to_target, prev_action; reach-avoid adds obstacle_pos,
+    obstacle_size, link_obstacle_dist."""
+    reward: Literal["sparse", "semi_sparse", "dense"] = "dense"
+    """Reward formulation: sparse (+1 in target), semi_sparse (paper eq. 1), dense (paper eq. 2)."""
+    w_reach: float = 1.0
+    """Weight of the in-target bonus (sparse and semi_sparse)."""
+    w_dist: float = 1.0
+    """Weight of the distance term (semi_sparse and dense)."""
+    d_max: Optional[float] = None
+    """Maximum reach in the semi_sparse term w_dist * (2 d_max - d); None: the robot's reach."""
+    alpha: float = 20.0
+    """Sharpness of the dense reward w_dist * exp(-alpha * d)."""
+    w_joint_vel: float = 0.0
+    """Penalty weight on the L2 norm of the joint velocities (semi_sparse and dense)."""
+    w_joint_acc: float = 0.0
+    """Penalty weight on the L2 norm of the joint accelerations (semi_sparse and dense)."""
+    collision_penalty: float = 0.0
+    """Reward subtracted on the step that collides (the paper uses 0: termination alone)."""
+    target_radius: float = 0.01
+    """The end effector is in the target when closer than this to its centre (m)."""
+    success: Literal["reach_and_stay", "reach_and_terminate"] = "reach_and_stay"
+    """reach_and_stay continues after reaching; reach_and_terminate ends the episode there."""
+    workspace: Literal["full", "front", "upper", "pandagym"] = "full"
+    """Where targets lie: full (ball of the robot's reach around the shoulder), front (its x >= 0
+    half), upper (its z >= 0 part, above the base plane), pandagym (PandaGym's 30 cm cube)."""
+    target_sampling: Literal["reachable", "uniform"] = "reachable"
+    """reachable: end effector of a random collision-free pose inside the workspace; uniform:
+    uniform in the workspace volume (not every such point is reachable)."""
+    init_range: Literal["full", "limited"] = "full"
+    """Initial joint positions uniform over the full joint range or the robot's limited range
+    (UR5e: 360 instead of 720 degrees); colliding poses are rejected."""
+    episode_length: int = 125
+    """Steps per episode before truncation (125 x 40 ms = 5 s)."""
+    substeps: int = 20
+    """Physics steps of 2 ms per environment step."""
+    gravity_compensation: bool = False
+    """Compensate gravity in the joints as the real arms' controllers do (not in the paper)."""
+    sampling_candidates: int = 32
+    """Candidates drawn at once for each rejection-sampled quantity (pose, target, obstacle); a
+    reset that finds none valid is counted in the `reset_fallback` metric."""
+
+    @property
+    def task(self) -> str:
+        return "reach"
+
+    def allowed_observations(self) -> tuple[str, ...]:
+        return REACH_OBSERVATIONS
+
+    def validate(self) -> None:
+        """Raises `ValueError` on an impossible or unknown value."""
+        _choice("action", self.action, ACTIONS)
+        _choice("reward", self.reward, REWARDS)
+        _choice("success", self.success, SUCCESS_MODES)
+        _choice("workspace", self.workspace, WORKSPACES)
+        _choice("target_sampling", self.target_sampling, TARGET_SAMPLINGS)
+        _choice("init_range", self.init_range, INIT_RANGES)
+        if isinstance(self.observation, str) or not isinstance(self.observation, (tuple, list)) or not self.observation:
+            raise ValueError(f"observation={self.observation!r} is invalid: allowed is a non-empty tuple of "
+                             f"{', '.join(self.allowed_observations())}.")
+        for part in self.observation:
+            if part not in self.allowed_observations():
+                extra = " (obstacle parts need a reach-avoid env)" if part in OBSTACLE_OBSERVATIONS else ""
+                raise ValueError(f"observation part {part!r} is invalid for the {self.task} task{extra}: "
+                                 f"allowed are {', '.join(self.allowed_observations())}.")
+        if len(set(self.observation)) != len(self.observation):
+            raise ValueError(f"observation={self.observation!r} is invalid: a part appears twice.")
+        for name in ("action_scale", "alpha", "target_radius"):
+            _positive(name, getattr(self, name))
+        for name in ("w_reach", "w_dist", "w_joint_vel", "w_joint_acc", "collision_penalty"):
+            _positive(name, getattr(self, name), strict=False)
+        if self.d_max is not None:
+            _positive("d_max", self.d_max)
+        _integer("episode_length", self.episode_length, 1)
+        _integer("substeps", self.substeps, 1)
+        _integer("sampling_candidates", self.sampling_candidates, 1)
+        if not isinstance(self.gravity_compensation, bool):
+            raise ValueError(f"gravity_compensation={self.gravity_compensation!r} is invalid: allowed are True, False.")
+
+
+@dataclasses.dataclass(frozen=True)
+class ReachAvoidConfig(ReachConfig):
+    """Reach-avoid task: reach the target without touching a static spherical obstacle."""
+
+    observation: tuple[str, ...] = ("joint_pos", "ee_pos", "target_pos", "ee_to_target", "obstacle_pos",
+                                    "link_obstacle_dist")
+    """Observation parts, concatenated in this order (see ReachConfig); the paper found the
+    link-to-obstacle distances critical and the obstacle size useless at a fixed size."""
+    reward: Literal["sparse", "semi_sparse", "dense"] = "semi_sparse"
+    """Reward formulation; semi_sparse was slightly safer than dense on reach-avoid (paper)."""
+    target_radius: float = 0.02
+    """The end effector is in the target when closer than this to its centre (m)."""
+    obstacle_radius: float = 0.1
+    """Radius of the spherical obstacle (m); the paper evaluates 0.025 to 0.3."""
+    obstacle_region: float = 0.6
+    """Obstacles are sampled uniformly in the cube [-obstacle_region, obstacle_region]^3 around the
+    robot base (paper: a 1.2 m cube), rejecting ones that touch the initial pose or the target."""
+    w_obst: float = 0.1
+    """Weight of the link-proximity penalty w_obst * sum_i max(0, 1 - d_i / obstacle_tau) (eq. 3)."""
+    obstacle_tau: float = 0.1
+    """Distance (m) under which a link's proximity to the obstacle is penalised."""
+    link_distance: Literal["origin", "surface"] = "origin"
+    """How d_i is measured: origin (paper: link frame origin to the obstacle centre, minus the
+    radius) or surface (exact distance between the link's capsules and the obstacle)."""
+
+    @property
+    def task(self) -> str:
+        return "reach-avoid"
+
+    def allowed_observations(self) -> tuple[str, ...]:
+        return REACH_OBSERVATIONS + OBSTACLE_OBSERVATIONS
+
+    def validate(self) -> None:
+        super().validate()
+        _positive("obstacle_radius", self.obstacle_radius)
+        _positive("obstacle_region", self.obstacle_region)
+        _positive("w_obst", self.w_obst, strict=False)
+        _positive("obstacle_tau", self.obstacle_tau)
+        _choice("link_distance", self.link_distance, LINK_DISTANCES)

@@ -1,0 +1,78 @@
+"""Environment names and `make`.
+
+`make(name, **options)` builds the config of that environment with `options` replacing its
+defaults, validates it (a `ValueError` names the field, the value and what is allowed) and returns
+the unwrapped, single environment.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Callable
+
+from envs.base import Env
+
+
+@dataclasses.dataclass(frozen=True)
+class EnvSpec:
+    """How to build one registered environment."""
+
+    default_config: Callable[[], object]
+    """Returns the environment's default config (a frozen dataclass)."""
+    build: Callable[[object], Env]
+    """Builds the environment from a validated config."""
+    description: str
+    """One line shown by `envs.names()` users and error messages."""
+
+
+_REGISTRY: dict[str, EnvSpec] = {}
+
+
+def register(name: str, spec: EnvSpec) -> None:
+    """Adds an environment under `name` (later registrations replace earlier ones)."""
+    _REGISTRY[name] = spec
+
+
+def names() -> list[str]:
+    """The registered environment names."""
+    return sorted(_REGISTRY)
+
+
+def spec(name: str) -> EnvSpec:
+    """The registry entry of `name`; a `ValueError` lists the valid names otherwise."""
+    if name not in _REGISTRY:
+        raise ValueError(f"env={name!r} is unknown: allowed are {', '.join(names())}.")
+    return _REGISTRY[name]
+
+
+def default_config(name: str):
+    """The default config of environment `name`."""
+    return spec(name).default_config()
+
+
+def make_config(name: str, **options):
+    """The default config of `name` with `options` replacing fields; validated."""
+    config = default_config(name)
+    fields = {f.name for f in dataclasses.fields(config)}
+    unknown = sorted(set(options) - fields)
+    if unknown:
+        raise ValueError(
+            f"option {unknown[0]!r} does not exist for env {name!r}: allowed are {', '.join(sorted(fields))}."
+        )
+    config = dataclasses.replace(config, **options)
+    config.validate()
+    return config
+
+
+def make(name: str, **options) -> Env:
+    """Builds environment `name` with config fields overridden by `options`.
+
+    Example: `envs.make("ur5e-reach-avoid", obstacle_radius=0.2, workspace="front")`.
+    """
+    return spec(name).build(make_config(name, **options))
+
+
+def from_config(name: str, config) -> Env:
+    """Builds environment `name` from a complete config (for example one stored in a checkpoint)."""
+    config.validate()
+    return spec(name).build(config)
