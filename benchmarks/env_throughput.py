@@ -1,0 +1,153 @@
+"""Environment throughput: env steps/s with random actions and auto-resets, next to the MJX
+physics ceiling of the same robot model measured in the same run.
+
+    python benchmarks/env_throughput.py --out results/env_throughput   # on the GPU machine
+
+For each environment and batch size, one jitted `lax.scan` runs `--steps` environment steps of
+the fully wrapped environment (episode limit, fresh auto-reset, vmap) with uniform random
+actions. The ceiling is the robot's own MJCF (contacts disabled, as the envs use it) stepped with
+`mjx.step` in a `lax.scan`, `substeps` physics steps per env step with random controls: no
+policy, no collision checks, no observations, rewards or resets. Timing: compile and one warm-up
+call first, then the median of `--repeats` timed calls, each ended by `block_until_ready`.
+Writes `<out>.json` (every number plus device, versions, command) and `<out>.md` (a table).
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import platform
+import statistics
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import jax  # noqa: E402
+import jax.numpy as jnp  # noqa: E402
+import mujoco  # noqa: E402
+from mujoco import mjx  # noqa: E402
+
+import envs  # noqa: E402
+from envs.robots import ROBOTS  # noqa: E402
+
+
+def time_calls(fn, args, repeats):
+    jax.block_until_ready(fn(*args))  # compile + warm-up
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        jax.block_until_ready(fn(*args))
+        times.append(time.perf_counter() - start)
+    return statistics.median(times)
+
+
+def env_rate(name, num_envs, steps, repeats, substeps, auto_reset=True):
+    env = envs.make(name, substeps=substeps)
+    batched = envs.wrap(env) if auto_reset else envs.wrappers.VmapWrapper(env)
+    state = jax.jit(batched.reset)(jax.random.split(jax.random.PRNGKey(0), num_envs))
+
+    @jax.jit
+    def rollout(state, key):
+        def body(state, key):
+            action = jax.random.uniform(key, (num_envs, env.action_size), minval=-1.0, maxval=1.0)
+            return batched.step(state, action), None
+
+        state, _ = jax.lax.scan(body, state, jax.random.split(key, steps))
+        return state
+
+    seconds = time_calls(rollout, (state, jax.random.PRNGKey(1)), repeats)
+    return num_envs * steps / seconds
+
+
+def ceiling_rate(robot_name, num_envs, steps, repeats, substeps):
+    robot = ROBOTS[robot_name]()
+    model = robot.mjx_model
+    low, high = robot.joint_low, robot.joint_high
+
+    def start(key):
+        q = jax.random.uniform(key, (robot.nq,), minval=low, maxval=high)
+        return robot.data_template.replace(qpos=q, ctrl=q)
+
+    data = jax.jit(jax.vmap(start))(jax.random.split(jax.random.PRNGKey(0), num_envs))
+
+    @jax.jit
+    def rollout(data, key):
+        def env_step(data, key):
+            ctrl = jax.random.uniform(key, (num_envs, robot.nq), minval=low, maxval=high)
+            data = data.replace(ctrl=ctrl)
+
+            def physics(d, _):
+                return jax.vmap(mjx.step, in_axes=(None, 0))(model, d), None
+
+            data, _ = jax.lax.scan(physics, data, length=substeps)
+            return data, None
+
+        with jax.default_matmul_precision("highest"):
+            data, _ = jax.lax.scan(env_step, data, jax.random.split(key, steps))
+        return data
+
+    seconds = time_calls(rollout, (data, jax.random.PRNGKey(1)), repeats)
+    return num_envs * steps / seconds
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--envs", nargs="+", default=["ur5e-reach", "ur5e-reach-avoid", "panda-reach", "panda-reach-avoid"])
+    parser.add_argument("--sizes", nargs="+", type=int, default=[1024, 8192, 32768])
+    parser.add_argument("--steps", type=int, default=100, help="env steps per timed call")
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--substeps", type=int, default=20)
+    parser.add_argument("--no-reset-variant", action="store_true",
+                        help="also time each env without auto-reset (shows what resets cost)")
+    parser.add_argument("--out", default="results/env_throughput", help="output path without extension")
+    args = parser.parse_args()
+
+    device = jax.devices()[0]
+    rows = []
+    robots = sorted({name.split("-")[0] for name in args.envs})
+    for size in args.sizes:
+        ceilings = {}
+        for robot in robots:
+            ceilings[robot] = ceiling_rate(robot, size, args.steps, args.repeats, args.substeps)
+            print(f"{size:>6} envs  {robot:<18} ceiling {ceilings[robot]:>12,.0f} steps/s", flush=True)
+        for name in args.envs:
+            rate = env_rate(name, size, args.steps, args.repeats, args.substeps)
+            row = {"env": name, "num_envs": size, "steps_per_s": rate,
+                   "ceiling_steps_per_s": ceilings[name.split("-")[0]],
+                   "fraction_of_ceiling": rate / ceilings[name.split("-")[0]]}
+            if args.no_reset_variant:
+                row["no_reset_steps_per_s"] = env_rate(name, size, args.steps, args.repeats, args.substeps, auto_reset=False)
+            rows.append(row)
+            print(f"{size:>6} envs  {name:<18} {rate:>12,.0f} steps/s  ({row['fraction_of_ceiling']:.0%} of ceiling)"
+                  + (f"  no reset {row['no_reset_steps_per_s']:,.0f}" if args.no_reset_variant else ""), flush=True)
+
+    meta = {
+        "device": device.device_kind, "platform": device.platform, "num_devices": jax.device_count(),
+        "jax": jax.__version__, "mujoco": mujoco.__version__, "python": platform.python_version(),
+        "date": datetime.date.today().isoformat(), "command": " ".join(["python"] + sys.argv),
+        "substeps": args.substeps, "steps_per_call": args.steps, "repeats": args.repeats,
+    }
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.with_suffix(".json").write_text(json.dumps({"meta": meta, "rows": rows}, indent=2))
+    extra = " no auto-reset |" if args.no_reset_variant else ""
+    lines = [
+        f"# Environment throughput ({meta['device']}, {meta['date']})", "",
+        f"Command: `{meta['command']}`  ",
+        f"jax {meta['jax']}, mujoco {meta['mujoco']}, {args.substeps} substeps of 2 ms per env step, random actions,"
+        " auto-reset with fresh sampling. Ceiling: the same robot model, raw `mjx.step` in `lax.scan`, no env logic.", "",
+        f"| env | envs | env steps/s | ceiling steps/s | fraction |{extra}",
+        "|---|---:|---:|---:|---:|" + ("---:|" if extra else ""),
+    ]
+    for r in rows:
+        lines.append(f"| {r['env']} | {r['num_envs']:,} | {r['steps_per_s']:,.0f} | {r['ceiling_steps_per_s']:,.0f} | "
+                     f"{r['fraction_of_ceiling']:.0%} |" + (f" {r['no_reset_steps_per_s']:,.0f} |" if extra else ""))
+    out.with_suffix(".md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+
+
+if __name__ == "__main__":
+    main()
