@@ -1,0 +1,117 @@
+"""Orbax checkpoints of the full training state plus the run's config as JSON.
+
+Layout under `<logdir>/checkpoints/<env_steps>/`: `state/` (the whole seed-batched `TrainState`:
+parameters, optimiser and normaliser state, loop and env RNG, env states, update count and, for
+SAC, the replay buffer, so a resumed run continues bit-for-bit), `config/` (the config JSON) and,
+for the final checkpoint, `eval.json` (evaluation metrics). Saves are synchronous: the compiled
+chunk donates its input state, so the arrays must be written before the next chunk runs.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import re
+import types
+import typing
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import orbax.checkpoint as ocp
+
+
+def config_to_dict(config) -> dict:
+    """A JSON-ready dict of a (nested) frozen-dataclass config."""
+    return json.loads(json.dumps(dataclasses.asdict(config)))
+
+
+def dataclass_from_dict(cls, data: dict):
+    """Inverse of `config_to_dict` for one dataclass type: nested dataclasses and tuples are rebuilt
+    from the field annotations; unknown keys raise a ValueError naming them."""
+    hints = typing.get_type_hints(cls)
+    names = {f.name for f in dataclasses.fields(cls)}
+    unknown = sorted(set(data) - names)
+    if unknown:
+        raise ValueError(f"config field {unknown[0]!r} does not exist in {cls.__name__}: allowed are {', '.join(sorted(names))}.")
+    kwargs = {}
+    for name, value in data.items():
+        kwargs[name] = _coerce(hints.get(name, Any), value)
+    return cls(**kwargs)
+
+
+def _coerce(tp, value):
+    origin = typing.get_origin(tp)
+    if dataclasses.is_dataclass(tp) and isinstance(value, dict):
+        return dataclass_from_dict(tp, value)
+    if origin is tuple and isinstance(value, list):
+        args = typing.get_args(tp)
+        inner = args[0] if args else Any
+        return tuple(_coerce(inner, v) for v in value)
+    if origin in (typing.Union, types.UnionType):
+        for arg in typing.get_args(tp):
+            if arg is type(None) and value is None:
+                return None
+        for arg in typing.get_args(tp):
+            if arg is not type(None):
+                return _coerce(arg, value)
+    if tp is float and isinstance(value, int):
+        return float(value)
+    return value
+
+
+def _nonempty_leaves(tree) -> dict:
+    """{name: leaf} of the leaves with at least one element, named by position and tree path.
+
+    Orbax refuses zero-size arrays, and `mjx.Data` has several (e.g. `act` of a model without
+    actuator state); they carry no information and are rebuilt from the abstract state on restore.
+    """
+    out = {}
+    for i, (path, leaf) in enumerate(jax.tree_util.tree_flatten_with_path(tree)[0]):
+        if leaf.size:
+            out[f"{i:05d}{re.sub(r'[^A-Za-z0-9]+', '_', jax.tree_util.keystr(path))}"] = leaf
+    return out
+
+
+class Checkpointer:
+    """Saves and restores `TrainState`s under `<directory>`, keeping the newest `keep`."""
+
+    def __init__(self, directory: str, keep: int = 3):
+        self.directory = os.path.abspath(directory)
+        options = ocp.CheckpointManagerOptions(max_to_keep=keep, create=True, enable_async_checkpointing=False)
+        self.manager = ocp.CheckpointManager(self.directory, options=options, item_names=("state", "config"))
+
+    def latest_step(self) -> int | None:
+        return self.manager.latest_step()
+
+    def save(self, step: int, state, config_dict: dict) -> None:
+        self.manager.save(
+            step, args=ocp.args.Composite(state=ocp.args.StandardSave(_nonempty_leaves(state)),
+                                          config=ocp.args.JsonSave(config_dict)),
+            force=True,
+        )
+        self.manager.wait_until_finished()
+
+    def restore(self, step: int, abstract_state):
+        """The state saved at `step`, placed with the shardings of `abstract_state`."""
+        restored = self.manager.restore(
+            step, args=ocp.args.Composite(state=ocp.args.StandardRestore(_nonempty_leaves(abstract_state)),
+                                          config=ocp.args.JsonRestore())
+        )
+        saved = restored.state
+        leaves, treedef = jax.tree_util.tree_flatten_with_path(abstract_state)
+        names = list(_nonempty_leaves(abstract_state))
+        it = iter(names)
+        state = [saved[next(it)] if a.size else jnp.zeros(a.shape, a.dtype, device=getattr(a, "sharding", None))
+                 for _, a in leaves]
+        return jax.tree_util.tree_unflatten(treedef, state), restored.config
+
+    def restore_config(self, step: int) -> dict:
+        return self.manager.restore(step, args=ocp.args.Composite(config=ocp.args.JsonRestore())).config
+
+    def step_dir(self, step: int) -> str:
+        return os.path.join(self.directory, str(step))
+
+    def close(self) -> None:
+        self.manager.close()

@@ -1,0 +1,294 @@
+"""The training loop shared by PPO and SAC: one compiled chunk of updates, vmapped over seeds and
+split over devices.
+
+A chunk runs `n` updates (`n` is a traced scalar, so chunks of any length share one compiled
+program). Each update
+
+1. steps the batched environment `learner.steps_per_update` times (every environment, in
+   `lax.scan`), asking `learner.act` for actions and recording `Transition`s, and
+2. hands the `(steps_per_update, local_envs)` transitions to `learner.update`.
+
+A learner is any object with this interface (see `Learner`): `init`, `act`, `update`, `policy`,
+`steps_per_update` and `env_axes`. Everything a learner needs about devices comes in `Parallel`.
+
+Data parallelism: the environments are split evenly over the devices (`shard_map` over a 1-D mesh
+named "dev"); parameters are replicated and learners average gradients and normaliser moments with
+`Parallel.pmean` / `psum`. Random numbers are drawn per *global* environment index, so a run on two
+devices reproduces the one-device run up to float summation order. With one device no `shard_map`
+is built and every collective is a no-op.
+
+Seeds: every leaf of `TrainState` carries a leading seed axis and the chunk is `jax.vmap`ped over it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any, NamedTuple, Protocol
+
+import jax
+import jax.numpy as jnp
+from flax import struct
+from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
+
+AXIS = "dev"
+
+
+class Transition(NamedTuple):
+    """One environment step of every local environment (leading axes: time, env)."""
+
+    obs: jax.Array
+    action: jax.Array
+    """The action sent to the environment, in [-1, 1]."""
+    reward: jax.Array
+    termination: jax.Array
+    """1.0 where the episode really ended (no bootstrapping from `next_obs`)."""
+    truncation: jax.Array
+    """1.0 where the time limit ended the episode (bootstrap from `next_obs`)."""
+    next_obs: jax.Array
+    """Observation after the step; on a done step the *terminal* one (`info["final_obs"]`), not the
+    first observation of the next episode."""
+    extras: dict
+    """Whatever `learner.act` returned besides the action (e.g. PPO's log-prob)."""
+
+    @property
+    def done(self) -> jax.Array:
+        """Episode boundary (termination or truncation): advantage traces stop here."""
+        return jnp.maximum(self.termination, self.truncation)
+
+
+@dataclasses.dataclass(frozen=True)
+class Parallel:
+    """How the environments are split over devices, seen from inside the compiled chunk."""
+
+    num_envs: int
+    """Environments over all devices."""
+    num_devices: int = 1
+    axis_name: str | None = None
+    """Mesh axis to reduce over; None with one device (collectives become identities)."""
+
+    @property
+    def local_envs(self) -> int:
+        return self.num_envs // self.num_devices
+
+    def env_ids(self) -> jax.Array:
+        """Global indices of this device's environments."""
+        offset = 0 if self.axis_name is None else jax.lax.axis_index(self.axis_name) * self.local_envs
+        return offset + jnp.arange(self.local_envs)
+
+    def pmean(self, tree):
+        return tree if self.axis_name is None else jax.lax.pmean(tree, self.axis_name)
+
+    def psum(self, tree):
+        return tree if self.axis_name is None else jax.lax.psum(tree, self.axis_name)
+
+    def varying(self, tree):
+        """Marks device-local accumulators as varying over devices (for shard_map's type check)."""
+        return tree if self.axis_name is None else jax.lax.pcast(tree, (self.axis_name,), to="varying")
+
+
+def per_env_keys(key: jax.Array, env_ids: jax.Array) -> jax.Array:
+    """One key per environment, a function of the global environment index only."""
+    return jax.vmap(jax.random.fold_in, in_axes=(None, 0))(key, env_ids)
+
+
+class Learner(Protocol):
+    """What the loop needs from an algorithm (PPO and SAC implement it)."""
+
+    steps_per_update: int
+    """Environment steps taken by each environment between two updates."""
+
+    def init(self, key: jax.Array) -> Any:
+        """The learner state (params, optimiser, normaliser, buffers) with *global* env axes."""
+
+    def env_axes(self, state: Any) -> Any:
+        """Per leaf of `state`, the axis that runs over environments (split over devices), or None."""
+
+    def act(self, state: Any, obs: jax.Array, keys: jax.Array) -> tuple[jax.Array, dict]:
+        """Exploration actions for the local envs (`keys`: one per env) and extras to store."""
+
+    def update(self, state: Any, batch: Transition, key: jax.Array, par: Parallel) -> tuple[Any, dict]:
+        """One update from `(steps_per_update, local_envs)` transitions; metrics are scalars
+        already averaged over devices. Keys starting with "loss/" are checked for NaN."""
+
+    def policy(self, state: Any, obs: jax.Array) -> jax.Array:
+        """Deterministic actions for evaluation."""
+
+
+@struct.dataclass
+class TrainState:
+    """Everything a run needs to continue exactly; this is what a checkpoint stores."""
+
+    learner: Any
+    env_state: Any
+    key: jax.Array
+    episode_return: jax.Array
+    """Return so far of each environment's current episode."""
+    episode_length: jax.Array
+    updates: jax.Array
+    """Updates done so far (int32); env steps = updates * steps_per_update * num_envs."""
+
+
+def init_train_state(key: jax.Array, env, learner: Learner, num_envs: int) -> TrainState:
+    """A fresh single-seed state; `env` is the batched (wrapped) environment."""
+    k_env, k_learner, k_loop = jax.random.split(key, 3)
+    env_state = env.reset(jax.random.split(k_env, num_envs))
+    return TrainState(
+        learner=learner.init(k_learner),
+        env_state=env_state,
+        key=k_loop,
+        episode_return=jnp.zeros(num_envs),
+        episode_length=jnp.zeros(num_envs),
+        updates=jnp.zeros((), jnp.int32),
+    )
+
+
+def state_specs(state: TrainState, learner: Learner):
+    """PartitionSpecs of a seed-batched `TrainState`: seed axis first and replicated, each env axis
+    split over the "dev" mesh axis, everything else replicated."""
+    axes = TrainState(
+        learner=learner.env_axes(state.learner),
+        env_state=jax.tree.map(lambda _: 0, state.env_state),
+        key=None, episode_return=0, episode_length=0, updates=None,
+    )
+    leaves, treedef = jax.tree.flatten(state)
+    axis_leaves = jax.tree.flatten(axes, is_leaf=lambda x: x is None)[0]
+    if len(axis_leaves) != len(leaves):
+        raise ValueError("learner.env_axes returned a tree that does not match the learner state")
+    specs = [P() if a is None else P(*([None] * (a + 1) + [AXIS])) for a in axis_leaves]
+    return jax.tree.unflatten(treedef, specs)
+
+
+def episode_metric_names(env_state) -> list[str]:
+    return sorted(env_state.metrics)
+
+
+def make_chunk(env, learner: Learner, par: Parallel):
+    """The single-seed, single-device-view chunk: `chunk(state, n_updates) -> (state, metrics)`."""
+    steps = learner.steps_per_update
+
+    def rollout(ls, carry, key):
+        def step(c, k):
+            env_state, ep_ret, ep_len, acc = c
+            action, extras = learner.act(ls, env_state.obs, per_env_keys(k, par.env_ids()))
+            nxt = env.step(env_state, action)
+            truncation = nxt.info["truncation"]
+            done = nxt.done
+            tr = Transition(
+                obs=env_state.obs, action=action, reward=nxt.reward,
+                termination=done * (1.0 - truncation), truncation=truncation,
+                next_obs=nxt.info["final_obs"], extras=extras,
+            )
+            ep_ret = ep_ret + nxt.reward
+            ep_len = ep_len + 1.0
+            acc = dict(acc)
+            acc["episodes"] = acc["episodes"] + jnp.sum(done)
+            acc["episode/return"] = acc["episode/return"] + jnp.sum(done * ep_ret)
+            acc["episode/length"] = acc["episode/length"] + jnp.sum(done * ep_len)
+            for name, value in nxt.metrics.items():
+                acc["episode/" + name] = acc["episode/" + name] + jnp.sum(done * value)
+            ep_ret = ep_ret * (1.0 - done)
+            ep_len = ep_len * (1.0 - done)
+            return (nxt, ep_ret, ep_len, acc), tr
+
+        return jax.lax.scan(step, carry, jax.random.split(key, steps))
+
+    def chunk(state: TrainState, n_updates: jax.Array):
+        names = episode_metric_names(state.env_state)
+        acc0 = par.varying({k: jnp.zeros(()) for k in ["episodes", "episode/return", "episode/length"] + ["episode/" + n for n in names]})
+        carry0 = (state.env_state, state.episode_return, state.episode_length, acc0)
+        metrics_shape = jax.eval_shape(
+            lambda st: learner.update(st.learner, rollout(st.learner, carry0, st.key)[1], st.key, par)[1], state
+        )
+        lm0 = jax.tree.map(lambda x: jnp.zeros(x.shape, x.dtype), metrics_shape)
+
+        def one_update(_, carry):
+            st, acc, lm = carry
+            key, k_roll, k_update = jax.random.split(st.key, 3)
+            (env_state, ep_ret, ep_len, acc), batch = rollout(
+                st.learner, (st.env_state, st.episode_return, st.episode_length, acc), k_roll
+            )
+            ls, metrics = learner.update(st.learner, batch, k_update, par)
+            lm = jax.tree.map(jnp.add, lm, metrics)
+            st = TrainState(ls, env_state, key, ep_ret, ep_len, st.updates + 1)
+            return st, acc, lm
+
+        new_state, acc, lm = jax.lax.fori_loop(0, n_updates, one_update, (state, acc0, lm0))
+        # The loop may have made some leaves weakly typed (env code writing Python floats); keep the
+        # input's exact types so the next chunk call does not recompile.
+        state = jax.tree.map(lambda x, ref: jax.lax.convert_element_type(x, ref.dtype), new_state, state)
+        acc = par.psum(acc)
+        count = acc.pop("episodes")
+        metrics = {k: v / jnp.maximum(n_updates, 1) for k, v in lm.items()}
+        metrics["episodes"] = count
+        for k, v in acc.items():
+            metrics[k] = jnp.where(count > 0, v / jnp.maximum(count, 1.0), jnp.nan)
+        return state, metrics
+
+    return chunk
+
+
+def make_evaluate(env, learner: Learner, num_envs: int, episode_length: int, last_steps: int = 10):
+    """`evaluate(learner_state, key) -> metrics`: one episode per env with the deterministic policy.
+
+    `env` is the batched environment. Each env's *first* episode counts (it ends by termination or
+    at the time limit). Reported: mean return and length, each env metric at the episode's last step,
+    and `<metric>_last{last_steps}`, its mean over the episode's last `last_steps` steps (the paper
+    reports the distance to the target that way).
+    """
+
+    def evaluate(ls, key):
+        state = env.reset(jax.random.split(key, num_envs))
+
+        def step(s, _):
+            nxt = env.step(s, learner.policy(ls, s.obs))
+            return nxt, (nxt.done, nxt.reward, nxt.metrics)
+
+        _, (done, reward, metrics) = jax.lax.scan(step, state, None, length=episode_length)
+        t = jnp.arange(episode_length)[:, None]
+        first_done = jnp.where(jnp.any(done > 0, axis=0), jnp.argmax(done > 0, axis=0), episode_length - 1)
+        alive = t <= first_done
+        last = alive & (t > first_done - last_steps)
+        out = {
+            "episode/return": jnp.mean(jnp.sum(reward * alive, axis=0)),
+            "episode/length": jnp.mean(first_done + 1.0),
+        }
+        for name, value in metrics.items():
+            out["episode/" + name] = jnp.mean(jnp.take_along_axis(value, first_done[None], axis=0))
+            out[f"episode/{name}_last{last_steps}"] = jnp.mean(jnp.sum(value * last, 0) / jnp.sum(last, 0))
+        return out
+
+    return evaluate
+
+
+class Programs:
+    """The compiled pieces of one run: `init(keys)`, `chunk(state, n)`, `evaluate(state, keys)`.
+
+    Built once per (env config, algorithm config, seeds, devices); `agents.driver` runs them.
+    """
+
+    def __init__(self, env, eval_env, learner: Learner, num_envs: int, num_seeds: int, devices,
+                 eval_envs: int, episode_length: int, eval_last_steps: int = 10):
+        self.env, self.learner, self.num_envs, self.num_seeds = env, learner, num_envs, num_seeds
+        self.devices = list(devices)
+        nd = len(self.devices)
+        par = Parallel(num_envs, nd, AXIS if nd > 1 else None)
+        self.parallel = par
+        self.mesh = Mesh(self.devices, (AXIS,))
+
+        init_one = lambda key: init_train_state(key, env, learner, num_envs)
+        init_all = jax.vmap(init_one)
+        abstract = jax.eval_shape(init_all, jax.ShapeDtypeStruct((num_seeds, 2), jnp.uint32))
+        self.specs = state_specs(abstract, learner)
+        self.shardings = jax.tree.map(lambda s: NamedSharding(self.mesh, s), self.specs)
+        self.abstract_state = jax.tree.map(
+            lambda a, s: jax.ShapeDtypeStruct(a.shape, a.dtype, sharding=s), abstract, self.shardings
+        )
+        self.init = jax.jit(init_all, out_shardings=self.shardings)
+
+        chunk = jax.vmap(make_chunk(env, learner, par), in_axes=(0, None))
+        if nd > 1:
+            chunk = jax.shard_map(chunk, mesh=self.mesh, in_specs=(self.specs, P()), out_specs=(self.specs, P()))
+        self.chunk = jax.jit(chunk, donate_argnums=0)
+
+        evaluate = jax.vmap(make_evaluate(eval_env, learner, eval_envs, episode_length, eval_last_steps), in_axes=(0, None))
+        self.evaluate = jax.jit(evaluate)

@@ -1,0 +1,97 @@
+"""MLP policy, value and twin-Q networks (flax.linen).
+
+The paper trains 3x256 networks (4x256 for absolute control and reach-avoid) with Brax's defaults:
+swish activations, LeCun-uniform kernels and zero biases; those are our defaults too.
+"""
+
+from __future__ import annotations
+
+from typing import Callable, Sequence
+
+import flax.linen as nn
+import jax
+import jax.numpy as jnp
+
+ACTIVATIONS: dict[str, Callable[[jax.Array], jax.Array]] = {
+    "swish": nn.swish,
+    "relu": nn.relu,
+    "tanh": nn.tanh,
+    "elu": nn.elu,
+    "gelu": nn.gelu,
+}
+KERNEL_INITS = ("lecun_uniform", "orthogonal", "glorot_uniform")
+
+
+def kernel_init(name: str, scale: float = 1.0):
+    """Kernel initialiser by name; `scale` multiplies the weights of that layer."""
+    if name == "lecun_uniform":
+        return nn.initializers.variance_scaling(scale**2, "fan_in", "uniform")
+    if name == "glorot_uniform":
+        return nn.initializers.variance_scaling(scale**2, "fan_avg", "uniform")
+    if name == "orthogonal":
+        return nn.initializers.orthogonal(scale)
+    raise ValueError(f"kernel_init={name!r} is unknown: allowed are {', '.join(KERNEL_INITS)}.")
+
+
+class MLP(nn.Module):
+    """Dense layers with an activation between them; the last layer is linear."""
+
+    hidden_sizes: Sequence[int]
+    out_size: int
+    activation: str = "swish"
+    kernel_init: str = "lecun_uniform"
+    layer_norm: bool = False
+    out_scale: float = 1.0
+    """Weight scale of the output layer (e.g. 0.01 for a near-uniform initial policy)."""
+
+    @nn.compact
+    def __call__(self, x: jax.Array) -> jax.Array:
+        act = ACTIVATIONS[self.activation]
+        for i, size in enumerate(self.hidden_sizes):
+            x = nn.Dense(size, kernel_init=kernel_init(self.kernel_init), name=f"hidden_{i}")(x)
+            if self.layer_norm:
+                x = nn.LayerNorm(name=f"norm_{i}")(x)
+            x = act(x)
+        return nn.Dense(self.out_size, kernel_init=kernel_init(self.kernel_init, self.out_scale), name="out")(x)
+
+
+class TwinQ(nn.Module):
+    """Two independent Q(s, a) MLPs; returns shape (..., 2)."""
+
+    hidden_sizes: Sequence[int]
+    activation: str = "swish"
+    kernel_init: str = "lecun_uniform"
+    layer_norm: bool = False
+
+    @nn.compact
+    def __call__(self, obs: jax.Array, action: jax.Array) -> jax.Array:
+        x = jnp.concatenate([obs, action], axis=-1)
+        qs = [
+            MLP(self.hidden_sizes, 1, self.activation, self.kernel_init, self.layer_norm, name=f"q{i}")(x)
+            for i in range(2)
+        ]
+        return jnp.concatenate(qs, axis=-1)
+
+
+def policy_network(action_size: int, hidden_sizes, activation="swish", init="lecun_uniform", layer_norm=False) -> MLP:
+    """Outputs 2 * action_size numbers: the mean and the raw scale of a `TanhNormal`."""
+    return MLP(tuple(hidden_sizes), 2 * action_size, activation, init, layer_norm)
+
+
+def value_network(hidden_sizes, activation="swish", init="lecun_uniform", layer_norm=False) -> MLP:
+    """Outputs one number per observation (squeeze the last axis)."""
+    return MLP(tuple(hidden_sizes), 1, activation, init, layer_norm)
+
+
+def q_network(hidden_sizes, activation="swish", init="lecun_uniform", layer_norm=False) -> TwinQ:
+    return TwinQ(tuple(hidden_sizes), activation, init, layer_norm)
+
+
+def validate_network_fields(hidden_field: str, hidden_sizes, activation: str, init: str, prefix: str = "algo.") -> None:
+    """ValueErrors naming the offending config field (`hidden_field` names the layer-size field)."""
+    if len(hidden_sizes) == 0 or any(int(h) < 1 for h in hidden_sizes):
+        raise ValueError(f"{prefix}{hidden_field}={tuple(hidden_sizes)!r} is invalid: allowed is a non-empty tuple of integers >= 1.")
+    if activation not in ACTIVATIONS:
+        raise ValueError(f"{prefix}activation={activation!r} is unknown: allowed are {', '.join(ACTIVATIONS)}.")
+    if init not in KERNEL_INITS:
+        raise ValueError(f"{prefix}kernel_init={init!r} is unknown: allowed are {', '.join(KERNEL_INITS)}.")

@@ -1,0 +1,397 @@
+"""Proximal Policy Optimization (Schulman et al. 2017) for the shared loop in `agents.loop`.
+
+Batch vocabulary follows Brax's PPO, so the paper's numbers (section "Training and evaluation")
+carry over unchanged:
+
+- `num_envs` environments step in parallel;
+- one update consumes `batch_size * num_minibatches` unrolls of `unroll_length` steps, i.e.
+  `batch_size * num_minibatches * unroll_length` env steps (paper: 512 * 64 * 10 = 327,680);
+  each env contributes `batch_size * num_minibatches / num_envs` consecutive unrolls, so
+  `num_envs` must divide `batch_size * num_minibatches`;
+- the data is split into `num_minibatches` minibatches of `batch_size` unrolls and swept
+  `updates_per_batch` times (epochs), one gradient step per minibatch.
+
+As in Brax, advantages are computed within each unroll (GAE truncated at `unroll_length` steps,
+bootstrapped with the value of the unroll's last next-observation).
+
+Differences from Brax's PPO, as switches in `PPOConfig` (Brax's PPO with the paper's settings
+collapsed after ~16M steps on the arm task): a learning-rate schedule, global gradient-norm
+clipping, clipped observation normalisation, value-target normalisation with PopArt-style output
+preservation, an optional KL guard, advantages recomputed with the current value function each
+epoch, and truncated episodes bootstrapped from the terminal observation (Brax's auto-reset loses it).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Literal
+
+import jax
+import jax.numpy as jnp
+import optax
+from flax import struct
+
+from agents import networks, normalizer
+from agents.distributions import TanhNormal
+from agents.loop import Parallel, Transition, per_env_keys
+
+LR_SCHEDULES = ("constant", "linear", "cosine")
+
+
+@dataclasses.dataclass(frozen=True)
+class PPOConfig:
+    """PPO hyperparameters. Defaults: the paper's reach setting (relative control)."""
+
+    num_envs: int = 8192
+    """Parallel environments over all devices (not stated in the paper; its throughput figures use 8192)."""
+    batch_size: int = 512
+    """Unrolls per minibatch (Brax's meaning)."""
+    num_minibatches: int = 64
+    """Minibatches per update; an update collects batch_size * num_minibatches unrolls."""
+    unroll_length: int = 10
+    """Steps per unroll; GAE looks at most this far ahead."""
+    updates_per_batch: int = 5
+    """Epochs over each batch (paper: 5 for relative, 7 for absolute control)."""
+    learning_rate: float = 8e-4
+    """Adam step size at the start of training."""
+    lr_schedule: Literal["constant", "linear", "cosine"] = "linear"
+    """Learning-rate decay over num_timesteps (Brax: constant)."""
+    lr_end_fraction: float = 0.1
+    """Final learning rate as a fraction of learning_rate (linear and cosine schedules)."""
+    discount: float = 0.97
+    """Discount factor gamma."""
+    gae_lambda: float = 0.95
+    """GAE lambda."""
+    clip_epsilon: float = 0.3
+    """Clipping range of the probability ratio (Brax's default)."""
+    entropy_coef: float = 1e-4
+    """Weight of the entropy bonus (Brax's default)."""
+    value_loss_coef: float = 0.25
+    """Weight of the mean squared value error (Brax uses 0.5 * 0.5)."""
+    reward_scaling: float = 1.0
+    """Rewards are multiplied by this before GAE."""
+    normalize_observations: bool = True
+    """Normalise observations with running statistics shared over envs and devices."""
+    obs_clip: float = 10.0
+    """Normalised observations are clipped to [-obs_clip, obs_clip] (0 disables)."""
+    normalize_advantages: bool = True
+    """Standardise advantages per minibatch (over all devices)."""
+    normalize_value_targets: bool = True
+    """Learn the value in normalised units (running target statistics, PopArt output preservation)."""
+    value_norm_decay: float = 0.99
+    """Per-update decay of the value-target statistics once past the exact running average."""
+    max_grad_norm: float = 1.0
+    """Clip the global gradient norm to this (0 disables; Brax: no clipping)."""
+    target_kl: float = 0.0
+    """KL guard: skip the rest of an update's gradient steps once the approximate KL to the
+    behaviour policy exceeds 1.5 * target_kl (0 disables)."""
+    recompute_advantages: bool = True
+    """Recompute advantages with the current value function at the start of every epoch."""
+    min_std: float = 1e-3
+    """Lower bound of the policy's pre-squash standard deviation."""
+    policy_hidden_sizes: tuple[int, ...] = (256, 256, 256)
+    """Hidden layer widths of the policy (paper: 3x256; 4x256 for absolute control / reach-avoid)."""
+    value_hidden_sizes: tuple[int, ...] = (256, 256, 256)
+    """Hidden layer widths of the value network."""
+    activation: str = "swish"
+    """Hidden activation: swish, relu, tanh, elu or gelu."""
+    kernel_init: str = "lecun_uniform"
+    """Weight initialiser: lecun_uniform, orthogonal or glorot_uniform."""
+    layer_norm: bool = False
+    """LayerNorm after each hidden layer."""
+
+    @property
+    def env_steps_per_update(self) -> int:
+        return self.batch_size * self.num_minibatches * self.unroll_length
+
+    def validate(self, num_devices: int = 1) -> None:
+        """ValueError naming the field, its value and what is allowed."""
+        for name in ("num_envs", "batch_size", "num_minibatches", "unroll_length", "updates_per_batch"):
+            if int(getattr(self, name)) < 1:
+                raise ValueError(f"algo.{name}={getattr(self, name)!r} is invalid: allowed is an integer >= 1.")
+        unrolls = self.batch_size * self.num_minibatches
+        if unrolls % self.num_envs:
+            raise ValueError(
+                f"algo.num_envs={self.num_envs} is invalid: it must divide algo.batch_size * algo.num_minibatches"
+                f" = {unrolls}; allowed are its divisors, e.g. {_divisors_near(unrolls, self.num_envs)}."
+            )
+        if self.num_envs % num_devices:
+            raise ValueError(f"algo.num_envs={self.num_envs} is invalid: it must be divisible by the {num_devices} devices.")
+        if self.batch_size % num_devices:
+            raise ValueError(f"algo.batch_size={self.batch_size} is invalid: it must be divisible by the {num_devices} devices.")
+        _check_positive("algo.learning_rate", self.learning_rate)
+        _check_range("algo.discount", self.discount, 0.0, 1.0)
+        _check_range("algo.gae_lambda", self.gae_lambda, 0.0, 1.0)
+        _check_range("algo.lr_end_fraction", self.lr_end_fraction, 0.0, 1.0)
+        _check_range("algo.value_norm_decay", self.value_norm_decay, 0.0, 1.0)
+        _check_positive("algo.clip_epsilon", self.clip_epsilon)
+        _check_positive("algo.min_std", self.min_std)
+        for name in ("entropy_coef", "value_loss_coef", "max_grad_norm", "target_kl", "obs_clip"):
+            if not float(getattr(self, name)) >= 0:
+                raise ValueError(f"algo.{name}={getattr(self, name)!r} is invalid: allowed is a number >= 0.")
+        if self.lr_schedule not in LR_SCHEDULES:
+            raise ValueError(f"algo.lr_schedule={self.lr_schedule!r} is unknown: allowed are {', '.join(LR_SCHEDULES)}.")
+        networks.validate_network_fields("policy_hidden_sizes", self.policy_hidden_sizes, self.activation, self.kernel_init)
+        networks.validate_network_fields("value_hidden_sizes", self.value_hidden_sizes, self.activation, self.kernel_init)
+
+
+def _check_positive(name, value):
+    if not float(value) > 0:
+        raise ValueError(f"{name}={value!r} is invalid: allowed is a number > 0.")
+
+
+def _check_range(name, value, lo, hi):
+    if not lo <= float(value) <= hi:
+        raise ValueError(f"{name}={value!r} is invalid: allowed is a number in [{lo}, {hi}].")
+
+
+def _divisors_near(n: int, x: int) -> str:
+    divs = [d for d in range(1, n + 1) if n % d == 0]
+    divs.sort(key=lambda d: abs(math.log(d / max(x, 1))))
+    return ", ".join(str(d) for d in sorted(divs[:4]))
+
+
+# ----------------------------------------------------------------------------------------------
+# The formulas (small named functions, unit-tested on hand-computed numbers).
+
+
+def gae(rewards, values, next_values, terminations, dones, discount: float, lam: float):
+    """Generalised advantage estimation (Schulman et al. 2016, eq. 16), time on axis 0.
+
+    delta_t = r_t + discount * (1 - termination_t) * V(s'_t) - V(s_t), where s'_t is the step's next
+    observation (the terminal one on truncation, so time-outs bootstrap and real terminations do
+    not); A_t = delta_t + discount * lam * (1 - done_t) * A_{t+1}, the trace stopping at every episode
+    boundary and at the end of the array (A_T = 0 there: the last delta already bootstraps).
+    Returns (advantages, value targets = advantages + values).
+    """
+    deltas = rewards + discount * (1.0 - terminations) * next_values - values
+
+    def backward(next_adv, x):
+        delta, done = x
+        adv = delta + discount * lam * (1.0 - done) * next_adv
+        return adv, adv
+
+    _, advantages = jax.lax.scan(backward, jnp.zeros_like(deltas[0]), (deltas, dones), reverse=True)
+    return advantages, advantages + values
+
+
+def ppo_loss_terms(log_prob, old_log_prob, advantages, values, value_targets, entropy, clip_epsilon: float):
+    """The PPO objective's pieces (means over the minibatch), eq. 7 of Schulman et al. 2017."""
+    log_ratio = log_prob - old_log_prob
+    ratio = jnp.exp(log_ratio)
+    clipped = jnp.clip(ratio, 1.0 - clip_epsilon, 1.0 + clip_epsilon)
+    surrogate = jnp.minimum(ratio * advantages, clipped * advantages)
+    return {
+        "policy_loss": -jnp.mean(surrogate),
+        "value_loss": jnp.mean(jnp.square(values - value_targets)),
+        "entropy": jnp.mean(entropy),
+        # k3 estimator of KL(behaviour || current): unbiased and >= 0 (Schulman's note on KL approximation).
+        "approx_kl": jnp.mean((ratio - 1.0) - log_ratio),
+        "clip_fraction": jnp.mean((jnp.abs(ratio - 1.0) > clip_epsilon).astype(jnp.float32)),
+    }
+
+
+def ppo_total_loss(terms: dict, value_loss_coef: float, entropy_coef: float):
+    return terms["policy_loss"] + value_loss_coef * terms["value_loss"] - entropy_coef * terms["entropy"]
+
+
+def learning_rate(config: PPOConfig, progress: jax.Array) -> jax.Array:
+    """Learning rate at `progress` in [0, 1] of the planned updates."""
+    p = jnp.clip(progress, 0.0, 1.0)
+    end = config.lr_end_fraction
+    if config.lr_schedule == "linear":
+        frac = 1.0 - (1.0 - end) * p
+    elif config.lr_schedule == "cosine":
+        frac = end + (1.0 - end) * 0.5 * (1.0 + jnp.cos(jnp.pi * p))
+    else:
+        frac = jnp.ones_like(p)
+    return config.learning_rate * frac
+
+
+def popart_preserve(value_params, old: normalizer.RunningStats, new: normalizer.RunningStats):
+    """Rescales the value head so its de-normalised outputs are unchanged by a statistics update
+    (van Hasselt et al. 2016, "Learning values across many orders of magnitude", eq. 6)."""
+    s_old, s_new = normalizer.std(old), normalizer.std(new)
+    out = value_params["params"]["out"]
+    out = {"kernel": out["kernel"] * s_old / s_new, "bias": (out["bias"] * s_old + old.mean - new.mean) / s_new}
+    return {**value_params, "params": {**value_params["params"], "out": out}}
+
+
+# ----------------------------------------------------------------------------------------------
+# The learner.
+
+
+@struct.dataclass
+class PPOState:
+    params: dict
+    """{"policy": ..., "value": ...}"""
+    opt_state: optax.OptState
+    obs_stats: normalizer.RunningStats
+    value_stats: normalizer.RunningStats
+    updates: jax.Array
+    """Updates done (drives the learning-rate schedule)."""
+
+
+class PPO:
+    """PPO as a `agents.loop.Learner`."""
+
+    def __init__(self, config: PPOConfig, observation_size: int, action_size: int, total_updates: int):
+        self.config = config
+        self.observation_size, self.action_size = observation_size, action_size
+        self.total_updates = max(1, int(total_updates))
+        c = config
+        self.unrolls_per_env = c.batch_size * c.num_minibatches // c.num_envs
+        self.steps_per_update = self.unrolls_per_env * c.unroll_length
+        self.policy_net = networks.policy_network(action_size, c.policy_hidden_sizes, c.activation, c.kernel_init, c.layer_norm)
+        self.value_net = networks.value_network(c.value_hidden_sizes, c.activation, c.kernel_init, c.layer_norm)
+        clip = [optax.clip_by_global_norm(c.max_grad_norm)] if c.max_grad_norm > 0 else []
+        self.optimizer = optax.chain(*clip, optax.scale_by_adam())
+
+    # -- pieces ---------------------------------------------------------------------------------
+
+    def _obs(self, state: PPOState, obs):
+        if not self.config.normalize_observations:
+            return obs
+        return normalizer.normalize(state.obs_stats, obs, self.config.obs_clip or None)
+
+    def _dist(self, policy_params, x) -> TanhNormal:
+        return TanhNormal.from_network_output(self.policy_net.apply(policy_params, x), self.config.min_std)
+
+    def _value(self, value_params, value_stats, x):
+        """De-normalised value estimate."""
+        v = self.value_net.apply(value_params, x)[..., 0]
+        return normalizer.denormalize(value_stats, v) if self.config.normalize_value_targets else v
+
+    # -- Learner interface ----------------------------------------------------------------------
+
+    def init(self, key) -> PPOState:
+        k_pi, k_v = jax.random.split(key)
+        dummy = jnp.zeros((1, self.observation_size))
+        params = {"policy": self.policy_net.init(k_pi, dummy), "value": self.value_net.init(k_v, dummy)}
+        return PPOState(params, self.optimizer.init(params), normalizer.init(self.observation_size), normalizer.init(()),
+                        jnp.zeros((), jnp.int32))
+
+    def env_axes(self, state: PPOState):
+        return jax.tree.map(lambda _: None, state)
+
+    def act(self, state: PPOState, obs, keys):
+        dist = self._dist(state.params["policy"], self._obs(state, obs))
+        noise = jax.vmap(lambda k, m: jax.random.normal(k, m.shape, m.dtype))(keys, dist.mean)
+        u = dist.mean + dist.std * noise
+        return jnp.tanh(u), {"raw_action": u, "log_prob": dist.log_prob_raw(u)}
+
+    def policy(self, state: PPOState, obs):
+        return self._dist(state.params["policy"], self._obs(state, obs)).mode()
+
+    def advantages(self, params, obs_stats, value_stats, data: Transition):
+        """GAE per unroll; `data` leaves are (envs, unrolls, unroll_length, ...)."""
+        c = self.config
+        norm = lambda o: self._obs(PPOState(None, None, obs_stats, None, None), o)
+        values = self._value(params["value"], value_stats, norm(data.obs))
+        next_values = self._value(params["value"], value_stats, norm(data.next_obs))
+        time_first = lambda x: jnp.moveaxis(x, 2, 0)
+        adv, targets = gae(time_first(data.reward), time_first(values), time_first(next_values),
+                           time_first(data.termination), time_first(data.done), c.discount, c.gae_lambda)
+        return jnp.moveaxis(adv, 0, 2), jnp.moveaxis(targets, 0, 2)
+
+    def minibatches(self, tree, key, par: Parallel):
+        """Splits (envs, unrolls, ...) leaves into (num_minibatches, local batch, ...).
+
+        Stratified so that it does not depend on the number of devices: each env's unrolls are
+        permuted with a key of its global index, unroll slot s = env * unrolls_per_env + j goes to
+        minibatch s mod num_minibatches, and the minibatch order is permuted with a shared key. Every
+        minibatch therefore spreads over many envs and holds batch_size / devices unrolls per device.
+        """
+        m = self.config.num_minibatches
+        k_perm, k_order = jax.random.split(key)
+        perms = jax.vmap(lambda k: jax.random.permutation(k, self.unrolls_per_env))(per_env_keys(k_perm, par.env_ids()))
+        order = jax.random.permutation(k_order, m)
+
+        def arrange(x):
+            x = jax.vmap(lambda xe, pe: xe[pe])(x, perms)
+            x = x.reshape((-1, m) + x.shape[2:])
+            return jnp.swapaxes(x, 0, 1)[order]
+
+        return jax.tree.map(arrange, tree)
+
+    def update(self, state: PPOState, batch: Transition, key, par: Parallel):
+        c = self.config
+        n_seq, length = self.unrolls_per_env, c.unroll_length
+        # (T, envs, ...) -> (envs, unrolls, unroll_length, ...): unroll j of env e covers steps
+        # j * unroll_length ... (j + 1) * unroll_length - 1.
+        data = jax.tree.map(lambda x: jnp.moveaxis(x.reshape((n_seq, length) + x.shape[1:]), 2, 0), batch)
+        data = data._replace(reward=data.reward * c.reward_scaling)
+        lr = learning_rate(c, state.updates.astype(jnp.float32) / self.total_updates)
+
+        params, value_stats = state.params, state.value_stats
+        adv0, targets0 = self.advantages(params, state.obs_stats, value_stats, data)
+        if c.normalize_value_targets:
+            new_stats = normalizer.update(value_stats, targets0, par.axis_name, decay=c.value_norm_decay)
+            params = {**params, "value": popart_preserve(params["value"], value_stats, new_stats)}
+            value_stats = new_stats
+
+        def loss_fn(p, mb):
+            x = self._obs(state, mb["obs"])
+            dist = self._dist(p["policy"], x)
+            v = self.value_net.apply(p["value"], x)[..., 0]
+            targets = mb["targets"]
+            if c.normalize_value_targets:
+                targets = normalizer.normalize(value_stats, targets)
+            terms = ppo_loss_terms(dist.log_prob_raw(mb["raw_action"]), mb["log_prob"], mb["advantages"], v,
+                                   targets, dist.entropy_from_noise(mb["noise"]), c.clip_epsilon)
+            terms["std"] = jnp.mean(dist.std)
+            # The mean over devices is taken inside the differentiated function: under shard_map the
+            # gradient w.r.t. replicated parameters is then the global-batch gradient.
+            terms = par.pmean(terms)
+            return ppo_total_loss(terms, c.value_loss_coef, c.entropy_coef), terms
+
+        def sgd_step(carry, mb):
+            p, opt_state, stopped = carry
+            adv = mb["advantages"]
+            if c.normalize_advantages:
+                mean = par.pmean(jnp.mean(adv))
+                var = par.pmean(jnp.mean(jnp.square(adv - mean)))
+                mb = {**mb, "advantages": (adv - mean) / (jnp.sqrt(var) + 1e-8)}
+            (loss, terms), grads = jax.value_and_grad(loss_fn, has_aux=True)(p, mb)
+            if c.target_kl > 0:
+                stopped = stopped | (terms["approx_kl"] > 1.5 * c.target_kl)
+            updates, new_opt_state = self.optimizer.update(grads, opt_state, p)
+            new_p = jax.tree.map(lambda w, u: w - lr * u, p, updates)
+            keep = lambda new, old: jax.tree.map(lambda a, b: jnp.where(stopped, b, a), new, old)
+            p, opt_state = keep(new_p, p), keep(new_opt_state, opt_state)
+            terms = {**terms, "total_loss": loss, "grad_norm": optax.tree.norm(grads),
+                     "skipped": stopped.astype(jnp.float32)}
+            return (p, opt_state, stopped), terms
+
+        def epoch(carry, k):
+            p, opt_state, stopped = carry
+            if c.recompute_advantages:
+                adv, targets = self.advantages(p, state.obs_stats, value_stats, data)
+            else:
+                adv, targets = adv0, targets0
+            tree = {"obs": data.obs, "raw_action": data.extras["raw_action"], "log_prob": data.extras["log_prob"],
+                    "advantages": adv, "targets": targets}
+            k_mb, k_ent = jax.random.split(k)
+            # Noise of the one-sample entropy estimate, keyed by global env index (device-invariant).
+            shape = data.extras["raw_action"].shape[1:]
+            tree["noise"] = jax.vmap(lambda kk: jax.random.normal(kk, shape))(per_env_keys(k_ent, par.env_ids()))
+            mbs = self.minibatches(tree, k_mb, par)
+            return jax.lax.scan(sgd_step, (p, opt_state, stopped), mbs)
+
+        (params, opt_state, _), terms = jax.lax.scan(
+            epoch, (params, state.opt_state, jnp.zeros((), bool)), jax.random.split(key, c.updates_per_batch)
+        )
+        obs_stats = state.obs_stats
+        if c.normalize_observations:
+            obs_stats = normalizer.update(obs_stats, batch.obs, par.axis_name)
+        terms = jax.tree.map(jnp.mean, terms)
+        metrics = {
+            "loss/total": terms["total_loss"], "loss/policy": terms["policy_loss"], "loss/value": terms["value_loss"],
+            "policy/entropy": terms["entropy"], "policy/approx_kl": terms["approx_kl"],
+            "policy/clip_fraction": terms["clip_fraction"], "policy/std": terms["std"],
+            "optim/grad_norm": terms["grad_norm"], "optim/learning_rate": lr, "optim/kl_skipped": terms["skipped"],
+            "value/target_mean": par.pmean(jnp.mean(targets0)),
+        }
+        new_state = PPOState(params, opt_state, obs_stats, value_stats, state.updates + 1)
+        return new_state, metrics

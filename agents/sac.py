@@ -1,0 +1,324 @@
+"""Soft Actor-Critic (Haarnoja et al. 2018, "SAC algorithms and applications") for `agents.loop`.
+
+Twin Q networks with Polyak-averaged targets, automatic temperature, and a replay buffer kept in
+device memory inside the learner state. Each update is one environment step of all `num_envs`
+environments (as in Brax), inserted into the buffer, then `grad_updates_per_step` gradient steps on
+`batch_size` sampled transitions. Until the buffer holds `min_replay_size` transitions the actions
+are uniform random and no gradient step is applied (Brax's prefill; these steps count towards
+num_timesteps).
+
+The buffer is a circular array of shape (max_replay_size / num_envs, num_envs, ...): row t holds
+every env's transition of one step. Its env axis is split over devices like the environments.
+Sampling is stratified over envs (each env contributes batch_size / num_envs samples at uniformly
+drawn rows, or each block of num_envs / batch_size envs one sample) with random numbers keyed by
+global sample index, so a run on two devices reproduces the one-device run.
+
+Bootstrapping: the critic target uses the stored `next_obs`, which on a truncated step is the
+terminal observation, and drops the bootstrap only on real terminations.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax
+import jax.numpy as jnp
+import optax
+from flax import struct
+
+from agents import networks, normalizer
+from agents.distributions import TanhNormal
+from agents.loop import Parallel, Transition, per_env_keys
+from agents.ppo import _check_positive, _check_range
+
+
+@dataclasses.dataclass(frozen=True)
+class SACConfig:
+    """SAC hyperparameters. Defaults: the paper's SAC setting (section "Training and evaluation")."""
+
+    num_envs: int = 128
+    """Parallel environments over all devices; one update steps each of them once."""
+    batch_size: int = 256
+    """Transitions per gradient step (must divide or be a multiple of num_envs)."""
+    learning_rate: float = 1e-4
+    """Adam step size of the policy, the critics and the temperature."""
+    discount: float = 0.97
+    """Discount factor gamma."""
+    reward_scaling: float = 20.0
+    """Rewards are multiplied by this in the critic target."""
+    tau: float = 0.005
+    """Polyak factor of the target critics (Brax's default)."""
+    min_replay_size: int = 102_400
+    """Transitions collected with random actions before learning starts."""
+    max_replay_size: int = 2_048_000
+    """Replay capacity in transitions (a multiple of num_envs); oldest are overwritten."""
+    grad_updates_per_step: int = 1
+    """Gradient steps per environment step of all envs (Brax's default; not stated in the paper)."""
+    init_alpha: float = 1.0
+    """Initial temperature."""
+    target_entropy: float | None = None
+    """Entropy target of the temperature update; None means -action_size."""
+    normalize_observations: bool = True
+    """Normalise observations with running statistics (updated from every inserted step)."""
+    obs_clip: float = 10.0
+    """Normalised observations are clipped to [-obs_clip, obs_clip] (0 disables)."""
+    max_grad_norm: float = 0.0
+    """Clip each network's gradient norm to this (0 disables)."""
+    min_std: float = 1e-3
+    """Lower bound of the policy's pre-squash standard deviation."""
+    policy_hidden_sizes: tuple[int, ...] = (256, 256, 256)
+    """Hidden layer widths of the policy."""
+    q_hidden_sizes: tuple[int, ...] = (256, 256, 256)
+    """Hidden layer widths of each Q network."""
+    activation: str = "swish"
+    """Hidden activation: swish, relu, tanh, elu or gelu."""
+    kernel_init: str = "lecun_uniform"
+    """Weight initialiser: lecun_uniform, orthogonal or glorot_uniform."""
+    layer_norm: bool = False
+    """LayerNorm after each hidden layer."""
+
+    @property
+    def env_steps_per_update(self) -> int:
+        return self.num_envs
+
+    def validate(self, num_devices: int = 1) -> None:
+        """ValueError naming the field, its value and what is allowed."""
+        for name in ("num_envs", "batch_size", "max_replay_size", "grad_updates_per_step"):
+            if int(getattr(self, name)) < 1:
+                raise ValueError(f"algo.{name}={getattr(self, name)!r} is invalid: allowed is an integer >= 1.")
+        if self.batch_size % self.num_envs and self.num_envs % self.batch_size:
+            raise ValueError(
+                f"algo.batch_size={self.batch_size} is invalid with algo.num_envs={self.num_envs}: allowed are "
+                f"multiples or divisors of num_envs (e.g. {self.num_envs}, {2 * self.num_envs})."
+            )
+        if self.num_envs % num_devices:
+            raise ValueError(f"algo.num_envs={self.num_envs} is invalid: it must be divisible by the {num_devices} devices.")
+        if self.batch_size % num_devices:
+            raise ValueError(f"algo.batch_size={self.batch_size} is invalid: it must be divisible by the {num_devices} devices.")
+        if self.max_replay_size % self.num_envs:
+            raise ValueError(
+                f"algo.max_replay_size={self.max_replay_size} is invalid: allowed are multiples of algo.num_envs={self.num_envs}."
+            )
+        if not 0 <= self.min_replay_size <= self.max_replay_size:
+            raise ValueError(
+                f"algo.min_replay_size={self.min_replay_size} is invalid: allowed is 0 ... algo.max_replay_size={self.max_replay_size}."
+            )
+        _check_positive("algo.learning_rate", self.learning_rate)
+        _check_positive("algo.reward_scaling", self.reward_scaling)
+        _check_positive("algo.init_alpha", self.init_alpha)
+        _check_positive("algo.min_std", self.min_std)
+        _check_range("algo.discount", self.discount, 0.0, 1.0)
+        _check_range("algo.tau", self.tau, 0.0, 1.0)
+        for name in ("max_grad_norm", "obs_clip"):
+            if not float(getattr(self, name)) >= 0:
+                raise ValueError(f"algo.{name}={getattr(self, name)!r} is invalid: allowed is a number >= 0.")
+        networks.validate_network_fields("policy_hidden_sizes", self.policy_hidden_sizes, self.activation, self.kernel_init)
+        networks.validate_network_fields("q_hidden_sizes", self.q_hidden_sizes, self.activation, self.kernel_init)
+
+
+# ----------------------------------------------------------------------------------------------
+# The formulas (unit-tested on hand-computed numbers).
+
+
+def critic_target(reward, termination, next_q, next_log_prob, alpha, discount: float, reward_scaling: float):
+    """y = s r + gamma (1 - termination) (min_i Q'_i(s', a') - alpha log pi(a'|s')), a' ~ pi(s')
+    (Haarnoja et al. 2018, eqs. 3 and 5 with the clipped double-Q minimum). `next_q`: (..., 2)."""
+    soft_value = jnp.min(next_q, axis=-1) - alpha * next_log_prob
+    return reward_scaling * reward + discount * (1.0 - termination) * soft_value
+
+
+def critic_loss(q, target):
+    """0.5 * mean squared error of both critics against the (constant) target. `q`: (..., 2)."""
+    return 0.5 * jnp.mean(jnp.square(q - jax.lax.stop_gradient(target)[..., None]))
+
+
+def actor_loss(log_prob, q, alpha):
+    """E[alpha log pi(a|s) - min_i Q_i(s, a)], a ~ pi(s) reparameterised (eq. 7)."""
+    return jnp.mean(alpha * log_prob - jnp.min(q, axis=-1))
+
+
+def temperature_loss(log_alpha, log_prob, target_entropy: float):
+    """-log_alpha * E[log pi + target_entropy] (eq. 18 in log space): raises alpha while the
+    policy's entropy -E[log pi] is below the target, lowers it above."""
+    return -log_alpha * jnp.mean(jax.lax.stop_gradient(log_prob) + target_entropy)
+
+
+def polyak(target, online, tau: float):
+    return jax.tree.map(lambda t, o: (1.0 - tau) * t + tau * o, target, online)
+
+
+# ----------------------------------------------------------------------------------------------
+
+
+@struct.dataclass
+class Replay:
+    data: dict
+    """obs, action, reward, termination, next_obs; leaves (rows, num_envs, ...)."""
+    position: jax.Array
+    """Next row to write (int32)."""
+    rows: jax.Array
+    """Rows filled so far, at most the capacity (int32)."""
+
+
+@struct.dataclass
+class SACState:
+    policy_params: dict
+    q_params: dict
+    target_q_params: dict
+    log_alpha: jax.Array
+    policy_opt: optax.OptState
+    q_opt: optax.OptState
+    alpha_opt: optax.OptState
+    obs_stats: normalizer.RunningStats
+    replay: Replay
+
+
+class SAC:
+    """SAC as a `agents.loop.Learner`."""
+
+    steps_per_update = 1
+
+    def __init__(self, config: SACConfig, observation_size: int, action_size: int):
+        c = self.config = config
+        self.observation_size, self.action_size = observation_size, action_size
+        self.rows = c.max_replay_size // c.num_envs
+        self.target_entropy = -float(action_size) if c.target_entropy is None else float(c.target_entropy)
+        self.policy_net = networks.policy_network(action_size, c.policy_hidden_sizes, c.activation, c.kernel_init, c.layer_norm)
+        self.q_net = networks.q_network(c.q_hidden_sizes, c.activation, c.kernel_init, c.layer_norm)
+        clip = [optax.clip_by_global_norm(c.max_grad_norm)] if c.max_grad_norm > 0 else []
+        self.optimizer = optax.chain(*clip, optax.adam(c.learning_rate))
+
+    def _obs(self, stats, obs):
+        if not self.config.normalize_observations:
+            return obs
+        return normalizer.normalize(stats, obs, self.config.obs_clip or None)
+
+    def _dist(self, params, x) -> TanhNormal:
+        return TanhNormal.from_network_output(self.policy_net.apply(params, x), self.config.min_std)
+
+    def init(self, key) -> SACState:
+        c = self.config
+        k_pi, k_q = jax.random.split(key)
+        obs = jnp.zeros((1, self.observation_size))
+        policy_params = self.policy_net.init(k_pi, obs)
+        q_params = self.q_net.init(k_q, obs, jnp.zeros((1, self.action_size)))
+        log_alpha = jnp.log(jnp.asarray(c.init_alpha, jnp.float32))
+        z = lambda *shape: jnp.zeros((self.rows, c.num_envs) + shape)
+        replay = Replay(
+            data={"obs": z(self.observation_size), "action": z(self.action_size), "reward": z(),
+                  "termination": z(), "next_obs": z(self.observation_size)},
+            position=jnp.zeros((), jnp.int32), rows=jnp.zeros((), jnp.int32),
+        )
+        return SACState(policy_params, q_params, q_params, log_alpha, self.optimizer.init(policy_params),
+                        self.optimizer.init(q_params), self.optimizer.init(log_alpha),
+                        normalizer.init(self.observation_size), replay)
+
+    def env_axes(self, state: SACState):
+        """The replay buffer's env axis (1) is split over devices; everything else is replicated."""
+        replay = Replay(data=jax.tree.map(lambda _: 1, state.replay.data), position=None, rows=None)
+        return jax.tree.map(lambda _: None, state).replace(replay=replay)
+
+    def _warming_up(self, state: SACState):
+        return state.replay.rows * self.config.num_envs < self.config.min_replay_size
+
+    def act(self, state: SACState, obs, keys):
+        dist = self._dist(state.policy_params, self._obs(state.obs_stats, obs))
+        noise = jax.vmap(lambda k, m: jax.random.normal(k, m.shape, m.dtype))(keys, dist.mean)
+        action, _, _ = dist.sample_with_noise(noise)
+        uniform = jax.vmap(lambda k, m: jax.random.uniform(jax.random.fold_in(k, 1), m.shape, m.dtype, -1.0, 1.0))(keys, dist.mean)
+        return jnp.where(self._warming_up(state), uniform, action), {}
+
+    def policy(self, state: SACState, obs):
+        return self._dist(state.policy_params, self._obs(state.obs_stats, obs)).mode()
+
+    def insert(self, replay: Replay, batch: Transition) -> Replay:
+        steps = batch.reward.shape[0]
+        rows = (replay.position + jnp.arange(steps)) % self.rows
+        new = {"obs": batch.obs, "action": batch.action, "reward": batch.reward,
+               "termination": batch.termination, "next_obs": batch.next_obs}
+        data = jax.tree.map(lambda buf, x: buf.at[rows].set(x), replay.data, new)
+        return Replay(data, (replay.position + steps) % self.rows, jnp.minimum(replay.rows + steps, self.rows))
+
+    def sample(self, replay: Replay, key, par: Parallel):
+        """This device's share of a stratified batch; returns (transitions, global sample ids)."""
+        c = self.config
+        ids = par.env_ids()
+        n_local = par.local_envs
+        k_env, k_row = jax.random.split(key)
+        if c.batch_size >= c.num_envs:
+            per_env = c.batch_size // c.num_envs
+            local_env = jnp.repeat(jnp.arange(n_local), per_env)
+            sample_ids = jnp.repeat(ids, per_env) * per_env + jnp.tile(jnp.arange(per_env), n_local)
+        else:
+            group = c.num_envs // c.batch_size
+            blocks = jnp.arange(n_local // group)
+            sample_ids = ids[0] // group + blocks
+            offset = jax.vmap(lambda k: jax.random.randint(k, (), 0, group))(per_env_keys(k_env, sample_ids))
+            local_env = blocks * group + offset
+        rows = jax.vmap(lambda k: jax.random.randint(k, (), 0, replay.rows))(per_env_keys(k_row, sample_ids))
+        return jax.tree.map(lambda x: x[rows, local_env], replay.data), sample_ids
+
+    def update(self, state: SACState, batch: Transition, key, par: Parallel):
+        c = self.config
+        replay = self.insert(state.replay, batch)
+        obs_stats = state.obs_stats
+        if c.normalize_observations:
+            obs_stats = normalizer.update(obs_stats, batch.obs, par.axis_name)
+        state = state.replace(replay=replay, obs_stats=obs_stats)
+
+        def noise_for(k, ids):
+            return jax.vmap(lambda kk: jax.random.normal(kk, (self.action_size,)))(per_env_keys(k, ids))
+
+        def sgd_step(s: SACState, k):
+            k_sample, k_next, k_pi = jax.random.split(k, 3)
+            mb, ids = self.sample(s.replay, k_sample, par)
+            # Losses are averaged over devices inside the differentiated functions: under shard_map
+            # the gradient w.r.t. replicated parameters is then the global-batch gradient.
+            obs, next_obs = self._obs(s.obs_stats, mb["obs"]), self._obs(s.obs_stats, mb["next_obs"])
+            alpha = jnp.exp(s.log_alpha)
+
+            next_action, _, next_log_prob = self._dist(s.policy_params, next_obs).sample_with_noise(noise_for(k_next, ids))
+            next_q = self.q_net.apply(s.target_q_params, next_obs, next_action)
+            target = critic_target(mb["reward"], mb["termination"], next_q, next_log_prob, alpha, c.discount, c.reward_scaling)
+
+            def q_loss_fn(qp):
+                q = self.q_net.apply(qp, obs, mb["action"])
+                return par.pmean((critic_loss(q, target), jnp.mean(q)))
+
+            (q_loss, q_mean), q_grads = jax.value_and_grad(q_loss_fn, has_aux=True)(s.q_params)
+            q_updates, q_opt = self.optimizer.update(q_grads, s.q_opt, s.q_params)
+            q_params = optax.apply_updates(s.q_params, q_updates)
+
+            pi_noise = noise_for(k_pi, ids)
+
+            def pi_loss_fn(pp):
+                action, _, log_prob = self._dist(pp, obs).sample_with_noise(pi_noise)
+                return par.pmean(actor_loss(log_prob, self.q_net.apply(q_params, obs, action), alpha)), log_prob
+
+            (pi_loss, log_prob), pi_grads = jax.value_and_grad(pi_loss_fn, has_aux=True)(s.policy_params)
+            pi_updates, policy_opt = self.optimizer.update(pi_grads, s.policy_opt, s.policy_params)
+            policy_params = optax.apply_updates(s.policy_params, pi_updates)
+
+            a_loss, a_grad = jax.value_and_grad(lambda la: par.pmean(temperature_loss(la, log_prob, self.target_entropy)))(s.log_alpha)
+            entropy = par.pmean(-jnp.mean(log_prob))
+            a_updates, alpha_opt = self.optimizer.update(a_grad, s.alpha_opt, s.log_alpha)
+            log_alpha = optax.apply_updates(s.log_alpha, a_updates)
+
+            s = s.replace(policy_params=policy_params, q_params=q_params, log_alpha=log_alpha,
+                          target_q_params=polyak(s.target_q_params, q_params, c.tau),
+                          policy_opt=policy_opt, q_opt=q_opt, alpha_opt=alpha_opt)
+            metrics = {"loss/critic": q_loss, "loss/actor": pi_loss, "loss/temperature": a_loss,
+                       "sac/alpha": alpha, "sac/entropy": entropy, "sac/q_mean": q_mean}
+            return s, metrics
+
+        def train(s):
+            s, metrics = jax.lax.scan(sgd_step, s, jax.random.split(key, c.grad_updates_per_step))
+            return s, jax.tree.map(jnp.mean, metrics)
+
+        def skip(s):  # still filling the buffer: no gradient step, losses reported as 0
+            metrics = jax.tree.map(lambda x: jnp.zeros(x.shape, x.dtype), jax.eval_shape(train, s)[1])
+            return s, {**metrics, "sac/alpha": jnp.exp(s.log_alpha)}
+
+        state, metrics = jax.lax.cond(self._warming_up(state), skip, train, state)
+        metrics["replay/transitions"] = (state.replay.rows * c.num_envs).astype(jnp.float32)
+        return state, metrics

@@ -1,0 +1,211 @@
+"""The formulas of the learners on hand-computed numbers (no training)."""
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+import pytest
+
+from agents import normalizer
+from agents.distributions import TanhNormal
+from agents.loop import Parallel
+from agents.networks import MLP, TwinQ
+from agents.ppo import PPO, PPOConfig, gae, learning_rate, popart_preserve, ppo_loss_terms, ppo_total_loss
+from agents.sac import actor_loss, critic_loss, critic_target, polyak, temperature_loss
+
+
+# -- tanh-Gaussian ----------------------------------------------------------------------------
+
+
+def test_tanh_normal_log_prob_finite_at_and_beyond_bounds():
+    dist = TanhNormal(jnp.array([[0.3, -2.0]]), jnp.array([[0.5, 0.01]]))
+    for a in ([1.0, -1.0], [-1.0, 1.0], [1.5, -7.0], [0.999999, -0.999999]):
+        lp = dist.log_prob(jnp.array([a]))
+        assert np.all(np.isfinite(np.asarray(lp))), a
+    # Pre-squash values far out in the tails, where tanh(u) == +-1 in float32.
+    u = jnp.array([[30.0, -50.0]])
+    assert np.all(np.isfinite(np.asarray(dist.log_prob_raw(u))))
+    assert np.asarray(jnp.tanh(u)).tolist() == [[1.0, -1.0]]
+
+
+def test_tanh_normal_log_prob_matches_change_of_variables():
+    mean, std = jnp.array([0.2, -0.4]), jnp.array([0.7, 1.3])
+    u = jnp.array([0.5, -1.1])
+    a = np.tanh(np.asarray(u, np.float64))
+    normal = -0.5 * ((np.asarray(u) - np.asarray(mean)) / np.asarray(std)) ** 2 - np.log(np.asarray(std)) - 0.5 * math.log(2 * math.pi)
+    expected = np.sum(normal - np.log(1 - a**2))
+    dist = TanhNormal(mean, std)
+    np.testing.assert_allclose(float(dist.log_prob_raw(u)), expected, rtol=1e-5)
+    np.testing.assert_allclose(float(dist.log_prob(jnp.asarray(a, jnp.float32))), expected, rtol=1e-4)
+    import distrax
+    reference = distrax.Transformed(distrax.MultivariateNormalDiag(mean, std), distrax.Block(distrax.Tanh(), 1))
+    np.testing.assert_allclose(float(dist.log_prob(jnp.asarray(a, jnp.float32))), float(reference.log_prob(jnp.asarray(a, jnp.float32))), rtol=1e-4)
+
+
+def test_tanh_normal_sampling_entropy_and_mode():
+    dist = TanhNormal(jnp.zeros((20000, 1)) + 0.3, jnp.full((20000, 1), 0.2))
+    a, u, lp = dist.sample_and_log_prob(jax.random.PRNGKey(0))
+    np.testing.assert_allclose(np.asarray(a), np.tanh(np.asarray(u)), rtol=1e-6)
+    np.testing.assert_allclose(np.asarray(lp), np.asarray(dist.log_prob_raw(u)))
+    assert np.all(np.abs(np.asarray(a)) < 1)
+    # Entropy estimate: H[N] + E[log(1 - tanh^2)], compared with a Monte-Carlo -E[log pi].
+    entropy = float(jnp.mean(dist.entropy(jax.random.PRNGKey(1))))
+    np.testing.assert_allclose(entropy, -float(jnp.mean(lp)), atol=0.02)
+    assert float(dist.mode()[0, 0]) == pytest.approx(math.tanh(0.3), rel=1e-6)
+
+
+# -- normaliser ---------------------------------------------------------------------------------
+
+
+def test_normalizer_running_merge_equals_full_batch():
+    x = jax.random.normal(jax.random.PRNGKey(0), (3, 50, 4)) * jnp.array([1.0, 2.0, 0.1, 5.0]) + 3.0
+    stats = normalizer.init(4)
+    for part in x:  # three batches
+        stats = normalizer.update(stats, part)
+    flat = np.asarray(x).reshape(-1, 4)
+    np.testing.assert_allclose(np.asarray(stats.mean), flat.mean(0), rtol=1e-5)
+    np.testing.assert_allclose(np.asarray(stats.var), flat.var(0), rtol=1e-4)
+    assert float(stats.count) == 150
+    y = normalizer.normalize(stats, jnp.asarray(flat))
+    np.testing.assert_allclose(np.asarray(y).std(0), 1.0, rtol=1e-3)
+    assert float(jnp.max(normalizer.normalize(stats, jnp.full((1, 4), 1e6), clip=5.0))) == 5.0
+
+
+def test_normalizer_decay_tracks_recent_batches():
+    stats = normalizer.init(())
+    for value in [0.0] * 50 + [10.0] * 50:
+        stats = normalizer.update(stats, jnp.full((8,), value), decay=0.9)
+    assert float(stats.mean) == pytest.approx(10.0 * (1 - 0.9**50), rel=1e-4)
+
+
+# -- PPO ----------------------------------------------------------------------------------------
+
+
+def _gae_loop(r, v, nv, term, done, gamma, lam):
+    T = len(r)
+    adv = np.zeros(T)
+    last = 0.0
+    for t in reversed(range(T)):
+        delta = r[t] + gamma * (1 - term[t]) * nv[t] - v[t]
+        last = delta + gamma * lam * (1 - done[t]) * last
+        adv[t] = last
+    return adv, adv + v
+
+
+def test_gae_matches_python_loop_with_terminations_and_truncations():
+    rng = np.random.default_rng(0)
+    T, N = 12, 3
+    r, v, nv = rng.normal(size=(T, N)), rng.normal(size=(T, N)), rng.normal(size=(T, N))
+    term = np.zeros((T, N))
+    trunc = np.zeros((T, N))
+    term[3, 0] = term[7, 1] = 1
+    trunc[5, 0] = trunc[2, 2] = trunc[11, 1] = 1
+    done = np.maximum(term, trunc)
+    adv, targets = gae(*(jnp.asarray(a, jnp.float32) for a in (r, v, nv, term, done)), 0.97, 0.95)
+    for n in range(N):
+        ref_adv, ref_t = _gae_loop(r[:, n], v[:, n], nv[:, n], term[:, n], done[:, n], 0.97, 0.95)
+        np.testing.assert_allclose(np.asarray(adv)[:, n], ref_adv, rtol=1e-5, atol=1e-5)
+        np.testing.assert_allclose(np.asarray(targets)[:, n], ref_t, rtol=1e-5, atol=1e-5)
+
+
+def test_truncation_bootstraps_and_termination_does_not():
+    # One step each: reward 1, V(s) = 0, V(final obs) = 10.
+    ones = jnp.ones((1, 2))
+    rewards, values, next_values = ones, 0 * ones, 10 * ones
+    termination = jnp.array([[1.0, 0.0]])  # env 0 terminated, env 1 truncated
+    done = ones
+    adv, _ = gae(rewards, values, next_values, termination, done, 0.9, 0.95)
+    np.testing.assert_allclose(np.asarray(adv), [[1.0, 1.0 + 0.9 * 10]])
+    q = critic_target(jnp.array([1.0, 1.0]), termination[0], jnp.array([[10.0, 12.0], [10.0, 12.0]]),
+                      jnp.zeros(2), 0.0, 0.9, 1.0)
+    np.testing.assert_allclose(np.asarray(q), [1.0, 10.0])
+
+
+def test_ppo_loss_on_hand_computed_numbers():
+    log_prob = jnp.log(jnp.array([1.5, 0.5, 1.1, 0.7]))  # ratios 1.5, 0.5, 1.1, 0.7 (old log-prob 0)
+    old = jnp.zeros(4)
+    adv = jnp.array([1.0, 1.0, -2.0, -2.0])
+    values, targets = jnp.array([0.0, 1.0, 2.0, 3.0]), jnp.array([1.0, 1.0, 0.0, 3.0])
+    terms = ppo_loss_terms(log_prob, old, adv, values, targets, jnp.array([0.5, 0.5, 0.5, 0.5]), 0.2)
+    # min(r A, clip(r, 0.8, 1.2) A): min(1.5, 1.2) = 1.2; min(0.5, 0.8) = 0.5; -2.2 (inside the range);
+    # min(-1.4, -1.6) = -1.6 (the clipped term is the pessimistic one) -> mean -0.525
+    assert float(terms["policy_loss"]) == pytest.approx(0.525, rel=1e-6)
+    assert float(terms["value_loss"]) == pytest.approx((1 + 0 + 4 + 0) / 4, rel=1e-6)
+    assert float(terms["clip_fraction"]) == pytest.approx(0.75)
+    kl = np.mean([(r - 1) - math.log(r) for r in (1.5, 0.5, 1.1, 0.7)])
+    assert float(terms["approx_kl"]) == pytest.approx(kl, rel=1e-5)
+    total = ppo_total_loss(terms, 0.25, 0.01)
+    assert float(total) == pytest.approx(0.525 + 0.25 * 1.25 - 0.01 * 0.5, rel=1e-6)
+
+
+def test_learning_rate_schedules():
+    cfg = PPOConfig(learning_rate=1.0, lr_end_fraction=0.1)
+    assert float(learning_rate(cfg, jnp.array(0.5))) == pytest.approx(0.55)
+    assert float(learning_rate(cfg.__class__(learning_rate=1.0, lr_schedule="cosine", lr_end_fraction=0.0), jnp.array(0.5))) == pytest.approx(0.5)
+    assert float(learning_rate(cfg.__class__(learning_rate=2.0, lr_schedule="constant"), jnp.array(0.9))) == 2.0
+
+
+def test_popart_preserves_value_outputs():
+    net = MLP((8,), 1)
+    params = net.init(jax.random.PRNGKey(0), jnp.zeros((1, 3)))
+    x = jax.random.normal(jax.random.PRNGKey(1), (5, 3))
+    old = normalizer.RunningStats(jnp.array(10.0), jnp.array(2.0), jnp.array(4.0))
+    new = normalizer.RunningStats(jnp.array(20.0), jnp.array(-1.0), jnp.array(0.25))
+    before = normalizer.denormalize(old, net.apply(params, x))
+    after = normalizer.denormalize(new, net.apply(popart_preserve(params, old, new), x))
+    np.testing.assert_allclose(np.asarray(after), np.asarray(before), rtol=1e-5, atol=1e-5)
+
+
+def test_ppo_minibatches_are_a_stratified_permutation():
+    cfg = PPOConfig(num_envs=4, batch_size=4, num_minibatches=4, unroll_length=2)
+    ppo = PPO(cfg, 3, 1, 10)
+    ids = jnp.arange(4 * 4).reshape(4, 4)  # (envs, unrolls): unroll id
+    mbs = ppo.minibatches({"id": ids}, jax.random.PRNGKey(0), Parallel(4))["id"]
+    assert mbs.shape == (4, 4)
+    assert sorted(np.asarray(mbs).ravel().tolist()) == list(range(16))
+    for mb in np.asarray(mbs):  # every minibatch takes one unroll from each env
+        assert sorted((mb // 4).tolist()) == [0, 1, 2, 3]
+
+
+# -- SAC ----------------------------------------------------------------------------------------
+
+
+def test_sac_critic_target_on_hand_computed_numbers():
+    reward = jnp.array([1.0, 0.5])
+    termination = jnp.array([0.0, 1.0])
+    next_q = jnp.array([[3.0, 2.0], [5.0, 7.0]])
+    next_log_prob = jnp.array([-1.0, 0.4])
+    y = critic_target(reward, termination, next_q, next_log_prob, alpha=0.2, discount=0.9, reward_scaling=20.0)
+    # env 0: 20 * 1 + 0.9 * (min(3, 2) - 0.2 * -1) = 20 + 0.9 * 2.2 = 21.98; env 1 terminated: 10
+    np.testing.assert_allclose(np.asarray(y), [21.98, 10.0], rtol=1e-6)
+    q = jnp.array([[21.0, 22.98], [10.0, 11.0]])
+    assert float(critic_loss(q, y)) == pytest.approx(0.5 * (0.98**2 + 1.0**2 + 0 + 1.0) / 4, rel=1e-5)
+    assert float(actor_loss(jnp.array([-1.0, 0.5]), jnp.array([[1.0, 2.0], [3.0, 0.0]]), 0.1)) == pytest.approx(
+        ((0.1 * -1 - 1.0) + (0.1 * 0.5 - 0.0)) / 2, rel=1e-6)
+
+
+def test_sac_temperature_update_on_hand_computed_numbers():
+    log_alpha = jnp.array(math.log(0.5))
+    log_prob = jnp.array([-0.5, 0.5, 1.0])  # entropy -mean = -1/3
+    target_entropy = -2.0
+    loss, grad = jax.value_and_grad(temperature_loss)(log_alpha, log_prob, target_entropy)
+    # d/dlog_alpha = -(mean(log pi) + target) = -(1/3 - 2) = 5/3 > 0: entropy above target, alpha falls.
+    assert float(grad) == pytest.approx(5.0 / 3.0, rel=1e-6)
+    assert float(loss) == pytest.approx(-math.log(0.5) * (1.0 / 3.0 - 2.0), rel=1e-6)
+    opt = optax.adam(1e-2)
+    updates, _ = opt.update(grad, opt.init(log_alpha), log_alpha)
+    # Adam's first step is lr * g / (|g| + eps) = -lr * sign(g).
+    assert float(optax.apply_updates(log_alpha, updates)) == pytest.approx(math.log(0.5) - 1e-2, rel=1e-5)
+    target = polyak({"w": jnp.array(1.0)}, {"w": jnp.array(3.0)}, 0.005)
+    assert float(target["w"]) == pytest.approx(1.01)
+
+
+def test_twin_q_and_mlp_shapes():
+    q = TwinQ((16, 16))
+    params = q.init(jax.random.PRNGKey(0), jnp.zeros((1, 5)), jnp.zeros((1, 2)))
+    out = q.apply(params, jnp.ones((7, 5)), jnp.ones((7, 2)))
+    assert out.shape == (7, 2)
+    assert not np.allclose(np.asarray(out[:, 0]), np.asarray(out[:, 1]))  # independent critics
+    assert len(params["params"]["q0"]) == 3  # two hidden layers + output

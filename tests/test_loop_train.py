@@ -1,0 +1,224 @@
+"""train.py end to end: checkpoints that load back, exact resume, NaN stop, input validation, and
+the two-device data-parallel path."""
+
+import json
+import os
+import subprocess
+import sys
+import textwrap
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import train as train_cli
+from agents import driver
+from agents.checkpoint import Checkpointer
+from agents.ppo import PPO, PPOConfig
+from agents.sac import SACConfig
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+SHORT = 30_720  # 6 updates of the PPO probe preset (same compiled program as tests/test_agents_learning.py)
+QUIET = dict(tensorboard=False, progress=False)
+
+
+def _subprocess_env(**extra):
+    path = os.pathsep.join(p for p in (ROOT, os.environ.get("PYTHONPATH", "")) if p)
+    return dict(os.environ, PYTHONPATH=path, **extra)
+
+
+def test_train_cli_writes_checkpoints_logs_and_eval_that_load_back(tmp_path):
+    logdir = tmp_path / "run"
+    cmd = [sys.executable, "train.py", "point-mass-ppo", "--num-timesteps", "10240", "--checkpoint-every", "5120",
+           "--eval-envs", "32", "--logdir", str(logdir), "--no-progress", "--env.goal-radius", "0.15"]
+    proc = subprocess.run(cmd, cwd=ROOT, env=_subprocess_env(), capture_output=True, text=True, timeout=240)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert "done after 10240 env steps" in proc.stdout
+
+    saved = json.loads((logdir / "config.json").read_text())
+    config = driver.config_from_json(saved)
+    assert config == train_cli.make_config("point-mass-ppo", num_timesteps=10240, checkpoint_every=5120, eval_envs=32,
+                                           logdir=str(logdir), progress=False,
+                                           env=config.env.__class__(goal_radius=0.15))
+    ckpt = Checkpointer(str(logdir / "checkpoints"))
+    assert ckpt.manager.all_steps() == [5120, 10240]
+    programs = driver.programs_for(config)
+    state, stored_config = ckpt.restore(10240, programs.abstract_state)
+    assert stored_config == saved
+    assert int(state.updates[0]) == 2
+    assert all(np.all(np.isfinite(np.asarray(x))) for x in jax.tree.leaves(state.learner.params))
+    assert float(state.learner.obs_stats.count[0]) == 2 * 5120  # normaliser statistics were saved
+    ev = json.loads((logdir / "checkpoints" / "10240" / "eval.json").read_text())
+    assert ev["eval_envs"] == 32 and 0 <= ev["mean"]["episode/target_reached"] <= 1
+
+    rows = (logdir / "metrics.csv").read_text().splitlines()
+    header = rows[0].split(",")
+    for column in ("env_steps", "steps_per_second", "episode/return", "episode/target_reached", "episode/distance",
+                   "loss/policy", "loss/value", "policy/entropy", "policy/approx_kl", "policy/clip_fraction"):
+        assert column in header
+    assert len(rows) == 1 + 2
+    assert any(name.startswith("events.out.tfevents") for name in os.listdir(logdir / "tb" / "seed_0"))
+
+
+def test_train_cli_on_the_arm_writes_a_checkpoint_that_loads_back(tmp_path):
+    """The main job on the real env: its MJX state (with zero-size fields) checkpoints and restores."""
+    logdir = tmp_path / "arm"
+    cmd = [sys.executable, "train.py", "ur5e-reach-ppo-cpu", "--num-timesteps", "1280", "--eval-envs", "4",
+           "--logdir", str(logdir), "--no-progress", "--env.substeps", "2", "--env.sampling-candidates", "4"]
+    proc = subprocess.run(cmd, cwd=ROOT, env=_subprocess_env(), capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    config = driver.config_from_json(json.loads((logdir / "config.json").read_text()))
+    assert config.env_name == "ur5e-reach" and config.env.substeps == 2
+    ckpt = Checkpointer(str(logdir / "checkpoints"))
+    state, _ = ckpt.restore(1280, driver.programs_for(config).abstract_state)
+    assert int(state.updates[0]) == 1
+    assert state.env_state.pipeline_state.act.shape[-1] == 0  # zero-size MJX fields come back
+    np.testing.assert_array_less(np.abs(np.asarray(state.env_state.pipeline_state.qpos)), 2 * np.pi + 1e-3)
+    ev = json.loads((logdir / "eval.json").read_text())
+    assert set(ev["mean"]) >= {"episode/target_reached", "episode/self_collision", "episode/distance_last10"}
+
+
+def _full_state(result):
+    return jax.tree.leaves(jax.device_get(result.state))
+
+
+def test_resume_reproduces_an_unbroken_run_bit_for_bit(tmp_path):
+    base = dict(num_timesteps=SHORT, eval_envs=0, log_every=5120, **QUIET)
+    unbroken = driver.train(train_cli.make_config("point-mass-ppo", logdir=str(tmp_path / "a"), **base))
+    first = driver.train(train_cli.make_config("point-mass-ppo", logdir=str(tmp_path / "b"), stop_after_steps=15_360, **base))
+    assert first.status == "stopped" and first.env_steps == 15_360
+    resumed = driver.train(train_cli.make_config("point-mass-ppo", logdir=str(tmp_path / "b"), resume=True, **base))
+    assert resumed.status == "done" and resumed.env_steps == SHORT
+    for a, b in zip(_full_state(unbroken), _full_state(resumed)):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    # The run did change the parameters (the comparison is not vacuous).
+    init = driver.programs_for(unbroken.config).init(driver.seed_keys(unbroken.config))
+    assert not np.allclose(np.asarray(jax.tree.leaves(init.learner.params)[0]),
+                           np.asarray(jax.tree.leaves(unbroken.state.learner.params)[0]))
+    # A differing algorithm setting is refused on resume.
+    with pytest.raises(ValueError, match="algo.learning_rate"):
+        changed = train_cli.make_config("point-mass-ppo", logdir=str(tmp_path / "b"), resume=True, **base)
+        driver.train(driver.dataclasses.replace(changed, algo=driver.dataclasses.replace(changed.algo, learning_rate=1.0)))
+
+
+class _PoisonedPPO(PPO):
+    """PPO whose parameters and losses become NaN from its 4th update on."""
+
+    def update(self, state, batch, key, par):
+        state, metrics = super().update(state, batch, key, par)
+        bad = state.updates >= 4
+        poison = lambda x: jnp.where(bad, jnp.nan, x)
+        state = state.replace(params=jax.tree.map(poison, state.params))
+        metrics = {**metrics, "loss/total": poison(metrics["loss/total"])}
+        return state, metrics
+
+
+def test_nan_loss_stops_the_run_and_keeps_the_last_good_checkpoint(tmp_path, monkeypatch):
+    monkeypatch.setattr(driver, "make_learner", lambda cfg, o, a, n: _PoisonedPPO(cfg, o, a, n))
+    driver.build_programs.cache_clear()
+    config = train_cli.make_config("point-mass-ppo", num_timesteps=6 * 5120, checkpoint_every=2 * 5120,
+                                   log_every=5120, eval_envs=0, logdir=str(tmp_path / "nan"), **QUIET)
+    try:
+        with pytest.raises(driver.NonFiniteLossError, match=r"loss/total .*env step 20480.*last good checkpoint \(10240\)"):
+            driver.train(config)
+    finally:
+        driver.build_programs.cache_clear()
+    ckpt = Checkpointer(str(tmp_path / "nan" / "checkpoints"))
+    assert ckpt.latest_step() == 10240
+    state, _ = ckpt.restore(10240, driver.programs_for(config).abstract_state)
+    assert all(np.all(np.isfinite(np.asarray(x))) for x in jax.tree.leaves(state.learner.params))
+
+
+BAD_INPUTS = [
+    (lambda: train_cli.make_config("ur5-reach-ppo"), r"preset='ur5-reach-ppo' is unknown: allowed are point-mass-ppo"),
+    (lambda: train_cli.parse(["no-such-preset"]), r"preset='no-such-preset' is unknown"),
+    (lambda: train_cli.parse(["point-mass-ppo", "--algo.num-envs", "48"]),
+     r"algo.num_envs=48 is invalid: it must divide algo.batch_size \* algo.num_minibatches = 512"),
+    (lambda: train_cli.parse(["point-mass-ppo", "--algo.batch-size", "10", "--algo.num-minibatches", "3", "--algo.num-envs", "7"]),
+     r"algo.num_envs=7 is invalid: it must divide .* = 30"),
+    (lambda: PPOConfig(num_envs=6, batch_size=6, num_minibatches=2).validate(num_devices=4),
+     r"algo.num_envs=6 is invalid: it must be divisible by the 4 devices"),
+    (lambda: SACConfig(num_envs=12, batch_size=24, max_replay_size=1200).validate(num_devices=8), r"algo.num_envs=12 is invalid: .* 8 devices"),
+    (lambda: train_cli.parse(["point-mass-ppo", "--devices", "64"]), r"devices=64 is invalid: allowed are 0 \(all\) to"),
+    (lambda: train_cli.parse(["point-mass-ppo", "--algo.activation", "sigmoid"]), r"algo.activation='sigmoid' is unknown: allowed are swish"),
+    (lambda: train_cli.parse(["point-mass-ppo", "--algo.lr-schedule", "step"]), None),  # tyro: not a Literal choice
+    (lambda: train_cli.parse(["point-mass-ppo", "--algo.discount", "1.5"]), r"algo.discount=1.5 is invalid: allowed is a number in \[0.0, 1.0\]"),
+    (lambda: train_cli.parse(["point-mass-ppo", "--algo.value-hidden-sizes"]),
+     r"algo.value_hidden_sizes=\(\) is invalid: allowed is a non-empty tuple"),
+    (lambda: train_cli.parse(["point-mass-ppo", "--algo.kernel-init", "zeros"]), r"algo.kernel_init='zeros' is unknown"),
+    (lambda: train_cli.parse(["point-mass-ppo", "--algo.unroll-length", "0"]), r"algo.unroll_length=0 is invalid: allowed is an integer >= 1"),
+    (lambda: train_cli.parse(["point-mass-ppo", "--num-timesteps", "ten"]), None),  # tyro: not an integer
+    (lambda: train_cli.parse(["point-mass-ppo", "--seeds", "0"]), r"seeds=0 is invalid: allowed is an integer >= 1"),
+    (lambda: train_cli.parse(["point-mass-ppo", "--env.goal-radius", "-1"]), r"goal_radius=-1.0 is invalid"),
+    (lambda: train_cli.make_config("point-mass-ppo", env=None), r"env=NoneType does not fit env_name='point-mass'"),
+    (lambda: train_cli.parse(["point-mass-sac", "--algo.batch-size", "24"]),
+     r"algo.batch_size=24 is invalid with algo.num_envs=16: allowed are multiples or divisors"),
+    (lambda: train_cli.parse(["point-mass-sac", "--algo.max-replay-size", "1000"]),
+     r"algo.max_replay_size=1000 is invalid: allowed are multiples of algo.num_envs=16"),
+    (lambda: train_cli.parse(["point-mass-sac", "--algo.min-replay-size", "64000"]), r"algo.min_replay_size=64000 is invalid"),
+    (lambda: train_cli.parse(["point-mass-ppo", "--resume"]), r"logdir='' is invalid with resume=True"),
+]
+
+
+@pytest.mark.parametrize("make, message", BAD_INPUTS)
+def test_bad_input_fails_before_compiling(make, message, monkeypatch, tmp_path):
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(driver, "build_programs", lambda *a, **k: pytest.fail("compiled despite bad input"))
+    if message is None:
+        with pytest.raises(SystemExit) as info:
+            make()
+        assert info.value.code == 2
+        return
+    with pytest.raises(ValueError, match=message):
+        config = make()
+        if config is not None:
+            driver.train(config)
+
+
+def test_resume_without_checkpoint_is_refused(tmp_path):
+    config = train_cli.make_config("point-mass-ppo", logdir=str(tmp_path / "empty"), resume=True, **QUIET)
+    with pytest.raises(ValueError, match="holds no checkpoint"):
+        driver.train(config)
+
+
+TWO_DEVICES = textwrap.dedent("""
+    import json, jax, numpy as np
+    jax.config.update("jax_compilation_cache_dir", "{ROOT}/.jax_cache")
+    import train as T
+    from agents import driver
+    assert jax.local_device_count() == 2
+    out = {}
+    for preset, steps in (("point-mass-ppo", 2 * 5120), ("point-mass-sac", 40 * 16)):
+        algo = dict(num_envs=16, min_replay_size=256) if preset.endswith("sac") else {}
+        runs = []
+        for devices in (1, 2):
+            cfg = T.make_config(preset, num_timesteps=steps, devices=devices, seeds=2, eval_envs=0,
+                                logdir=f"{TMP}/{preset}-{devices}", tensorboard=False, progress=False)
+            cfg = driver.dataclasses.replace(cfg, algo=driver.dataclasses.replace(cfg.algo, **algo))
+            r = driver.train(cfg)
+            runs.append(r)
+        sharding = runs[1].state.env_state.obs.sharding
+        a, b = (jax.tree.leaves(jax.device_get(r.state.learner)) for r in runs)
+        pa, pb = (jax.tree.leaves(jax.device_get(r.state.learner.policy_params if preset.endswith("sac") else r.state.learner.params)) for r in runs)
+        out[preset] = {
+            "max_diff": max(float(np.max(np.abs(x - y)) / (np.max(np.abs(x)) + 1e-3)) if x.size else 0.0 for x, y in zip(a, b)),
+            "param_scale": max(float(np.max(np.abs(x))) for x in pa),
+            "moved": max(float(np.max(np.abs(x))) for x in jax.tree.leaves(jax.device_get(runs[0].state.learner)) if x.size) > 0,
+            "env_shards": len(sharding.device_set),
+            "returns": [runs[0].last_metrics["episode/return"].tolist(), runs[1].last_metrics["episode/return"].tolist()],
+        }
+    print("RESULT" + json.dumps(out))
+""")
+
+
+def test_two_devices_match_one_device(tmp_path):
+    env = _subprocess_env(XLA_FLAGS="--xla_force_host_platform_device_count=2")
+    code = TWO_DEVICES.replace("{TMP}", str(tmp_path)).replace("{ROOT}", ROOT)
+    proc = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    result = json.loads(proc.stdout.split("RESULT", 1)[1])
+    for preset, r in result.items():
+        assert r["env_shards"] == 2, preset  # the environments really were split over both devices
+        assert r["max_diff"] < 1e-4, (preset, r)  # relative to each leaf's scale
+        np.testing.assert_allclose(r["returns"][0], r["returns"][1], rtol=1e-4)
