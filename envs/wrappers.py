@@ -77,7 +77,8 @@ class EpisodeWrapper(Wrapper):
         state = self.env.step(state, action)
         steps = state.info["steps"] + 1
         out_of_time = steps >= self.episode_length
-        truncation = jnp.where(out_of_time & (state.done == 0), 1.0, 0.0)
+        # float32, not weakly typed: the carry of a scan / jitted loop keeps one type
+        truncation = jnp.where(out_of_time & (state.done == 0), 1.0, 0.0).astype(jnp.float32)
         state.info["steps"] = steps
         state.info["truncation"] = truncation
         return state.replace(done=jnp.maximum(state.done, truncation))
