@@ -186,7 +186,8 @@ class SAC:
         self.policy_net = networks.policy_network(action_size, c.policy_hidden_sizes, c.activation, c.kernel_init, c.layer_norm)
         self.q_net = networks.q_network(c.q_hidden_sizes, c.activation, c.kernel_init, c.layer_norm)
         clip = [optax.clip_by_global_norm(c.max_grad_norm)] if c.max_grad_norm > 0 else []
-        self.optimizer = optax.chain(*clip, optax.adam(c.learning_rate))
+        # On one flat vector per network: few large GPU kernels per gradient step (see agents/ppo.py).
+        self.optimizer = optax.flatten(optax.chain(*clip, optax.adam(c.learning_rate)))
 
     def _obs(self, stats, obs):
         if not self.config.normalize_observations:
