@@ -198,11 +198,10 @@ class ArmEnv(Env):
             points, valid = workspaces.sample_uniform(cfg.workspace, key, cfg.sampling_candidates, center, robot.reach)
             index, ok = first_valid(valid)
             return points[index], jnp.zeros(robot.nq), ok
-        # Reachable: the end effector of a random collision-free pose over the full joint range.
-        qpos, kin, free = robot.sample_poses(key, cfg.sampling_candidates, robot.joint_low, robot.joint_high)
-        valid = free & workspaces.contains(cfg.workspace, kin.ee_pos, center, robot.reach)
-        index, ok = first_valid(valid)
-        return kin.ee_pos[index], qpos[index], ok
+        # Reachable: the end effector of a random collision-free pose, inside the workspace.
+        points, qpos, free = robot.sample_reachable(key, cfg.sampling_candidates)
+        index, ok = first_valid(free & workspaces.contains(cfg.workspace, points, center, robot.reach))
+        return points[index], qpos[index], ok
 
     def sample_task(self, key, kin0, target):
         """Task-specific episode data (the reach task has none) and whether sampling succeeded."""

@@ -189,7 +189,7 @@ class Robot(abc.ABC):
         frame origin; `mode="surface"` is the exact signed distance of the link's capsules.
         """
         if mode == "origin":
-            return jnp.linalg.norm(kin_xpos[..., self.link_bodies, :] - center[..., None, :], axis=-1) - radius
+            return jnp.linalg.norm(self.link_positions(kin_xpos) - center[..., None, :], axis=-1) - radius
         per_geom = self.obstacle_distances(geom_xpos, geom_xmat, center, radius)
         nlinks = len(self.link_bodies)
         onehot = self.link_geom_body[:, None] == np.arange(nlinks)[None, :]
@@ -212,6 +212,18 @@ class Robot(abc.ABC):
         kin = self.kinematics(qpos)
         free = jnp.all(self.self_distances(kin.geom_xpos, kin.geom_xmat) > 0.0, axis=-1)
         return qpos, kin, free
+
+    def sample_reachable(self, key, num):
+        """`num` candidate targets that the end effector reaches: (positions, the joint
+        configurations reaching them, collision-free mask). Poses are uniform over the full joint
+        range, so the positions are not uniform in space (paper, "Initial pose and target
+        sampling")."""
+        qpos, kin, free = self.sample_poses(key, num, self.joint_low, self.joint_high)
+        return kin.ee_pos, qpos, free
+
+    def link_positions(self, xpos: jax.Array) -> jax.Array:
+        """Frame origins of the links that can touch an obstacle, `[..., nlinks, 3]`."""
+        return xpos[..., self.link_bodies, :]
 
 
 def _axis_angle(axis: np.ndarray, angle: jax.Array) -> jax.Array:
