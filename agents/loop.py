@@ -23,6 +23,7 @@ Seeds: every leaf of `TrainState` carries a leading seed axis and the chunk is `
 from __future__ import annotations
 
 import dataclasses
+import functools
 from typing import Any, NamedTuple, Protocol
 
 import jax
@@ -81,14 +82,32 @@ class Parallel:
     def psum(self, tree):
         return tree if self.axis_name is None else jax.lax.psum(tree, self.axis_name)
 
-    def varying(self, tree):
-        """Marks device-local accumulators as varying over devices (for shard_map's type check)."""
-        return tree if self.axis_name is None else jax.lax.pcast(tree, (self.axis_name,), to="varying")
+    def mean_gradients(self, grads):
+        """The global-batch gradient from this device's one (equal local batches: the mean).
+
+        Explicit, because the chunk's `shard_map` runs with `check_vma=False` (MJX's solver is not
+        written for varying-axis checks), so autodiff adds no implicit cross-device sums.
+        """
+        return self.pmean(grads)
 
 
 def per_env_keys(key: jax.Array, env_ids: jax.Array) -> jax.Array:
     """One key per environment, a function of the global environment index only."""
     return jax.vmap(jax.random.fold_in, in_axes=(None, 0))(key, env_ids)
+
+
+def env_random(key: jax.Array, par: "Parallel", shape: tuple, kind: str = "normal") -> jax.Array:
+    """Random draws of `shape` per local environment, `(local_envs, *shape)`.
+
+    Drawn for all global environments from one key and sliced to this device's contiguous block:
+    every device count sees the same numbers per environment, and one batched draw replaces
+    thousands of per-environment key derivations (measurably cheaper on a GPU every env step).
+    """
+    sample = jax.random.normal if kind == "normal" else functools.partial(jax.random.uniform, minval=-1.0, maxval=1.0)
+    full = sample(key, (par.num_envs,) + tuple(shape))
+    if par.axis_name is None:
+        return full
+    return jax.lax.dynamic_slice_in_dim(full, jax.lax.axis_index(par.axis_name) * par.local_envs, par.local_envs)
 
 
 class Learner(Protocol):
@@ -103,8 +122,9 @@ class Learner(Protocol):
     def env_axes(self, state: Any) -> Any:
         """Per leaf of `state`, the axis that runs over environments (split over devices), or None."""
 
-    def act(self, state: Any, obs: jax.Array, keys: jax.Array) -> tuple[jax.Array, dict]:
-        """Exploration actions for the local envs (`keys`: one per env) and extras to store."""
+    def act(self, state: Any, obs: jax.Array, key: jax.Array, par: Parallel) -> tuple[jax.Array, dict]:
+        """Exploration actions for the local envs and extras to store; draw per-env randomness
+        with `env_random(key, par, ...)` so that it does not depend on the device count."""
 
     def update(self, state: Any, batch: Transition, key: jax.Array, par: Parallel) -> tuple[Any, dict]:
         """One update from `(steps_per_update, local_envs)` transitions; metrics are scalars
@@ -169,7 +189,7 @@ def make_chunk(env, learner: Learner, par: Parallel):
     def rollout(ls, carry, key):
         def step(c, k):
             env_state, ep_ret, ep_len, acc = c
-            action, extras = learner.act(ls, env_state.obs, per_env_keys(k, par.env_ids()))
+            action, extras = learner.act(ls, env_state.obs, k, par)
             nxt = env.step(env_state, action)
             truncation = nxt.info["truncation"]
             done = nxt.done
@@ -194,7 +214,7 @@ def make_chunk(env, learner: Learner, par: Parallel):
 
     def chunk(state: TrainState, n_updates: jax.Array):
         names = episode_metric_names(state.env_state)
-        acc0 = par.varying({k: jnp.zeros(()) for k in ["episodes", "episode/return", "episode/length"] + ["episode/" + n for n in names]})
+        acc0 = {k: jnp.zeros(()) for k in ["episodes", "episode/return", "episode/length"] + ["episode/" + n for n in names]}
         carry0 = (state.env_state, state.episode_return, state.episode_length, acc0)
         metrics_shape = jax.eval_shape(
             lambda st: learner.update(st.learner, rollout(st.learner, carry0, st.key)[1], st.key, par)[1], state
@@ -227,35 +247,69 @@ def make_chunk(env, learner: Learner, par: Parallel):
     return chunk
 
 
-def make_evaluate(env, learner: Learner, num_envs: int, episode_length: int, last_steps: int = 10):
+def episode_metrics(done, reward, metrics: dict, last_steps: int = 10) -> dict:
+    """Per-environment metrics of each environment's *first* episode, from a rollout's records.
+
+    `done`, `reward` and each `metrics[name]` are `(steps, envs)`: what `env.step` returned at each
+    step (the wrapped env auto-resets, so records after an episode's end belong to later episodes
+    and are ignored). An episode ends at its first `done` or, if none, at the last step. Returns
+    `(envs,)` arrays: "episode/return", "episode/length", "episode/<metric>" (its value at the
+    episode's last step; the env's metrics describe the whole episode there) and
+    "episode/<metric>_last{last_steps}" (its mean over the episode's last `last_steps` steps).
+    """
+    steps = done.shape[0]
+    t = jnp.arange(steps)[:, None]
+    first_done = jnp.where(jnp.any(done > 0, axis=0), jnp.argmax(done > 0, axis=0), steps - 1)
+    alive = t <= first_done
+    last = alive & (t > first_done - last_steps)
+    out = {
+        "episode/return": jnp.sum(reward * alive, axis=0),
+        "episode/length": first_done + 1.0,
+    }
+    for name, value in metrics.items():
+        out["episode/" + name] = jnp.take_along_axis(value, first_done[None], axis=0)[0]
+        out[f"episode/{name}_last{last_steps}"] = jnp.sum(value * last, 0) / jnp.sum(last, 0)
+    return out
+
+
+def make_evaluate(env, learner: Learner, num_envs: int, episode_length: int, last_steps: int = 10,
+                  act=None, per_env: bool = False, record=None):
     """`evaluate(learner_state, key) -> metrics`: one episode per env with the deterministic policy.
 
     `env` is the batched environment. Each env's *first* episode counts (it ends by termination or
-    at the time limit). Reported: mean return and length, each env metric at the episode's last step,
-    and `<metric>_last{last_steps}`, its mean over the episode's last `last_steps` steps (the paper
-    reports the distance to the target that way).
+    at the time limit). Reported (`episode_metrics`): mean return and length, each env metric at the
+    episode's last step, and `<metric>_last{last_steps}`, its mean over the episode's last
+    `last_steps` steps (the paper reports the distance to the target that way).
+
+    `act(learner_state, state, start, key) -> actions` replaces the learner's deterministic policy
+    (`learner.policy(learner_state, state.obs)`): policies that read the env state rather than the
+    observation, such as the baselines of `agents.baselines`. `start` is the state after reset (the
+    first episode's initial state), `key` a fresh key per step. `per_env=True` returns `(num_envs,)`
+    arrays instead of means. `record(state) -> pytree` additionally returns, as `(metrics, records)`,
+    that pytree for the reset state and after every step, stacked along a leading time axis of
+    `episode_length + 1` (e.g. joint positions for rendering).
+    The reset keys depend on `key` alone, so every policy sees the same episodes for one key.
     """
+    if act is None:
+        act = lambda ls, state, start, k: learner.policy(ls, state.obs)
 
     def evaluate(ls, key):
-        state = env.reset(jax.random.split(key, num_envs))
+        start = env.reset(jax.random.split(key, num_envs))
+        act_keys = jax.random.split(jax.random.fold_in(key, 1), episode_length)
 
-        def step(s, _):
-            nxt = env.step(s, learner.policy(ls, s.obs))
-            return nxt, (nxt.done, nxt.reward, nxt.metrics)
+        def step(s, k):
+            nxt = env.step(s, act(ls, s, start, k))
+            extra = () if record is None else record(nxt)
+            return nxt, (nxt.done, nxt.reward, nxt.metrics, extra)
 
-        _, (done, reward, metrics) = jax.lax.scan(step, state, None, length=episode_length)
-        t = jnp.arange(episode_length)[:, None]
-        first_done = jnp.where(jnp.any(done > 0, axis=0), jnp.argmax(done > 0, axis=0), episode_length - 1)
-        alive = t <= first_done
-        last = alive & (t > first_done - last_steps)
-        out = {
-            "episode/return": jnp.mean(jnp.sum(reward * alive, axis=0)),
-            "episode/length": jnp.mean(first_done + 1.0),
-        }
-        for name, value in metrics.items():
-            out["episode/" + name] = jnp.mean(jnp.take_along_axis(value, first_done[None], axis=0))
-            out[f"episode/{name}_last{last_steps}"] = jnp.mean(jnp.sum(value * last, 0) / jnp.sum(last, 0))
-        return out
+        _, (done, reward, metrics, records) = jax.lax.scan(step, start, act_keys)
+        out = episode_metrics(done, reward, metrics, last_steps)
+        if not per_env:
+            out = {k: jnp.mean(v) for k, v in out.items()}
+        if record is None:
+            return out
+        records = jax.tree.map(lambda a, b: jnp.concatenate([a[None], b]), record(start), records)
+        return out, records
 
     return evaluate
 
@@ -287,7 +341,10 @@ class Programs:
 
         chunk = jax.vmap(make_chunk(env, learner, par), in_axes=(0, None))
         if nd > 1:
-            chunk = jax.shard_map(chunk, mesh=self.mesh, in_specs=(self.specs, P()), out_specs=(self.specs, P()))
+            # check_vma=False: MJX's constraint solver (a lax.cond inside a scan) fails shard_map's
+            # varying-axis type check; learners therefore average gradients explicitly.
+            chunk = jax.shard_map(chunk, mesh=self.mesh, in_specs=(self.specs, P()), out_specs=(self.specs, P()),
+                                  check_vma=False)
         self.chunk = jax.jit(chunk, donate_argnums=0)
 
         evaluate = jax.vmap(make_evaluate(eval_env, learner, eval_envs, episode_length, eval_last_steps), in_axes=(0, None))

@@ -35,7 +35,7 @@ from jax.flatten_util import ravel_pytree
 
 from agents import networks, normalizer
 from agents.distributions import TanhNormal
-from agents.loop import Parallel, Transition, per_env_keys
+from agents.loop import Parallel, Transition, env_random, per_env_keys
 
 LR_SCHEDULES = ("constant", "linear", "cosine")
 
@@ -278,10 +278,9 @@ class PPO:
     def env_axes(self, state: PPOState):
         return jax.tree.map(lambda _: None, state)
 
-    def act(self, state: PPOState, obs, keys):
+    def act(self, state: PPOState, obs, key, par: Parallel):
         dist = self._dist(state.params["policy"], self._obs(state, obs))
-        noise = jax.vmap(lambda k, m: jax.random.normal(k, m.shape, m.dtype))(keys, dist.mean)
-        u = dist.mean + dist.std * noise
+        u = dist.mean + dist.std * env_random(key, par, (self.action_size,))
         return jnp.tanh(u), {"raw_action": u, "log_prob": dist.log_prob_raw(u)}
 
     def policy(self, state: PPOState, obs):
@@ -344,9 +343,6 @@ class PPO:
             terms = ppo_loss_terms(dist.log_prob_raw(mb["raw_action"]), mb["log_prob"], mb["advantages"], v,
                                    targets, dist.entropy_from_noise(mb["noise"]), c.clip_epsilon)
             terms["std"] = jnp.mean(dist.std)
-            # The mean over devices is taken inside the differentiated function: under shard_map the
-            # gradient w.r.t. replicated parameters is then the global-batch gradient.
-            terms = par.pmean(terms)
             return ppo_total_loss(terms, c.value_loss_coef, c.entropy_coef), terms
 
         def sgd_step(carry, mb):
@@ -357,6 +353,8 @@ class PPO:
                 var = par.pmean(jnp.mean(jnp.square(adv - mean)))
                 mb = {**mb, "advantages": (adv - mean) / (jnp.sqrt(var) + 1e-8)}
             (loss, terms), grads = jax.value_and_grad(loss_fn, has_aux=True)(p, mb)
+            # Device-local loss and gradient; the global-batch ones are their means over devices.
+            grads, loss, terms = par.mean_gradients(grads), par.pmean(loss), par.pmean(terms)
             if c.target_kl > 0:
                 stopped = stopped | (terms["approx_kl"] > 1.5 * c.target_kl)
             updates, new_opt_state = self.optimizer.update(grads, opt_state, p)
@@ -379,8 +377,7 @@ class PPO:
                     "advantages": adv, "targets": targets}
             k_mb, k_ent = jax.random.split(k)
             # Noise of the one-sample entropy estimate, keyed by global env index (device-invariant).
-            shape = data.extras["raw_action"].shape[1:]
-            tree["noise"] = jax.vmap(lambda kk: jax.random.normal(kk, shape))(per_env_keys(k_ent, par.env_ids()))
+            tree["noise"] = env_random(k_ent, par, data.extras["raw_action"].shape[1:])
             mbs = self.minibatches(tree, k_mb, par)
             return jax.lax.scan(sgd_step, (p, opt_state, stopped), mbs)
 

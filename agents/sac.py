@@ -28,7 +28,7 @@ from flax import struct
 
 from agents import networks, normalizer
 from agents.distributions import TanhNormal
-from agents.loop import Parallel, Transition, per_env_keys
+from agents.loop import Parallel, Transition, env_random, per_env_keys
 from agents.ppo import _check_positive, _check_range
 
 
@@ -222,11 +222,11 @@ class SAC:
     def _warming_up(self, state: SACState):
         return state.replay.rows * self.config.num_envs < self.config.min_replay_size
 
-    def act(self, state: SACState, obs, keys):
+    def act(self, state: SACState, obs, key, par: Parallel):
         dist = self._dist(state.policy_params, self._obs(state.obs_stats, obs))
-        noise = jax.vmap(lambda k, m: jax.random.normal(k, m.shape, m.dtype))(keys, dist.mean)
-        action, _, _ = dist.sample_with_noise(noise)
-        uniform = jax.vmap(lambda k, m: jax.random.uniform(jax.random.fold_in(k, 1), m.shape, m.dtype, -1.0, 1.0))(keys, dist.mean)
+        k_noise, k_uniform = jax.random.split(key)
+        action, _, _ = dist.sample_with_noise(env_random(k_noise, par, (self.action_size,)))
+        uniform = env_random(k_uniform, par, (self.action_size,), kind="uniform")
         return jnp.where(self._warming_up(state), uniform, action), {}
 
     def policy(self, state: SACState, obs):
@@ -273,8 +273,7 @@ class SAC:
         def sgd_step(s: SACState, k):
             k_sample, k_next, k_pi = jax.random.split(k, 3)
             mb, ids = self.sample(s.replay, k_sample, par)
-            # Losses are averaged over devices inside the differentiated functions: under shard_map
-            # the gradient w.r.t. replicated parameters is then the global-batch gradient.
+            # Device-local losses and gradients; the global-batch ones are their means over devices.
             obs, next_obs = self._obs(s.obs_stats, mb["obs"]), self._obs(s.obs_stats, mb["next_obs"])
             alpha = jnp.exp(s.log_alpha)
 
@@ -284,9 +283,10 @@ class SAC:
 
             def q_loss_fn(qp):
                 q = self.q_net.apply(qp, obs, mb["action"])
-                return par.pmean((critic_loss(q, target), jnp.mean(q)))
+                return critic_loss(q, target), jnp.mean(q)
 
             (q_loss, q_mean), q_grads = jax.value_and_grad(q_loss_fn, has_aux=True)(s.q_params)
+            q_grads, q_loss, q_mean = par.mean_gradients(q_grads), par.pmean(q_loss), par.pmean(q_mean)
             q_updates, q_opt = self.optimizer.update(q_grads, s.q_opt, s.q_params)
             q_params = optax.apply_updates(s.q_params, q_updates)
 
@@ -294,13 +294,15 @@ class SAC:
 
             def pi_loss_fn(pp):
                 action, _, log_prob = self._dist(pp, obs).sample_with_noise(pi_noise)
-                return par.pmean(actor_loss(log_prob, self.q_net.apply(q_params, obs, action), alpha)), log_prob
+                return actor_loss(log_prob, self.q_net.apply(q_params, obs, action), alpha), log_prob
 
             (pi_loss, log_prob), pi_grads = jax.value_and_grad(pi_loss_fn, has_aux=True)(s.policy_params)
+            pi_grads, pi_loss = par.mean_gradients(pi_grads), par.pmean(pi_loss)
             pi_updates, policy_opt = self.optimizer.update(pi_grads, s.policy_opt, s.policy_params)
             policy_params = optax.apply_updates(s.policy_params, pi_updates)
 
-            a_loss, a_grad = jax.value_and_grad(lambda la: par.pmean(temperature_loss(la, log_prob, self.target_entropy)))(s.log_alpha)
+            a_loss, a_grad = jax.value_and_grad(lambda la: temperature_loss(la, log_prob, self.target_entropy))(s.log_alpha)
+            a_grad, a_loss = par.mean_gradients(a_grad), par.pmean(a_loss)
             entropy = par.pmean(-jnp.mean(log_prob))
             a_updates, alpha_opt = self.optimizer.update(a_grad, s.alpha_opt, s.log_alpha)
             log_alpha = optax.apply_updates(s.log_alpha, a_updates)

@@ -75,7 +75,7 @@ class ArmEnv(Env):
     def _reset(self, rng: jax.Array) -> State:
         cfg, robot = self.config, self.robot
         k_pose, k_target, k_task = jax.random.split(rng, 3)
-        qpos, kin, free = robot.sample_poses(k_pose, cfg.sampling_candidates, self._init_low, self._init_high)
+        qpos, kin, free = robot.sample_poses(k_pose, self.candidates("pose"), self._init_low, self._init_high)
         index, pose_ok = first_valid(free)
         q0, kin0 = qpos[index], _take(kin, index)
         target, target_qpos, target_ok = self.sample_target(k_target)
@@ -189,17 +189,36 @@ class ArmEnv(Env):
             target = qpos + self.config.action_scale * action
         return jnp.clip(target, low, high)
 
+    def candidates(self, quantity: str) -> int:
+        """Rejection-sampling candidates for "pose", "target" or "obstacle".
+
+        Sized from measured acceptance rates (uniform full-range configurations; 20,000 samples
+        each, UR5e / Panda): collision-free pose 0.80 / 0.94; reachable target in the full
+        workspace 0.80 / 0.94, front 0.40 / 0.48, upper 0.50 / 0.89; uniform upper 0.62 / 0.75;
+        obstacle clear of pose and target 0.94 (0.1 m) and 0.67 (0.3 m). With the default 8, and
+        3x, 2x or 2x where acceptance is lower, a reset falls back with probability about 1e-6.
+        Every candidate costs forward kinematics and collision checks in every step's reset, so
+        more than needed is measurably slower (32 instead of 8 cost 11 % of PPO's training speed).
+        """
+        cfg = self.config
+        n = cfg.sampling_candidates
+        if quantity == "target" and cfg.workspace in ("front", "upper"):
+            return n * (3 if cfg.target_sampling == "reachable" else 2)
+        if quantity == "obstacle" and getattr(cfg, "obstacle_radius", 0.0) > 0.15:
+            return 2 * n
+        return n
+
     def sample_target(self, key):
         """Target position, the joint configuration that reaches it (zeros if unknown) and whether
         sampling succeeded."""
         cfg, robot = self.config, self.robot
         center = robot.workspace_center
         if cfg.target_sampling == "uniform":
-            points, valid = workspaces.sample_uniform(cfg.workspace, key, cfg.sampling_candidates, center, robot.reach)
+            points, valid = workspaces.sample_uniform(cfg.workspace, key, self.candidates("target"), center, robot.reach)
             index, ok = first_valid(valid)
             return points[index], jnp.zeros(robot.nq), ok
         # Reachable: the end effector of a random collision-free pose, inside the workspace.
-        points, qpos, free = robot.sample_reachable(key, cfg.sampling_candidates)
+        points, qpos, free = robot.sample_reachable(key, self.candidates("target"))
         index, ok = first_valid(free & workspaces.contains(cfg.workspace, points, center, robot.reach))
         return points[index], qpos[index], ok
 

@@ -80,7 +80,7 @@ class _Recorder:
     def env_axes(self, state):
         return jax.tree.map(lambda _: 1, state)
 
-    def act(self, state, obs, keys):
+    def act(self, state, obs, key, par):
         return jnp.ones((obs.shape[0], self.action_size)), {}
 
     def update(self, state, batch, key, par):

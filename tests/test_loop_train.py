@@ -208,6 +208,13 @@ TWO_DEVICES = textwrap.dedent("""
             "env_shards": len(sharding.device_set),
             "returns": [runs[0].last_metrics["episode/return"].tolist(), runs[1].last_metrics["episode/return"].tolist()],
         }
+    # The MJX arm on two devices (its constraint solver needs shard_map's check_vma=False).
+    cfg = T.make_config("ur5e-reach-ppo-cpu", num_timesteps=1280, devices=2, eval_envs=0, logdir=f"{TMP}/arm",
+                        tensorboard=False, progress=False)
+    cfg = driver.dataclasses.replace(cfg, env=driver.dataclasses.replace(cfg.env, substeps=2, sampling_candidates=4))
+    r = driver.train(cfg)
+    out["arm"] = {"env_shards": len(r.state.env_state.obs.sharding.device_set),
+                  "losses_finite": bool(all(np.isfinite(v).all() for k, v in r.last_metrics.items() if k.startswith("loss/")))}
     print("RESULT" + json.dumps(out))
 """)
 
@@ -215,9 +222,11 @@ TWO_DEVICES = textwrap.dedent("""
 def test_two_devices_match_one_device(tmp_path):
     env = _subprocess_env(XLA_FLAGS="--xla_force_host_platform_device_count=2")
     code = TWO_DEVICES.replace("{TMP}", str(tmp_path)).replace("{ROOT}", ROOT)
-    proc = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
+    proc = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr[-3000:]
     result = json.loads(proc.stdout.split("RESULT", 1)[1])
+    arm = result.pop("arm")
+    assert arm == {"env_shards": 2, "losses_finite": True}
     for preset, r in result.items():
         assert r["env_shards"] == 2, preset  # the environments really were split over both devices
         assert r["max_diff"] < 1e-4, (preset, r)  # relative to each leaf's scale

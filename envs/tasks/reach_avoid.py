@@ -18,7 +18,7 @@ class ReachAvoid(Reach):
         """Obstacle centre uniform in the cube around the base, clear of the initial pose (every
         robot geom, the base included) and not swallowing the target."""
         cfg, robot = self.config, self.robot
-        centers = jax.random.uniform(key, (cfg.sampling_candidates, 3), minval=-cfg.obstacle_region,
+        centers = jax.random.uniform(key, (self.candidates("obstacle"), 3), minval=-cfg.obstacle_region,
                                      maxval=cfg.obstacle_region)
         to_robot = robot.obstacle_distances(kin0.geom_xpos, kin0.geom_xmat, centers, cfg.obstacle_radius,
                                             geoms=robot.robot_geoms)
