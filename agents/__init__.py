@@ -12,7 +12,7 @@
 from agents.checkpoint import Checkpointer
 from agents.distributions import TanhNormal
 from agents.driver import NonFiniteLossError, TrainConfig, TrainResult, config_from_json, evaluate, train, validate
-from agents.loop import Learner, Parallel, Programs, TrainState, Transition, make_chunk, make_evaluate
+from agents.loop import Learner, Parallel, Programs, TrainState, Transition, episode_metrics, make_chunk, make_evaluate
 from agents.networks import MLP, TwinQ
 from agents.normalizer import RunningStats
 from agents.ppo import PPO, PPOConfig, gae, ppo_loss_terms
@@ -21,6 +21,7 @@ from agents.sac import SAC, SACConfig, critic_target, temperature_loss
 __all__ = [
     "Checkpointer", "TanhNormal", "NonFiniteLossError", "TrainConfig", "TrainResult", "config_from_json", "evaluate",
     "train", "validate", "Learner", "Parallel", "Programs", "TrainState", "Transition", "make_chunk", "make_evaluate",
+    "episode_metrics",
     "MLP", "TwinQ", "RunningStats", "PPO", "PPOConfig", "gae", "ppo_loss_terms", "SAC", "SACConfig", "critic_target",
     "temperature_loss",
 ]

@@ -2,7 +2,8 @@
 
 Layout under `<logdir>/checkpoints/<env_steps>/`: `state/` (the whole seed-batched `TrainState`:
 parameters, optimiser and normaliser state, loop and env RNG, env states, update count and, for
-SAC, the replay buffer, so a resumed run continues bit-for-bit), `config/` (the config JSON) and,
+SAC, the replay buffer, so a resumed run continues bit-for-bit), `config/` (the config JSON),
+`policy/` (the small policy export that eval.py loads, written by the driver: `agents.export`) and,
 for the final checkpoint, `eval.json` (evaluation metrics). Saves are synchronous: the compiled
 chunk donates its input state, so the arrays must be written before the next chunk runs.
 """

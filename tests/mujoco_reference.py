@@ -40,3 +40,14 @@ def geom_poses(model, qpos):
     data.qpos[:] = qpos
     mujoco.mj_kinematics(model, data)
     return data.geom_xpos.copy(), data.geom_xmat.reshape(-1, 3, 3).copy()
+
+
+def colliding_configuration(robot, seed):
+    """A joint configuration drawn uniformly within the joint limits that CPU MuJoCo finds in
+    self-collision (the first such draw of `seed`)."""
+    rng = np.random.default_rng(seed)
+    model = contact_model(robot)
+    while True:
+        q = rng.uniform(robot.joint_low, robot.joint_high).astype(np.float32)
+        if colliding_pairs(model, q):
+            return q

@@ -15,7 +15,7 @@ import pytest
 import envs
 from envs import rewards, workspaces
 from envs.arm import METRICS
-from mujoco_reference import colliding_pairs, contact_model, ee_position
+from mujoco_reference import colliding_configuration, colliding_pairs, contact_model, ee_position
 
 ARM_ENVS = ["ur5e-reach", "panda-reach", "ur5e-reach-avoid", "panda-reach-avoid"]
 N = 4
@@ -226,15 +226,6 @@ def test_truncation_after_episode_length_is_not_termination(compiled):
     assert not np.allclose(final.obs, final.info["final_obs"])  # terminal obs kept for bootstrapping
 
 
-def _colliding_configuration(env, seed):
-    rng = np.random.default_rng(seed)
-    model = contact_model(env.robot)
-    while True:
-        q = rng.uniform(env.robot.joint_low, env.robot.joint_high).astype(np.float32)
-        if colliding_pairs(model, q):
-            return q
-
-
 def _with_target(state, target):
     return state.replace(info={**state.info, "target_pos": jnp.asarray(target, jnp.float32)})
 
@@ -261,7 +252,7 @@ def test_collision_terminates_without_truncation_and_hand_built_metrics(compiled
     mean3 = sum(np.asarray(s.metrics["distance"]) for s in (s1, s2, s3)) / 3  # fewer than 10 steps so far
     np.testing.assert_allclose(s3.metrics["distance_last10"], mean3, rtol=1e-5)
     # Step 4: jump into a colliding configuration -> termination, not truncation; not reached.
-    q = _colliding_configuration(c.env, seed=15)
+    q = colliding_configuration(c.env.robot, seed=15)
     data = s3.pipeline_state.replace(qpos=jnp.tile(q, (N, 1)), qvel=jnp.zeros_like(s3.pipeline_state.qvel))
     s4 = c.step(s3.replace(pipeline_state=data), still)
     np.testing.assert_array_equal(s4.metrics["self_collision"], 1)

@@ -102,6 +102,28 @@ def test_resume_reproduces_an_unbroken_run_bit_for_bit(tmp_path):
         driver.train(driver.dataclasses.replace(changed, algo=driver.dataclasses.replace(changed.algo, learning_rate=1.0)))
 
 
+def test_checkpoint_without_envs_resumes_the_learner_with_fresh_episodes(tmp_path):
+    base = dict(num_timesteps=SHORT, eval_envs=0, log_every=5120, checkpoint_envs=False, **QUIET)
+    logdir = str(tmp_path / "small")
+    first = driver.train(train_cli.make_config("point-mass-ppo", logdir=logdir, stop_after_steps=15_360, **base))
+    assert first.status == "stopped"
+    ckpt = Checkpointer(os.path.join(logdir, "checkpoints"))
+    stored = os.listdir(os.path.join(ckpt.step_dir(15_360), "state"))
+    programs = driver.programs_for(first.config)
+    n_env_leaves = len(jax.tree.leaves(programs.abstract_state.env_state))
+    n_learner_leaves = len(jax.tree.leaves(programs.abstract_state.learner))
+    assert n_env_leaves > 0 and not any("env_state" in name for name in stored)  # no env state on disk
+    saved = driver.restore_state(ckpt, 15_360, programs, first.config, with_envs=False)
+    assert len(jax.tree.leaves(saved.learner)) == n_learner_leaves
+    for a, b in zip(jax.tree.leaves(jax.device_get(first.state.learner)), jax.tree.leaves(jax.device_get(saved.learner))):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))  # the learner comes back exactly
+    np.testing.assert_array_equal(np.asarray(saved.key), np.asarray(first.state.key))
+    np.testing.assert_array_equal(np.asarray(saved.episode_length), 0)  # ...with fresh episodes
+    assert not np.allclose(np.asarray(saved.env_state.obs), np.asarray(first.state.env_state.obs))
+    resumed = driver.train(train_cli.make_config("point-mass-ppo", logdir=logdir, resume=True, **base))
+    assert resumed.status == "done" and resumed.env_steps == SHORT
+
+
 class _PoisonedPPO(PPO):
     """PPO whose parameters and losses become NaN from its 4th update on."""
 

@@ -1,0 +1,441 @@
+"""Evaluation of trained policies and baselines on any env configuration (the library behind eval.py
+and benchmarks/paper_tables.py).
+
+    from agents import evaluation
+    policy = evaluation.checkpoint_policy("runs/ur5e-reach-ppo/20250101-120000")
+    config = evaluation.env_config_for("ur5e-reach", policy.train_env_config, workspace="front")
+    result = evaluation.run(policy, "ur5e-reach", config, num_envs=4096, eval_seeds=[1_000_000])
+    print(evaluation.markdown([result]))
+
+A policy is a checkpoint's policy export (`agents.export`, one unit per trained seed) or a baseline
+(`agents.baselines`). Every unit (trained seed x evaluation seed) runs `num_envs` environments for
+one episode each with the deterministic policy (`agents.loop.make_evaluate`); the same evaluation
+seed gives every policy the same episodes. Reported per unit: the mean over episodes of each paper
+metric (`PAPER_METRICS`); summarised as mean and standard deviation over units, plus the standard
+deviation over all episodes (the paper's baseline table gives that one for the distance).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import math
+import os
+import sys
+import time
+import warnings
+from typing import Any
+
+import jax
+import numpy as np
+
+import envs
+from agents import baselines, export
+from agents.loop import make_evaluate
+from envs.robots import ROBOTS
+
+PAPER_METRICS = {
+    "target_reached": "episode/target_reached",
+    "self_collision": "episode/self_collision",
+    "obstacle_collision": "episode/obstacle_collision",
+    "distance": "episode/distance_last10",
+    "steps_in_target": "episode/steps_in_target",
+    "times_left_target": "episode/times_left_target",
+}
+"""The paper's metrics (section "Training and evaluation", tables) and the `make_evaluate` key each
+is read from; all are an episode's values at its last step. `distance` is the mean end-effector to
+target distance over the episode's last 10 steps (the env's `distance_last10`)."""
+EXTRA_METRICS = {"episode_length": "episode/length", "return": "episode/return", "physics_nan": "episode/physics_nan",
+                 "reset_fallback": "episode/reset_fallback"}
+"""Also reported (JSON / CSV), not part of the paper's tables."""
+DEFAULT_EVAL_SEED = 1_000_000
+"""The training driver's `eval_seed`: eval.py on a run's own env config reproduces its eval.json."""
+
+
+def robot_of(env_name: str) -> str:
+    """The robot of a registered env name ("ur5e", "panda"), or the name itself for other envs."""
+    for robot in ROBOTS:
+        if env_name.startswith(robot + "-"):
+            return robot
+    return env_name
+
+
+def env_config_for(env_name: str, base, **overrides):
+    """The config of `env_name` that starts from `base` (e.g. a checkpoint's env config, possibly of
+    the other task: a reach config on a reach-avoid env keeps every field both have and takes the
+    rest from reach-avoid's defaults) with `overrides` (config fields) replacing values; validated."""
+    envs.registry.spec(env_name)  # unknown name -> ValueError listing the names
+    default = envs.default_config(env_name)
+    if base is None:
+        config = default
+    elif type(base) is type(default):
+        config = base
+    else:
+        names = {f.name for f in dataclasses.fields(default)}
+        shared = {f.name: getattr(base, f.name) for f in dataclasses.fields(base) if f.name in names}
+        config = dataclasses.replace(default, **shared)
+    fields = {f.name for f in dataclasses.fields(config)}
+    unknown = sorted(set(overrides) - fields)
+    if unknown:
+        raise ValueError(f"option {unknown[0]!r} does not exist for env {env_name!r}: allowed are {', '.join(sorted(fields))}.")
+    config = dataclasses.replace(config, **overrides)
+    config.validate()
+    return config
+
+
+# ------------------------------------------------------------------------------------------------
+# Policies
+
+
+@dataclasses.dataclass
+class Policy:
+    """What to evaluate: a checkpoint's policy (one unit per trained seed) or a baseline."""
+
+    kind: str
+    """"checkpoint" or "baseline"."""
+    name: str
+    """The baseline's name or the checkpoint's path as given."""
+    units: list
+    """Labels of the policy's units: trained seeds (checkpoint) or [None] (baseline)."""
+    export: export.PolicyExport | None = None
+
+    @property
+    def train_env_name(self) -> str | None:
+        return self.export.env_name if self.export else None
+
+    @property
+    def train_env_config(self):
+        return self.export.config.env if self.export else None
+
+    def describe(self) -> dict:
+        if self.export is None:
+            return {"kind": self.kind, "name": self.name}
+        e = self.export
+        return {"kind": self.kind, "name": self.name, "export": e.path, "env_steps": e.env_steps,
+                "algo": e.config.algo_name, "train_env_name": e.env_name, "seeds": e.seeds,
+                "train_config": e.meta["config"]}
+
+
+def baseline_policy(name: str) -> Policy:
+    baselines.index(name)  # unknown name -> ValueError
+    return Policy("baseline", name, [None])
+
+
+def checkpoint_policy(path: str) -> Policy:
+    """The policy export that `path` names (a train.py logdir: its newest checkpoint; a checkpoint
+    step directory; an export directory). A checkpoint from before exports existed gets one written
+    first (its full training state is restored once)."""
+    try:
+        loaded = export.load(path)
+    except export.MissingExport as missing:
+        print(f"note: {missing.step_dir} has no policy export; writing one from the full checkpoint.", file=sys.stderr)
+        try:
+            export.export_checkpoint(missing.step_dir)
+        except Exception as error:  # orbax / tensorstore raise many types on a broken checkpoint
+            raise ValueError(f"checkpoint {missing.step_dir!r} is corrupt or unreadable: {type(error).__name__}: "
+                             f"{str(error).splitlines()[0] if str(error) else ''}") from None
+        loaded = export.load(missing.step_dir)
+    return Policy("checkpoint", path, list(loaded.seeds), loaded)
+
+
+def check(policy: Policy, env_name: str, env_config) -> None:
+    """`check_compatible` on the env built from `env_config` (cheap: nothing is compiled)."""
+    check_compatible(policy, env_name, envs.from_config(env_name, env_config))
+
+
+def check_compatible(policy: Policy, env_name: str, env) -> None:
+    """ValueError unless `policy` can act in `env` (same robot, matching observation and action)."""
+    if policy.export is None:
+        baselines.check(policy.name, env)
+        return
+    e = policy.export
+    if robot_of(e.env_name) != robot_of(env_name):
+        raise ValueError(f"checkpoint {policy.name!r} was trained on {e.env_name!r} (robot {robot_of(e.env_name)}): "
+                         f"env={env_name!r} is another robot; allowed are the envs of robot {robot_of(e.env_name)}.")
+    if env.observation_size != e.observation_size:
+        observation = getattr(getattr(env.unwrapped, "config", None), "observation", None)
+        raise ValueError(f"the network of checkpoint {policy.name!r} takes observations of shape ({e.observation_size},) but "
+                         f"env {env_name!r} with observation={observation!r} gives shape ({env.observation_size},): "
+                         f"allowed are env options giving the trained observation {e.config.env.observation!r}.")
+    if env.action_size != e.action_size:
+        raise ValueError(f"the network of checkpoint {policy.name!r} outputs actions of shape ({e.action_size},) but env "
+                         f"{env_name!r} takes shape ({env.action_size},).")
+
+
+# ------------------------------------------------------------------------------------------------
+# Running
+
+
+@functools.lru_cache(maxsize=16)
+def _evaluator(env_name: str, env_config, algo_config, obs_size: int, act_size: int, num_envs: int, last_steps: int):
+    """(batched env, compiled `evaluate(params, key) -> (per-env metrics, records)`), cached per
+    setting so that several checkpoints / seeds / baselines (and a video of as many envs) share one
+    compilation. The env is not auto-reset (`_NoAutoReset`): only each env's first episode counts,
+    and its poses are recorded for rendering."""
+    base = envs.from_config(env_name, env_config)
+    env = envs.wrappers.VmapWrapper(_NoAutoReset(envs.wrappers.EpisodeWrapper(base, env_config.episode_length)))
+    length = env_config.episode_length
+    if algo_config is None:
+        fn = make_evaluate(env, None, num_envs, length, last_steps, act=baselines.make_act(env), per_env=True,
+                           record=_record)
+        return env, jax.jit(fn)
+    from agents.driver import make_learner
+
+    learner = make_learner(algo_config, obs_size, act_size, 1)
+    fn = make_evaluate(env, learner, num_envs, length, last_steps, per_env=True, record=_record)
+    return env, jax.jit(jax.vmap(fn, in_axes=(0, None)))
+
+
+class _NoAutoReset(envs.wrappers.AutoResetWrapper):
+    """The training stack's episodes (AutoResetWrapper's reset: the same initial states as
+    `envs.wrap` and the driver's evaluation for one key) without the auto-reset: an env whose
+    episode ended keeps stepping its terminal state (ignored by `episode_metrics`), so recorded poses
+    end where the episode did, and no fresh episode is sampled every step."""
+
+    def step(self, state, action):
+        return self.env.step(state, action)
+
+
+def _record(state):
+    """What a video needs of each step: joint positions, target and obstacle (arms only)."""
+    if not hasattr(state.pipeline_state, "qpos"):
+        return {}
+    out = {"qpos": state.pipeline_state.qpos, "target_pos": state.info["target_pos"]}
+    if "obstacle_pos" in state.info:
+        out["obstacle_pos"] = state.info["obstacle_pos"]
+    return out
+
+
+@dataclasses.dataclass
+class Result:
+    """One policy on one env configuration."""
+
+    policy: Policy
+    env_name: str
+    env_config: Any
+    num_envs: int
+    eval_seeds: list
+    last_steps: int
+    units: list
+    """[{"policy_seed", "eval_seed", "metrics": {name: mean over episodes}}]."""
+    per_env: dict
+    """{name: array (units, num_envs)}: every episode's value (for stds over episodes)."""
+    seconds: float
+    """Wall time of the evaluation, compilation included."""
+
+    def summary(self) -> dict:
+        return summarize(self.per_env)
+
+    def to_json(self) -> dict:
+        return jsonable({
+            "policy": self.policy.describe(),
+            "env_name": self.env_name,
+            "env_config": dataclasses.asdict(self.env_config),
+            "num_envs": self.num_envs,
+            "eval_seeds": list(self.eval_seeds),
+            "last_steps": self.last_steps,
+            "episodes": int(self.num_envs * len(self.units)),
+            "seconds": round(self.seconds, 2),
+            "summary": self.summary(),
+            "units": self.units,
+        })
+
+
+def jsonable(obj):
+    """`obj` with NaN / inf floats as None (strict JSON) and tuples as lists."""
+    if isinstance(obj, dict):
+        return {k: jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [jsonable(v) for v in obj]
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    return obj
+
+
+def _metric_names(per_step: dict, last_steps: int) -> dict:
+    names = {}
+    for name, key in {**PAPER_METRICS, **EXTRA_METRICS}.items():
+        key = key.replace("_last10", f"_last{last_steps}")
+        if key in per_step:
+            names[name] = key
+    if "distance" not in names and "episode/distance" in per_step:  # envs without distance_last10
+        names["distance"] = f"episode/distance_last{last_steps}"
+    return names
+
+
+def run(policy: Policy, env_name: str, env_config, num_envs: int = 4096, eval_seeds=(DEFAULT_EVAL_SEED,),
+        last_steps: int = 10) -> Result:
+    """Evaluates `policy` on `num_envs` episodes per unit and evaluation seed (see module doc)."""
+    if int(num_envs) < 1:
+        raise ValueError(f"num_envs={num_envs!r} is invalid: allowed is an integer >= 1.")
+    if not eval_seeds:
+        raise ValueError("eval_seeds=[] is invalid: allowed is at least one seed.")
+    algo = policy.export.config.algo if policy.export else None
+    obs = policy.export.observation_size if policy.export else 0
+    act = policy.export.action_size if policy.export else 0
+    env, evaluate = _evaluator(env_name, env_config, algo, obs, act, int(num_envs), int(last_steps))
+    check_compatible(policy, env_name, env)
+    params = policy.export.state if policy.export else baselines.index(policy.name)
+    t0 = time.perf_counter()
+    units, per_env = [], {}
+    for eval_seed in eval_seeds:
+        out = jax.device_get(evaluate(params, jax.random.PRNGKey(int(eval_seed)))[0])
+        names = _metric_names(out, last_steps)
+        for i, label in enumerate(policy.units):
+            values = {name: np.asarray(out[key][i] if policy.export else out[key], np.float64) for name, key in names.items()}
+            units.append({"policy_seed": label, "eval_seed": int(eval_seed),
+                          "metrics": {name: float(np.mean(v)) for name, v in values.items()}})
+            for name, v in values.items():
+                per_env.setdefault(name, []).append(v)
+    per_env = {k: np.stack(v) for k, v in per_env.items()}
+    derived = collided_distances(per_env)
+    per_env.update(derived)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        for i, unit in enumerate(units):
+            unit["metrics"].update({name: float(np.nanmean(v[i])) for name, v in derived.items()})
+    return Result(policy, env_name, env_config, int(num_envs), [int(s) for s in eval_seeds], int(last_steps), units,
+                  per_env, time.perf_counter() - t0)
+
+
+def collided_distances(per_env: dict) -> dict:
+    """Two readings of the final distance for comparing with other evaluators (not in our tables'
+    main columns): `distance_collided_as_0` counts an episode that ended in a collision as 0, which
+    is what summing per-step metrics over an episode's *active* steps gives when the distance is
+    only recorded over the last steps (Brax's evaluator); `distance_not_collided` is the mean over
+    collision-free episodes only (NaN if there are none)."""
+    if "distance" not in per_env or "self_collision" not in per_env:
+        return {}
+    collided = per_env["self_collision"] > 0
+    if "obstacle_collision" in per_env:
+        collided |= per_env["obstacle_collision"] > 0
+    return {"distance_collided_as_0": np.where(collided, 0.0, per_env["distance"]),
+            "distance_not_collided": np.where(collided, np.nan, per_env["distance"])}
+
+
+def summarize(per_env: dict) -> dict:
+    """{metric: {mean, std_units, std_episodes, units, episodes}} from (units, envs) arrays: the
+    mean over units of each unit's mean, its standard deviation over units (ddof 0, as over seeds),
+    and the standard deviation over all episodes pooled."""
+    out = {}
+    for name, values in per_env.items():
+        values = np.asarray(values, np.float64)
+        with np.errstate(invalid="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN units (e.g. no collision-free episode)
+            unit_means = np.nanmean(values, axis=1)
+            out[name] = {"mean": float(np.nanmean(unit_means)), "std_units": float(np.nanstd(unit_means)),
+                         "std_episodes": float(np.nanstd(values)), "units": int(values.shape[0]),
+                         "episodes": int(np.sum(~np.isnan(values)))}
+    return out
+
+
+def pooled(results: list[Result]) -> dict | None:
+    """The summary over the units of several results (e.g. one checkpoint per seed), or None if
+    their env configs differ."""
+    if len({(r.env_name, r.env_config) for r in results}) != 1:
+        return None
+    names = set.intersection(*(set(r.per_env) for r in results))
+    if len({r.num_envs for r in results}) != 1:
+        return None
+    return summarize({n: np.concatenate([r.per_env[n] for r in results]) for n in sorted(names)})
+
+
+# ------------------------------------------------------------------------------------------------
+# Reporting
+
+
+COLUMNS = [("target_reached", "target reached", 3), ("self_collision", "self collision", 3),
+           ("obstacle_collision", "obstacle collision", 3), ("distance", "distance (m)", 3),
+           ("steps_in_target", "steps in target", 1), ("times_left_target", "times left target", 2)]
+
+
+def fmt(stats: dict | None, digits: int, spread: str = "std_units") -> str:
+    """"mean ± std" (the std over units, omitted with a single unit), or "-" if missing."""
+    if not stats or not math.isfinite(stats["mean"]):
+        return "-"
+    text = f"{stats['mean']:.{digits}f}"
+    if spread == "std_episodes" or stats["units"] > 1:
+        text += f" ± {stats[spread]:.{digits}f}"
+    return text
+
+
+def label(result: Result) -> str:
+    p = result.policy
+    if p.export is None:
+        return p.name
+    return f"{p.name} ({p.export.config.algo_name}, {p.export.env_steps:,} steps)"
+
+
+def markdown(results: list[Result], spread: str = "std_units") -> str:
+    """A markdown table, one row per result (plus a pooled row for several checkpoints on one env
+    config); mean ± standard deviation over units (seeds / checkpoints)."""
+    names = [c for c in COLUMNS if any(c[0] in r.per_env for r in results)]
+    head = ["policy", "env", "seeds x envs"] + [c[1] for c in names]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for r in results:
+        s = r.summary()
+        cells = [label(r), r.env_name, f"{len(r.units)} x {r.num_envs}"] + [fmt(s.get(n), d, spread) for n, _, d in names]
+        lines.append("| " + " | ".join(cells) + " |")
+    if len(results) > 1 and all(r.policy.export for r in results):
+        s = pooled(results)
+        if s is not None:
+            units = sum(len(r.units) for r in results)
+            cells = ["all checkpoints", results[0].env_name, f"{units} x {results[0].num_envs}"]
+            lines.append("| " + " | ".join(cells + [fmt(s.get(n), d, spread) for n, _, d in names]) + " |")
+    return "\n".join(lines)
+
+
+def code_version() -> str:
+    """The git commit of this checkout, "+modified" if tracked files differ from it: results name
+    the code that made them. A copy without .git says "unknown" unless REACH_AVOID_CODE_VERSION
+    names it."""
+    import subprocess
+
+    if os.environ.get("REACH_AVOID_CODE_VERSION"):
+        return os.environ["REACH_AVOID_CODE_VERSION"]
+
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    try:
+        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=root, capture_output=True, text=True,
+                                timeout=10, check=True).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=root,
+                               capture_output=True, text=True, timeout=10, check=True).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+    return commit + ("+modified" if dirty else "")
+
+
+def device_description() -> str:
+    d = jax.devices()[0]
+    kind = getattr(d, "device_kind", d.platform)
+    text = f"{d.platform.upper()} ({kind})" if kind.lower() != d.platform else d.platform.upper()
+    if d.platform == "cpu":
+        text += f", {os.cpu_count()} cores"
+    return text
+
+
+# ------------------------------------------------------------------------------------------------
+# Rollouts for rendering
+
+
+def rollout(policy: Policy, env_name: str, env_config, num_envs: int = 1, eval_seed: int = DEFAULT_EVAL_SEED,
+            unit: int = 0) -> dict:
+    """Joint positions, target and obstacle of each env's first episode (for `benchmarks.render`):
+    {"qpos": (T + 1, n, nq), "target_pos": ..., ["obstacle_pos": ...], "length": (n,), "metrics": {...}}
+    with the policy's unit `unit` (a trained seed's index)."""
+    algo = policy.export.config.algo if policy.export else None
+    obs = policy.export.observation_size if policy.export else 0
+    act = policy.export.action_size if policy.export else 0
+    env, evaluate = _evaluator(env_name, env_config, algo, obs, act, int(num_envs), 10)
+    check_compatible(policy, env_name, env)
+    if policy.export:
+        params = jax.tree.map(lambda x: x[unit:unit + 1], policy.export.state)
+        out, records = jax.device_get(evaluate(params, jax.random.PRNGKey(int(eval_seed))))
+        out = {k: v[0] for k, v in out.items()}
+        records = jax.tree.map(lambda x: x[0], records)
+    else:
+        out, records = jax.device_get(evaluate(baselines.index(policy.name), jax.random.PRNGKey(int(eval_seed))))
+    records = {k: np.asarray(v) for k, v in records.items()}
+    records["length"] = np.asarray(out["episode/length"]).astype(int)
+    records["metrics"] = {k: np.asarray(v) for k, v in out.items()}
+    return records

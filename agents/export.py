@@ -1,0 +1,229 @@
+"""Policy exports: what evaluation needs of a run, small and loadable on a CPU.
+
+A checkpoint (`agents.checkpoint`) holds the whole `TrainState`: optimiser state, env states and,
+for SAC, a replay buffer of ~570 MB per seed at paper size. Evaluating needs only the policy. The
+training driver therefore writes, next to each checkpoint, `<step dir>/policy/`:
+
+- `policy.json`: format version, env steps, algorithm, observation and action sizes, seeds, and
+  the run's full config JSON (the one `agents.driver.config_from_json` reads);
+- `policy.npz`: the policy network's parameters and the observation normaliser's statistics, each
+  with the run's leading seed axis (`policy/params/hidden_0/kernel`, ..., `obs_stats/mean`, ...).
+
+`load` rebuilds the learner's own deterministic policy from it (`PPO.policy` / `SAC.policy` on a
+state holding only these arrays), so the export acts exactly as the trained learner does, without
+building or compiling the training programs. An export directory can be copied anywhere (e.g.
+`results/checkpoints/<name>/`) and loaded from there.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import zipfile
+
+import jax
+import numpy as np
+
+from agents import normalizer
+
+DIRNAME = "policy"
+"""Name of the export directory inside a checkpoint's step directory."""
+FORMAT = 1
+
+
+def policy_arrays(learner_state) -> dict:
+    """{"policy": params, "obs_stats": RunningStats} of a PPO or SAC learner state."""
+    from agents.ppo import PPOState
+    from agents.sac import SACState
+
+    if isinstance(learner_state, PPOState):
+        return {"policy": learner_state.params["policy"], "obs_stats": learner_state.obs_stats}
+    if isinstance(learner_state, SACState):
+        return {"policy": learner_state.policy_params, "obs_stats": learner_state.obs_stats}
+    raise ValueError(f"cannot export a policy from {type(learner_state).__name__}: allowed are PPOState, SACState.")
+
+
+def _flatten(tree, prefix="") -> dict:
+    out = {}
+    for key, value in tree.items():
+        name = f"{prefix}/{key}" if prefix else str(key)
+        if isinstance(value, dict):
+            out.update(_flatten(value, name))
+        else:
+            out[name] = np.asarray(value)
+    return out
+
+
+def _unflatten(flat: dict) -> dict:
+    tree: dict = {}
+    for name, value in flat.items():
+        node = tree
+        *path, leaf = name.split("/")
+        for part in path:
+            node = node.setdefault(part, {})
+        node[leaf] = value
+    return tree
+
+
+def save(directory: str, learner_state, config_json: dict, env_steps: int) -> str:
+    """Writes the export of a seed-batched learner state to `directory`; returns it."""
+    arrays = jax.device_get(policy_arrays(learner_state))
+    stats = arrays["obs_stats"]
+    flat = _flatten({"policy": arrays["policy"]})
+    flat.update({"obs_stats/count": np.asarray(stats.count), "obs_stats/mean": np.asarray(stats.mean),
+                 "obs_stats/var": np.asarray(stats.var)})
+    seeds = int(flat["obs_stats/mean"].shape[0])
+    first_kernel = flat["policy/params/hidden_0/kernel"]
+    meta = {
+        "format": FORMAT,
+        "env_steps": int(env_steps),
+        "algo_name": config_json["algo_name"],
+        "env_name": config_json["env_name"],
+        "seeds": [int(config_json["seed"]) + i for i in range(seeds)],
+        "observation_size": int(first_kernel.shape[-2]),
+        "action_size": int(flat["policy/params/out/bias"].shape[-1] // 2),
+        "config": config_json,
+    }
+    os.makedirs(directory, exist_ok=True)
+    np.savez(os.path.join(directory, "policy.npz"), **flat)
+    with open(os.path.join(directory, "policy.json"), "w") as f:
+        json.dump(meta, f, indent=2)
+    return directory
+
+
+@dataclasses.dataclass
+class PolicyExport:
+    """A loaded export: the run's config, the seed-batched policy arrays and what they act with."""
+
+    path: str
+    """The export directory."""
+    meta: dict
+    """policy.json (format, env_steps, algo_name, env_name, seeds, sizes, config)."""
+    config: object
+    """The run's `agents.driver.TrainConfig`."""
+    learner: object
+    """A PPO / SAC object built from the config (no compilation); `policy(state, obs)` acts."""
+    state: object
+    """A PPOState / SACState holding only the policy parameters and observation statistics, each
+    with the leading seed axis (vmap `learner.policy` over it)."""
+
+    @property
+    def env_name(self) -> str:
+        return self.config.env_name
+
+    @property
+    def env_steps(self) -> int:
+        return int(self.meta["env_steps"])
+
+    @property
+    def seeds(self) -> list[int]:
+        return list(self.meta["seeds"])
+
+    @property
+    def observation_size(self) -> int:
+        return int(self.meta["observation_size"])
+
+    @property
+    def action_size(self) -> int:
+        return int(self.meta["action_size"])
+
+
+def find(path: str) -> str:
+    """The export directory that `path` names: an export directory itself, a checkpoint step
+    directory (`<logdir>/checkpoints/<step>`) or a train.py logdir (its newest checkpoint).
+    ValueError if there is none; `MissingExport` if a checkpoint exists without an export."""
+    path = os.path.abspath(path)
+    if not os.path.exists(path):
+        raise ValueError(f"checkpoint {path!r} does not exist: allowed is a train.py logdir, a checkpoint step "
+                         "directory or a policy export directory.")
+    if os.path.isfile(os.path.join(path, "policy.json")):
+        return path
+    if os.path.isfile(os.path.join(path, DIRNAME, "policy.json")):
+        return os.path.join(path, DIRNAME)
+    step_root = os.path.join(path, "checkpoints") if os.path.isdir(os.path.join(path, "checkpoints")) else path
+    steps = sorted((int(d) for d in os.listdir(step_root) if d.isdigit() and os.path.isdir(os.path.join(step_root, d))))
+    if steps:
+        newest = os.path.join(step_root, str(steps[-1]))
+        if os.path.isfile(os.path.join(newest, DIRNAME, "policy.json")):
+            return os.path.join(newest, DIRNAME)
+        raise MissingExport(newest)
+    if os.path.isdir(os.path.join(path, "state")) and os.path.isdir(os.path.join(path, "config")):
+        raise MissingExport(path)
+    raise ValueError(f"checkpoint {path!r} holds no checkpoint and no policy export: allowed is a train.py logdir, "
+                     "a checkpoint step directory or a policy export directory.")
+
+
+class MissingExport(ValueError):
+    """A checkpoint step directory without a policy export (a run from before exports existed)."""
+
+    def __init__(self, step_dir: str):
+        super().__init__(f"checkpoint {step_dir!r} has no policy export ({DIRNAME}/policy.json); write one with "
+                         f"`python eval.py --export {step_dir}` (restores the full training state once).")
+        self.step_dir = step_dir
+
+
+def load(path: str) -> PolicyExport:
+    """Loads the export that `path` names (see `find`). ValueError if it is missing or corrupt."""
+    from agents import driver
+
+    directory = find(path)
+    try:
+        with open(os.path.join(directory, "policy.json")) as f:
+            meta = json.load(f)
+        with np.load(os.path.join(directory, "policy.npz")) as data:
+            flat = {k: np.asarray(data[k]) for k in data.files}
+        if meta.get("format") != FORMAT:
+            raise ValueError(f"format {meta.get('format')!r} is unsupported (allowed: {FORMAT})")
+        config = driver.config_from_json(meta["config"])
+        tree = _unflatten(flat)
+        stats = normalizer.RunningStats(tree["obs_stats"]["count"], tree["obs_stats"]["mean"], tree["obs_stats"]["var"])
+        params = tree["policy"]
+    except (OSError, KeyError, TypeError, ValueError, json.JSONDecodeError, zipfile.BadZipFile, EOFError) as error:
+        raise ValueError(f"policy export {directory!r} is corrupt or unreadable: {type(error).__name__}: {error}") from None
+    learner = driver.make_learner(config.algo, int(meta["observation_size"]), int(meta["action_size"]), 1)
+    _check_shapes(directory, learner, params, stats, meta)
+    return PolicyExport(directory, meta, config, learner, _learner_state(learner, params, stats))
+
+
+def _check_shapes(directory, learner, params, stats, meta) -> None:
+    """The arrays must be what the config's network expects (else a clear error, not one from jit)."""
+    import jax.numpy as jnp
+
+    dummy = jax.ShapeDtypeStruct((1, int(meta["observation_size"])), jnp.float32)
+    expected = jax.eval_shape(lambda x: learner.policy_net.init(jax.random.PRNGKey(0), x), dummy)
+    exp_flat = {k: v.shape for k, v in _flatten(jax.tree.map(lambda s: np.zeros(s.shape), expected)).items()}
+    got_flat = {k: v.shape[1:] for k, v in _flatten(params).items()}
+    seeds = {v.shape[0] for v in _flatten(params).values()} | {stats.mean.shape[0]}
+    if exp_flat != got_flat or len(seeds) != 1 or stats.mean.shape[1:] != (int(meta["observation_size"]),):
+        raise ValueError(f"policy export {directory!r} is corrupt: its arrays {got_flat} do not match the network of "
+                         f"its config {exp_flat}.")
+
+
+def _learner_state(learner, params, stats):
+    from agents.ppo import PPO, PPOState
+    from agents.sac import SACState
+
+    if isinstance(learner, PPO):
+        return PPOState(params={"policy": params}, opt_state=None, obs_stats=stats, value_stats=None, updates=None)
+    return SACState(policy_params=params, q_params=None, target_q_params=None, log_alpha=None, policy_opt=None,
+                    q_opt=None, alpha_opt=None, obs_stats=stats, replay=None)
+
+
+def export_checkpoint(step_dir: str) -> str:
+    """Writes the policy export of an existing checkpoint (restoring its whole training state once:
+    slow for SAC's replay buffer); returns the export directory."""
+    from agents import driver
+    from agents.checkpoint import Checkpointer
+
+    step_dir = os.path.abspath(step_dir)
+    step = int(os.path.basename(step_dir))
+    ckpt = Checkpointer(os.path.dirname(step_dir))
+    try:
+        config_json = ckpt.restore_config(step)
+        config = driver.config_from_json(config_json)
+        programs = driver.programs_for(config)
+        state, _ = ckpt.restore(step, programs.abstract_state)
+    finally:
+        ckpt.close()
+    return save(os.path.join(step_dir, DIRNAME), state.learner, config_json, step)

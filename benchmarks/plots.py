@@ -1,0 +1,226 @@
+"""Pictures: training curves from train.py logs, and the environment seen (matplotlib, PNG).
+
+Functions for notebooks (each returns the matplotlib Figure, and writes a PNG if `out` is given):
+
+    from benchmarks import plots
+    plots.training_curves({"front": "runs/front", "full": ["runs/full_a", "runs/full_b"]}, out="curves.png")
+    plots.initial_state({"ur5e-reach-avoid": {}}, seed=0, out="initial_state.png")
+    plots.target_scatter("ur5e-reach", out="targets.png")
+
+Command line (the PNGs under results/figures/ were made with these, on a CPU):
+
+    python benchmarks/plots.py curves runs/front runs/full --labels front full --out results/figures/curves.png
+    python benchmarks/plots.py env --out results/figures
+
+A rollout video is `python eval.py ... --video PATH` (benchmarks/render.py).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import os
+import sys
+
+import numpy as np
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+if ROOT not in sys.path:
+    sys.path.insert(0, ROOT)
+
+CURVE_METRICS = {  # the first four are drawn by default
+    "episode/target_reached": "target reached",
+    "episode/self_collision": "self collision",
+    "episode/obstacle_collision": "obstacle collision",
+    "episode/return": "episode return",
+    "episode/distance": "final distance to target (m)",
+}
+"""Columns of metrics.csv drawn by default, with their axis titles (the paper's figures)."""
+
+
+def _pyplot():
+    import matplotlib
+
+    if not os.environ.get("DISPLAY") and matplotlib.get_backend().lower() not in ("agg", "module://matplotlib_inline.backend_inline"):
+        matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def read_metrics(logdir: str) -> dict[str, np.ndarray]:
+    """metrics.csv of a train.py logdir as {column: float array} (empty cells are NaN)."""
+    path = logdir if logdir.endswith(".csv") else os.path.join(logdir, "metrics.csv")
+    if not os.path.isfile(path):
+        raise ValueError(f"{path!r} does not exist: allowed is a train.py logdir (with metrics.csv) or a metrics.csv.")
+    with open(path, newline="") as f:
+        rows = list(csv.DictReader(f))
+    if not rows:
+        raise ValueError(f"{path!r} has no rows.")
+    return {k: np.array([float(r[k]) if r.get(k) not in ("", None) else np.nan for r in rows]) for k in rows[0]}
+
+
+def curve(logdirs, metric: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """(env steps, mean, std, number of seeds) of `metric` over every seed of every logdir.
+
+    Seeds of one run are the `seed` column; several runs (e.g. one per seed) are pooled. Steps
+    logged by only some seeds are dropped, so every point averages the same seeds."""
+    logdirs = [logdirs] if isinstance(logdirs, str) else list(logdirs)
+    series = {}
+    for i, logdir in enumerate(logdirs):
+        m = read_metrics(logdir)
+        if metric not in m:
+            raise ValueError(f"metric {metric!r} is not in {logdir}/metrics.csv: allowed are "
+                             f"{', '.join(k for k in m if k not in ('env_steps', 'seed'))}.")
+        for step, seed, value in zip(m["env_steps"], m["seed"], m[metric]):
+            series.setdefault((i, seed), {})[step] = value
+    common = sorted(set.intersection(*(set(s) for s in series.values())))
+    values = np.array([[s[step] for step in common] for s in series.values()])
+    return np.array(common), np.nanmean(values, 0), np.nanstd(values, 0), len(series)
+
+
+def training_curves(runs: dict, metrics=None, out: str | None = None, title: str | None = None, band: float = 1.0):
+    """One panel per metric, one line per run (label -> logdir or list of logdirs): the mean over
+    seeds against env steps, with a band of `band` standard deviations across seeds."""
+    plt = _pyplot()
+    from matplotlib.ticker import EngFormatter
+
+    defaults = list(CURVE_METRICS)[:4]
+    metrics = metrics or [m for m in defaults if all(m in read_metrics(_first(d)) for d in runs.values())]
+    fig, axes = plt.subplots(1, len(metrics), figsize=(4.2 * len(metrics), 3.4), squeeze=False)
+    for ax, metric in zip(axes[0], metrics):
+        for name, logdirs in runs.items():
+            steps, mean, std, n = curve(logdirs, metric)
+            line, = ax.plot(steps, mean, label=f"{name} ({n} seed{'s' if n > 1 else ''})")
+            if n > 1 and band > 0:
+                ax.fill_between(steps, mean - band * std, mean + band * std, color=line.get_color(), alpha=0.2, lw=0)
+        ax.set_title(CURVE_METRICS.get(metric, metric))
+        ax.set_xlabel("env steps")
+        ax.xaxis.set_major_formatter(EngFormatter(sep=""))
+        ax.grid(alpha=0.3)
+        if metric in ("episode/target_reached", "episode/self_collision", "episode/obstacle_collision"):
+            ax.set_ylim(-0.02, 1.02)
+    axes[0][0].legend(fontsize=8)
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    return _save(fig, out)
+
+
+def _first(logdirs):
+    return logdirs if isinstance(logdirs, str) else list(logdirs)[0]
+
+
+def _save(fig, out, dpi: int = 110):
+    if out:
+        if os.path.dirname(out):
+            os.makedirs(os.path.dirname(out), exist_ok=True)
+        fig.savefig(out, dpi=dpi)
+        print(f"wrote {out}", file=sys.stderr)
+    return fig
+
+
+def initial_state(setups: dict, seed: int = 0, out: str | None = None, width: int = 640, height: int = 480,
+                  workspace_alpha: float = 0.12):
+    """Rendered initial states (robot, target in green, obstacle in red, the full workspace in
+    translucent grey), one panel per env: {env name: env options}. The target is drawn enlarged
+    (`benchmarks.render.TARGET_MARKER_RADIUS`), as in the paper's figure."""
+    import jax
+
+    import envs
+    from benchmarks import render
+
+    plt = _pyplot()
+    fig, axes = plt.subplots(1, len(setups), figsize=(width / 100 * len(setups), height / 100), squeeze=False)
+    for ax, (name, options) in zip(axes[0], setups.items()):
+        env = envs.make(name, **options)
+        state = jax.jit(env.reset)(jax.random.PRNGKey(seed))
+        ax.imshow(render.render_state(env, state, width=width, height=height, workspace_alpha=workspace_alpha))
+        extra = ", ".join(f"{k}={v}" for k, v in options.items())
+        ax.set_title(name + (f" ({extra})" if extra else ""), fontsize=9)
+        ax.axis("off")
+    fig.tight_layout()
+    return _save(fig, out)
+
+
+def sample_targets(env_name: str, workspace: str, num: int = 3000, seed: int = 0, **options) -> np.ndarray:
+    """`num` targets (num, 3) as the env samples them for `workspace` (pure-JAX kinematics; the
+    `pandagym` cube needs uniform sampling, which is used there)."""
+    import jax
+
+    import envs
+
+    if workspace == "pandagym":
+        options.setdefault("target_sampling", "uniform")
+    env = envs.make(env_name, workspace=workspace, **options)
+    sample = jax.jit(jax.vmap(env.sample_target))
+    targets, _, ok = sample(jax.random.split(jax.random.PRNGKey(seed), num))
+    return np.asarray(targets)[np.asarray(ok)]
+
+
+def target_scatter(env_name: str = "ur5e-reach", workspaces=("pandagym", "front", "upper", "full"), num: int = 2000,
+                   seed: int = 0, out: str | None = None, **options):
+    """The paper's target-distribution figure: targets as the env samples them (reachable: the end
+    effector of a random collision-free pose), one column per workspace, seen from above (x-y) and
+    from the side (x-z); the base is at the origin, the circle is the robot's reach."""
+    import envs
+
+    plt = _pyplot()
+    robot = envs.make(env_name).robot
+    center, reach = np.asarray(robot.workspace_center, float), float(robot.reach)
+    fig, axes = plt.subplots(2, len(workspaces), figsize=(3.2 * len(workspaces), 6.4), squeeze=False)
+    for col, ws in enumerate(workspaces):
+        pts = sample_targets(env_name, ws, num, seed, **options)
+        for row, (i, j, names) in enumerate(((0, 1, ("x", "y")), (0, 2, ("x", "z")))):
+            ax = axes[row][col]
+            ax.scatter(pts[:, i], pts[:, j], s=1.5, alpha=0.35, c=pts[:, 2], cmap="viridis", vmin=center[2] - reach,
+                       vmax=center[2] + reach, rasterized=True)
+            ax.add_patch(plt.Circle((center[i], center[j]), reach, fill=False, ls="--", lw=0.8, color="grey"))
+            ax.plot([0], [0], "k^", ms=6)
+            ax.set_xlim(-1.05, 1.05)
+            ax.set_ylim(center[j] - 1.05 if j == 2 else -1.05, center[j] + 1.05 if j == 2 else 1.05)
+            ax.set_aspect("equal")
+            ax.set_xlabel(f"{names[0]} (m)")
+            ax.set_ylabel(f"{names[1]} (m)")
+            ax.grid(alpha=0.3)
+            if row == 0:
+                ax.set_title(f"{ws} ({len(pts)} targets)", fontsize=10)
+    fig.suptitle(f"{env_name}: sampled targets per workspace, top (x-y) and side (x-z) views; colour = height")
+    fig.tight_layout()
+    return _save(fig, out, dpi=90)
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(prog="benchmarks/plots.py", description="Training curves and environment figures.")
+    sub = p.add_subparsers(dest="what", required=True)
+    c = sub.add_parser("curves", help="training curves from train.py logdirs")
+    c.add_argument("logdirs", nargs="+", help="train.py logdirs (one line each; join several with commas to pool them)")
+    c.add_argument("--labels", nargs="+", help="one label per logdir argument (default: the paths)")
+    c.add_argument("--metrics", nargs="+", help=f"metrics.csv columns (default: {', '.join(CURVE_METRICS)} where present)")
+    c.add_argument("--title")
+    c.add_argument("--out", required=True)
+    e = sub.add_parser("env", help="initial-state renders and target scatter")
+    e.add_argument("--out", default=os.path.join(ROOT, "results", "figures"))
+    e.add_argument("--seed", type=int, default=0)
+    e.add_argument("--num-targets", type=int, default=2000)
+    args = p.parse_args(argv)
+    if args.what == "curves":
+        labels = args.labels or args.logdirs
+        if len(labels) != len(args.logdirs):
+            raise ValueError(f"--labels has {len(labels)} entries for {len(args.logdirs)} logdirs: allowed is one each.")
+        training_curves({lab: d.split(",") for lab, d in zip(labels, args.logdirs)}, args.metrics, args.out, args.title)
+    else:
+        initial_state({"ur5e-reach-avoid": {}, "panda-reach-avoid": {}}, args.seed,
+                      os.path.join(args.out, "initial_state_reach_avoid.png"))
+        target_scatter("ur5e-reach", num=args.num_targets, seed=args.seed,
+                       out=os.path.join(args.out, "targets_ur5e.png"))
+        target_scatter("panda-reach", num=args.num_targets, seed=args.seed,
+                       out=os.path.join(args.out, "targets_panda.png"))
+
+
+if __name__ == "__main__":
+    try:
+        main()
+    except ValueError as error:
+        print(f"error: {error}", file=sys.stderr)
+        raise SystemExit(2)

@@ -1,0 +1,547 @@
+"""eval.py and its library (agents.evaluation, agents.export, agents.baselines): metric aggregation
+on hand-built episodes, the paper's baselines, policy exports written by the driver, evaluation of a
+checkpoint on another workspace, bad input, rendering.
+
+CPU cost is dominated by compiling MJX rollouts (~25 s each on 2 cores), so every compiled
+evaluation is shared: module-scoped fixtures, and eval.py subprocesses run the same programs as the
+in-process tests with the persistent compilation cache (`.jax_cache/`, see conftest.py) switched on.
+"""
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import envs
+import eval as eval_cli
+import train as train_cli
+from agents import baselines, driver, evaluation, export
+from agents.loop import episode_metrics
+from mujoco_reference import colliding_configuration
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+QUIET = dict(tensorboard=False, progress=False)
+
+
+def _subprocess_env():
+    path = os.pathsep.join(p for p in (ROOT, os.environ.get("PYTHONPATH", "")) if p)
+    return dict(os.environ, PYTHONPATH=path, JAX_COMPILATION_CACHE_DIR=os.path.join(ROOT, ".jax_cache"),
+                JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS="1")
+
+
+def _eval_cli(*args, timeout=400):
+    return subprocess.run([sys.executable, "eval.py", *args], cwd=ROOT, env=_subprocess_env(), capture_output=True,
+                          text=True, timeout=timeout)
+
+
+# ------------------------------------------------------------------------------------------------
+# Aggregation
+
+
+def test_episode_metrics_on_a_hand_built_rollout():
+    """Env 0: reach (t=1), leave (t=2), re-enter (t=3), collide (t=4, done), then a later episode that
+    must be ignored. Env 1: never done; its episode is the whole rollout."""
+    T = 14
+    done = np.zeros((T, 2), np.float32)
+    done[4, 0] = 1.0
+    done[9, 0] = 1.0  # second episode of env 0: ignored
+    reward = np.ones((T, 2), np.float32)
+    reward[4, 0] = 0.0  # the collision step
+    distance = np.tile(np.linspace(1.0, 0.1, T, dtype=np.float32)[:, None], (1, 2))
+    distance[:5, 0] = [0.05, 0.005, 0.1, 0.004, 0.3]
+    metrics = {
+        "distance": distance,
+        "target_reached": np.zeros((T, 2), np.float32),
+        "steps_in_target": np.zeros((T, 2), np.float32),
+        "times_left_target": np.zeros((T, 2), np.float32),
+        "self_collision": np.zeros((T, 2), np.float32),
+    }
+    metrics["target_reached"][:4, 0] = [0, 1, 1, 1]
+    metrics["target_reached"][4, 0] = 0  # a collision voids the reach
+    metrics["steps_in_target"][:5, 0] = [0, 1, 1, 2, 2]
+    metrics["times_left_target"][:5, 0] = [0, 0, 1, 1, 1]
+    metrics["self_collision"][4, 0] = 1
+    metrics["self_collision"][5:, 0] = 7.0  # garbage of later episodes
+    out = jax.device_get(episode_metrics(jnp.asarray(done), jnp.asarray(reward),
+                                         {k: jnp.asarray(v) for k, v in metrics.items()}, last_steps=3))
+    np.testing.assert_allclose(out["episode/length"], [5, T])
+    np.testing.assert_allclose(out["episode/return"], [4, T])
+    np.testing.assert_allclose(out["episode/self_collision"], [1, 0])
+    np.testing.assert_allclose(out["episode/target_reached"], [0, 0])
+    np.testing.assert_allclose(out["episode/steps_in_target"], [2, 0])
+    np.testing.assert_allclose(out["episode/times_left_target"], [1, 0])
+    np.testing.assert_allclose(out["episode/distance"], [0.3, distance[-1, 1]])
+    np.testing.assert_allclose(out["episode/distance_last3"], [(0.1 + 0.004 + 0.3) / 3, distance[-3:, 1].mean()], rtol=1e-6)
+    # Summaries: mean and std over units and over episodes.
+    s = evaluation.summarize({"x": np.array([[1.0, 0.0, 0.0, 1.0], [1.0, 1.0, 1.0, 1.0]])})["x"]
+    assert s["mean"] == 0.75 and s["std_units"] == 0.25 and np.isclose(s["std_episodes"], np.sqrt(3) / 4)
+
+
+def _with_target(state, target):
+    return state.replace(info={**state.info, "target_pos": jnp.asarray(target, jnp.float32)})
+
+
+def test_episode_metrics_on_env_states():
+    """The reach / leave / re-enter / collide sequence of tests/test_envs.py built from real env
+    states (same compiled step, shared through the compilation cache), then aggregated."""
+    n = 4  # tests/test_envs.py's batch: the compiled step comes from the cache
+    env = envs.wrap(envs.make("ur5e-reach"))
+    step = jax.jit(env.step)
+    still = jnp.zeros((n, 6))
+    ee = lambda s: np.asarray(step(s, still).pipeline_state.site_xpos)[:, env.unwrapped.robot.ee_site]
+    states = [jax.jit(env.reset)(jax.random.split(jax.random.PRNGKey(14), n))]
+    offsets = [0.0, 0.1, 0.0]  # in target, 10 cm off, back in
+    for off in offsets:
+        s = states[-1]
+        states.append(step(_with_target(s, ee(s) + np.array([off, 0, 0])), still))
+    # Step 4: a colliding configuration; step 5: the next episode (auto-reset) goes on.
+    q = colliding_configuration(env.unwrapped.robot, seed=15)
+    s = states[-1]
+    data = s.pipeline_state.replace(qpos=jnp.tile(q, (n, 1)), qvel=jnp.zeros_like(s.pipeline_state.qvel))
+    states.append(step(s.replace(pipeline_state=data), still))
+    states.append(step(states[-1], still))
+    seq = states[1:]
+    done = jnp.stack([s.done for s in seq])
+    reward = jnp.stack([s.reward for s in seq])
+    metrics = {k: jnp.stack([s.metrics[k] for s in seq]) for k in seq[0].metrics}
+    out = jax.device_get(episode_metrics(done, reward, metrics, last_steps=10))
+    np.testing.assert_array_equal(out["episode/length"], 4)
+    np.testing.assert_array_equal(out["episode/self_collision"], 1)
+    np.testing.assert_array_equal(out["episode/target_reached"], 0)
+    np.testing.assert_array_equal(out["episode/steps_in_target"], 2)
+    np.testing.assert_array_equal(out["episode/times_left_target"], 1)
+    d = np.stack([np.asarray(s.metrics["distance"]) for s in seq[:4]])
+    np.testing.assert_allclose(out["episode/distance_last10"], d.mean(0), rtol=1e-5)
+    np.testing.assert_allclose(out["episode/return"], np.asarray(reward)[:4].sum(0), rtol=1e-6)
+
+
+# ------------------------------------------------------------------------------------------------
+# Policy exports written by the driver (point mass: compiles in seconds)
+
+
+@pytest.fixture(scope="module")
+def point_run(tmp_path_factory):
+    """A 2-seed point-mass PPO run with checkpoints at 5120 and 10240 env steps."""
+    logdir = tmp_path_factory.mktemp("point") / "run"
+    config = train_cli.make_config("point-mass-ppo", num_timesteps=10240, checkpoint_every=5120, seeds=2,
+                                   eval_envs=64, logdir=str(logdir), **QUIET)
+    driver.train(config)
+    return logdir
+
+
+def test_driver_writes_policy_exports_that_reproduce_its_evaluation(point_run):
+    for step in (5120, 10240):
+        directory = point_run / "checkpoints" / str(step) / "policy"
+        assert (directory / "policy.json").is_file() and (directory / "policy.npz").is_file()
+        assert sum(f.stat().st_size for f in directory.iterdir()) < 200_000  # params + statistics only
+    policy = evaluation.checkpoint_policy(str(point_run))  # a logdir: its newest checkpoint
+    assert policy.export.env_steps == 10240 and policy.units == [0, 1]
+    assert policy.train_env_name == "point-mass"
+    # The export acts exactly as the trained learner: same numbers as the driver's eval.json.
+    result = evaluation.run(policy, "point-mass", policy.train_env_config, num_envs=64)
+    ev = json.loads((point_run / "eval.json").read_text())
+    for name, key in (("target_reached", "episode/target_reached"), ("distance", "episode/distance_last10"),
+                      ("return", "episode/return")):
+        np.testing.assert_allclose([u["metrics"][name] for u in result.units], ev["per_seed"][key], rtol=1e-5, atol=1e-6)
+    assert 0 < result.summary()["target_reached"]["mean"] <= 1
+    # A step directory names that checkpoint.
+    older = evaluation.checkpoint_policy(str(point_run / "checkpoints" / "5120"))
+    assert older.export.env_steps == 5120
+    assert not np.allclose(older.export.state.params["policy"]["params"]["out"]["kernel"],
+                           policy.export.state.params["policy"]["params"]["out"]["kernel"])
+
+
+def test_checkpoint_without_export_gets_one_from_the_full_state(point_run, tmp_path):
+    run = tmp_path / "old"
+    shutil.copytree(point_run, run)
+    shutil.rmtree(run / "checkpoints" / "10240" / "policy")  # as written before exports existed
+    policy = evaluation.checkpoint_policy(str(run))
+    assert (run / "checkpoints" / "10240" / "policy" / "policy.json").is_file()
+    fresh = evaluation.checkpoint_policy(str(point_run))
+    for a, b in zip(jax.tree.leaves(policy.export.state), jax.tree.leaves(fresh.export.state)):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_several_checkpoints_pooled(point_run, capsys):
+    step = str(point_run / "checkpoints" / "5120")
+    results = eval_cli.main(["--checkpoint", str(point_run), step, "--num-envs", "16", "--seeds", "2"])
+    assert [len(r.units) for r in results] == [4, 4]  # 2 trained seeds x 2 eval seeds each
+    out = capsys.readouterr().out
+    assert "all checkpoints | point-mass | 8 x 16" in out
+    pooled = evaluation.pooled(results)
+    assert pooled["target_reached"]["units"] == 8
+
+
+# ------------------------------------------------------------------------------------------------
+# Baselines (one compiled evaluation serves all three: the baseline is a traced index)
+
+BASELINE_ENV = dict(action="absolute", episode_length=100, target_radius=0.02)
+"""Absolute control (the paper's baselines, see eval.py) and 100 steps (4 s): the random agent's
+collisions come early (median step 20 at 4096 envs), the pseudo-IK needs ~80 steps on average to
+swing its joints (up to 4 pi rad at ~pi rad/s) to the target's pose."""
+
+
+BASELINE_ARGS = ["--env", "ur5e-reach", "--num-envs", "16"] + [f"--env.{k.replace('_', '-')}={v}" for k, v in BASELINE_ENV.items()]
+
+
+@pytest.fixture(scope="module")
+def baseline_runs(tmp_path_factory):
+    """eval.py (in process) for each baseline: {name: (result, json path, csv path)}."""
+    out = tmp_path_factory.mktemp("baselines")
+    runs = {}
+    for name in baselines.BASELINES:
+        paths = (out / f"{name}.json", out / f"{name}.csv")
+        [result] = eval_cli.main(BASELINE_ARGS + ["--policy", name, "--json", str(paths[0]), "--csv", str(paths[1])])
+        runs[name] = (result, *paths)
+    return runs
+
+
+@pytest.fixture(scope="module")
+def baseline_results(baseline_runs):
+    return {name: run[0] for name, run in baseline_runs.items()}
+
+
+def test_baselines_behave_as_in_the_paper(baseline_results):
+    s = {name: r.summary() for name, r in baseline_results.items()}
+    # Standstill: holds its initial pose, never reaches, never collides.
+    assert s["standstill"]["target_reached"]["mean"] == 0 and s["standstill"]["self_collision"]["mean"] == 0
+    assert s["standstill"]["steps_in_target"]["mean"] == 0
+    # Random (absolute control): flails and self-collides often (paper 30 %, ours 22 % at 4096 envs).
+    assert s["random"]["target_reached"]["mean"] == 0
+    assert s["random"]["self_collision"]["mean"] >= 2 / 16
+    # Pseudo-IK: commands the target's own pose; a fair share reaches, the rest collides on the way
+    # or settles off target under gravity; far closer than standing still.
+    assert s["pseudo_ik"]["target_reached"]["mean"] >= 3 / 16
+    assert s["pseudo_ik"]["distance_not_collided"]["mean"] < 0.5 * s["standstill"]["distance"]["mean"]
+    assert s["pseudo_ik"]["steps_in_target"]["mean"] > 0
+    # Same episodes for every baseline (one evaluation seed): same initial distances.
+    assert baseline_results["random"].eval_seeds == baseline_results["standstill"].eval_seeds
+
+
+def test_baseline_actions_command_the_right_joint_targets():
+    """standstill / pseudo-IK actions invert the env's action mapping in both modes."""
+    for action in ("absolute", "relative"):
+        env = envs.wrap(envs.make("ur5e-reach", action=action))
+        base = env.unwrapped
+        robot = base.robot
+        rng = np.random.default_rng(0)
+        q = rng.uniform(robot.joint_low, robot.joint_high, (5, 6)).astype(np.float32)
+        near = np.clip(q + rng.uniform(-0.05, 0.05, q.shape), robot.joint_low, robot.joint_high).astype(np.float32)
+        a = baselines.joint_target_action(base.config, robot, jnp.asarray(near), jnp.asarray(q))
+        np.testing.assert_allclose(base.action_to_ctrl(a, jnp.asarray(q)), near, atol=2e-5)
+        far = q + 1.0  # relative control: one step of at most action_scale towards it
+        a = baselines.joint_target_action(base.config, robot, jnp.asarray(far), jnp.asarray(q))
+        if action == "relative":
+            np.testing.assert_allclose(a, 1.0)
+
+
+def test_cli_baseline_json_csv(baseline_runs):
+    """The contract `eval.py --env ur5e-reach --policy standstill --num-envs N --json out.json`."""
+    result, out, table = baseline_runs["standstill"]
+    report = json.loads(out.read_text())
+    ev = report["evaluations"][0]
+    assert report["env_name"] == "ur5e-reach" and report["num_envs"] == 16 and report["eval_seeds"] == [1_000_000]
+    assert report["command"].startswith("python eval.py --env ur5e-reach --num-envs 16")
+    assert ev["policy"] == {"kind": "baseline", "name": "standstill"}
+    assert ev["env_config"]["action"] == "absolute" and ev["env_config"]["episode_length"] == 100
+    assert ev["env_config"]["substeps"] == 20  # untouched fields: the env's defaults
+    assert set(ev["summary"]) >= {"target_reached", "self_collision", "obstacle_collision", "distance",
+                                  "steps_in_target", "times_left_target"}
+    assert ev["summary"]["distance"]["mean"] == pytest.approx(result.summary()["distance"]["mean"])
+    assert len(ev["units"]) == 1 and ev["units"][0]["metrics"]["target_reached"] == 0
+    rows = table.read_text().splitlines()
+    assert len(rows) == 2 and "target_reached" in rows[0] and rows[1].startswith("standstill,ur5e-reach,")
+
+
+# ------------------------------------------------------------------------------------------------
+# A checkpoint on another workspace (an untrained UR5e policy written as the driver writes exports:
+# evaluation only needs its shapes and config; training it would compile PPO for a minute)
+
+ARM_ENV = dict(substeps=2, episode_length=20)
+
+
+def _untrained_export(directory, env_name="ur5e-reach", **env_options):
+    """A policy export as the driver writes it, of an untrained PPO policy (no compilation)."""
+    config = train_cli.make_config("ur5e-reach-ppo-cpu", env_name=env_name, env=envs.make_config(env_name, **env_options))
+    env = envs.make(env_name, **env_options)
+    learner = driver.make_learner(config.algo, env.observation_size, env.action_size, 1)
+    state = jax.vmap(learner.init)(jax.random.split(jax.random.PRNGKey(0), 1))
+    step_dir = directory / "run" / "checkpoints" / "1280"
+    export.save(str(step_dir / "policy"), state, driver.config_json(config), 1280)
+    return step_dir.parent.parent  # the logdir
+
+
+@pytest.fixture(scope="module")
+def arm_export(tmp_path_factory):
+    return _untrained_export(tmp_path_factory.mktemp("arm"), **ARM_ENV)
+
+
+def test_checkpoint_evaluated_on_another_workspace(arm_export):
+    policy = evaluation.checkpoint_policy(str(arm_export))
+    assert policy.train_env_config.workspace == "full"
+    config = evaluation.env_config_for("ur5e-reach", policy.train_env_config, workspace="front")
+    assert config.substeps == 2 and config.episode_length == 20  # the checkpoint's, not the defaults
+    result = evaluation.run(policy, "ur5e-reach", config, num_envs=4)
+    report = result.to_json()
+    assert report["env_config"]["workspace"] == "front" and report["policy"]["train_env_name"] == "ur5e-reach"
+    assert report["policy"]["train_config"]["env"]["workspace"] == "full"
+    s = result.summary()
+    assert 0 <= s["self_collision"]["mean"] <= 1 and 0 < s["distance"]["mean"] < 2.5
+    assert s["distance"]["units"] == 1 and s["distance"]["episodes"] == 4
+
+
+@pytest.fixture(scope="module")
+def arm_rollout(arm_export):
+    policy = evaluation.checkpoint_policy(str(arm_export))
+    config = evaluation.env_config_for("ur5e-reach", policy.train_env_config, workspace="front")
+    return policy, config, evaluation.rollout(policy, "ur5e-reach", config, num_envs=4)
+
+
+def test_rollout_shows_the_evaluated_episodes(arm_rollout):
+    policy, config, records = arm_rollout
+    assert records["qpos"].shape == (config.episode_length + 1, 4, 6)
+    assert (records["target_pos"][0, :, 0] >= 0).all()  # front workspace: x >= 0
+    assert np.abs(records["qpos"][-1] - records["qpos"][0]).max() > 1e-3  # the policy moved the arm
+    # Same episodes as the evaluation with as many envs (same compiled program as the test above).
+    result = evaluation.run(policy, "ur5e-reach", config, num_envs=4)
+    for name in ("distance", "self_collision", "episode_length"):
+        key = evaluation.PAPER_METRICS.get(name) or evaluation.EXTRA_METRICS[name]
+        np.testing.assert_allclose(records["metrics"][key], result.per_env[name][0], rtol=1e-5, atol=1e-6)
+
+
+def test_rendered_frames_show_robot_and_target(arm_rollout):
+    from benchmarks import render
+
+    policy, config, records = arm_rollout
+    env = envs.make("ur5e-reach", **{**ARM_ENV, "workspace": "front"})
+    frames = render.rollout_frames(env, records, width=160, height=120, hold=2)
+    assert frames.shape == (config.episode_length + 1 + 2, 2 * 120, 2 * 160, 3) and frames.dtype == np.uint8
+    assert frames.std() > 10  # not blank
+    assert not np.array_equal(frames[0], frames[-1])  # the arm moved
+    with render.Scene(env, 160, 120) as scene:
+        full = scene.draw(records["qpos"][0, 0], records["target_pos"][0, 0]).astype(int)
+        scene.option.geomgroup[2] = 0  # hide the robot
+        empty = scene.draw(records["qpos"][0, 0], records["target_pos"][0, 0]).astype(int)
+    robot_pixels = np.any(np.abs(full - empty) > 30, axis=-1).sum()
+    assert robot_pixels > 0.01 * 160 * 120
+    green = (full[..., 1] > 150) & (full[..., 0] < 100) & (full[..., 2] < 100)
+    assert green.sum() > 5  # the target marker
+
+
+def test_cli_checkpoint_on_other_workspace_with_video(arm_export, arm_rollout, tmp_path):
+    """`eval.py --checkpoint RUN --env.workspace front --json ... --video ...`; both compiled programs
+    come from the tests above through the compilation cache."""
+    out, video = tmp_path / "out.json", tmp_path / "rollout.gif"
+    proc = _eval_cli("--checkpoint", str(arm_export), "--env.workspace", "front", "--num-envs", "4", "--json", str(out),
+                     "--video", str(video), "--video-envs", "4", "--video-size", "160x120")
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    report = json.loads(out.read_text())
+    ev = report["evaluations"][0]
+    assert report["env_overrides"] == {"workspace": "front"}
+    assert ev["env_config"]["workspace"] == "front" and ev["env_config"]["substeps"] == 2
+    assert ev["policy"]["env_steps"] == 1280 and ev["policy"]["export"].endswith(os.path.join("1280", "policy"))
+    from PIL import Image
+
+    with Image.open(video) as gif:
+        assert gif.n_frames >= 10 and gif.size == (320, 240)
+
+
+# ------------------------------------------------------------------------------------------------
+# Bad input: a ValueError with a one-line message, before anything compiles
+
+
+@pytest.fixture
+def no_compile(monkeypatch):
+    """Evaluations are built (env, jitted function) but never run."""
+    original = evaluation._evaluator.__wrapped__
+
+    def building_only(*args):
+        env, _ = original(*args)
+        return env, lambda *a, **k: pytest.fail("evaluated despite bad input")
+
+    monkeypatch.setattr(evaluation, "_evaluator", building_only)
+
+
+def _corrupt(src, tmp_path, how):
+    run = tmp_path / "corrupt"
+    shutil.copytree(src, run)
+    policy = max(run.glob("checkpoints/*/policy"), key=lambda p: int(p.parent.name))  # the newest: eval.py's pick
+    if how == "npz":
+        data = (policy / "policy.npz").read_bytes()
+        (policy / "policy.npz").write_bytes(data[: len(data) // 2])
+    elif how == "json":
+        (policy / "policy.json").write_text("{not json")
+    elif how == "shapes":
+        with np.load(policy / "policy.npz") as f:
+            arrays = {k: f[k] for k in f.files}
+        arrays["policy/params/hidden_0/kernel"] = arrays["policy/params/hidden_0/kernel"][:, :, :7]
+        np.savez(policy / "policy.npz", **arrays)
+    elif how == "orbax":  # no export and a broken full checkpoint
+        step = policy.parent
+        shutil.rmtree(policy)
+        (step / "state").mkdir(exist_ok=True)
+        for f in (step / "state").rglob("*"):
+            if f.is_file():
+                f.write_bytes(b"garbage")
+    return run
+
+
+BAD = [
+    (lambda d, t: ["--checkpoint", str(t / "nowhere")], r"does not exist"),
+    (lambda d, t: ["--checkpoint", str(t)], r"holds no checkpoint and no policy export"),
+    (lambda d, t: ["--checkpoint", str(_corrupt(d["arm"], t, "npz"))], r"corrupt or unreadable"),
+    (lambda d, t: ["--checkpoint", str(_corrupt(d["arm"], t, "json"))], r"corrupt or unreadable: JSONDecodeError"),
+    (lambda d, t: ["--checkpoint", str(_corrupt(d["arm"], t, "shapes"))], r"do not match the network of its config"),
+    (lambda d, t: ["--checkpoint", str(_corrupt(d["point"], t, "orbax"))], r"corrupt or unreadable"),
+    (lambda d, t: ["--checkpoint", str(d["arm"]), "--env", "panda-reach"],
+     r"trained on 'ur5e-reach' \(robot ur5e\): env='panda-reach' is another robot"),
+    (lambda d, t: ["--checkpoint", str(d["point"]), "--env", "ur5e-reach"], r"is another robot"),
+    (lambda d, t: ["--checkpoint", str(d["arm"]), "--env.observation", "joint_pos", "ee_pos"],
+     r"takes observations of shape \(15,\) but env 'ur5e-reach' with observation=\('joint_pos', 'ee_pos'\) gives shape \(9,\)"),
+    (lambda d, t: ["--checkpoint", str(d["arm"]), "--env", "ur5e-reach-avoid"],  # reach agent: own observation kept
+     None),
+    (lambda d, t: ["--checkpoint", str(d["arm"]), "--env", "ur5e-reach-avoid", "--env.observation", "joint_pos",
+                   "ee_pos", "target_pos", "ee_to_target", "obstacle_pos"], r"shape \(15,\) .* gives shape \(18,\)"),
+    (lambda d, t: ["--env", "ur5e-reach", "--policy", "ik"], r"policy='ik' is unknown: allowed are random, standstill, pseudo_ik"),
+    (lambda d, t: ["--env", "ur5e-reach", "--policy", "pseudo_ik", "--env.target-sampling", "uniform"],
+     r"pseudo_ik' is undefined with target_sampling='uniform'"),
+    (lambda d, t: ["--env", "point-mass", "--policy", "pseudo_ik"], r"needs an arm environment"),
+    (lambda d, t: ["--env", "ur5-reach", "--policy", "random"], r"env='ur5-reach' is unknown: allowed are"),
+    (lambda d, t: ["--policy", "random"], r"--policy needs --env NAME"),
+    (lambda d, t: ["--env", "ur5e-reach"], r"give exactly one of --checkpoint"),
+    (lambda d, t: ["--env", "ur5e-reach", "--policy", "random", "--checkpoint", str(d["arm"])], r"give exactly one of"),
+    (lambda d, t: ["--env", "ur5e-reach", "--policy", "random", "--num-envs", "0"], r"--num-envs=0 is invalid"),
+    (lambda d, t: ["--env", "ur5e-reach", "--policy", "random", "--env.target-radius", "-1"], r"target_radius=-1.0 is invalid"),
+    (lambda d, t: ["--env", "ur5e-reach", "--policy", "random", "--num-env", "4"], r"option '--num-env' is unknown"),
+    (lambda d, t: ["--env", "point-mass", "--policy", "random", "--video", str(t / "v.gif")], r"--video needs an arm env"),
+    (lambda d, t: ["--env", "ur5e-reach", "--policy", "random", "--video", str(t / "v.avi")], r"allowed are .mp4 and .gif"),
+    (lambda d, t: ["--env", "ur5e-reach", "--policy", "random", "--video", str(t / "v.gif"), "--video-size", "big"],
+     r"--video-size='big' is invalid"),
+]
+
+
+@pytest.mark.parametrize("make, message", BAD, ids=[f"bad{i}" for i in range(len(BAD))])
+def test_bad_input_is_refused_with_a_clear_message(make, message, arm_export, point_run, tmp_path, no_compile):
+    args = make({"arm": arm_export, "point": point_run}, tmp_path)
+    if message is None:  # accepted: evaluation would start (and is stopped by the fixture)
+        with pytest.raises(pytest.fail.Exception, match="evaluated despite bad input"):
+            eval_cli.main(args + ["--num-envs", "2"])
+        return
+    with pytest.raises(ValueError, match=message) as info:
+        eval_cli.main(args)
+    assert "\n" not in str(info.value)
+
+
+def test_bad_option_values_exit_2():
+    with pytest.raises(SystemExit) as info:  # tyro: not a workspace
+        eval_cli.main(["--env", "ur5e-reach", "--policy", "random", "--env.workspace", "everywhere"])
+    assert info.value.code == 2
+
+
+def test_cli_error_is_one_line_with_exit_code_2(tmp_path):
+    proc = _eval_cli("--checkpoint", str(tmp_path / "missing"), "--json", str(tmp_path / "o.json"), timeout=120)
+    assert proc.returncode == 2
+    assert proc.stderr.strip().count("\n") == 0 and proc.stderr.startswith("error: checkpoint ")
+    assert "Traceback" not in proc.stderr and not (tmp_path / "o.json").exists()
+
+
+# ------------------------------------------------------------------------------------------------
+# Pictures
+
+
+def test_training_curves_from_train_logs(point_run, tmp_path):
+    from benchmarks import plots
+
+    steps, mean, std, seeds = plots.curve([str(point_run)], "episode/target_reached")
+    rows = plots.read_metrics(str(point_run))
+    assert seeds == 2 and list(steps) == [5120, 10240]
+    at_end = rows["episode/target_reached"][rows["env_steps"] == 10240]
+    np.testing.assert_allclose(mean[-1], at_end.mean()) and np.testing.assert_allclose(std[-1], at_end.std())
+    out = tmp_path / "curves.png"
+    fig = plots.training_curves({"ppo": str(point_run)}, out=str(out))
+    assert out.stat().st_size > 10_000 and len(fig.axes) == 2  # target reached and return (point mass has no collisions)
+    with pytest.raises(ValueError, match="metrics.csv"):
+        plots.read_metrics(str(tmp_path))
+
+
+def test_paper_tables_from_given_checkpoints_and_skips_the_rest(point_run, tmp_path, capsys):
+    from benchmarks import paper_tables
+
+    written = paper_tables.main(["--tables", "action", "workspace", "obstacle", "--out", str(tmp_path),
+                                 "--num-envs", "16", "--action", f"relative={point_run}"])
+    assert [os.path.basename(p) for p in written] == ["action_space.md"]
+    err = capsys.readouterr().err
+    assert "skipped table 'workspace'" in err and "skipped table 'obstacle'" in err
+    assert "no 'absolute' checkpoint given, row skipped" in err
+    text = (tmp_path / "action_space.md").read_text()
+    assert "| Relative | 2 x 16 |" in text and "Position" not in text
+    assert str(point_run) in text and "device: CPU" in text and "--action relative=" in text
+    data = json.loads((tmp_path / "action_space.json").read_text())
+    assert data["rows"][0]["role"] == "relative" and data["rows"][0]["policy"]["env_steps"] == 10240
+    with pytest.raises(ValueError, match="role 'diagonal' is unknown"):
+        paper_tables.main(["--tables", "workspace", "--workspace", f"diagonal={point_run}", "--out", str(tmp_path)])
+
+
+def test_paper_tables_evaluate_each_pair_on_the_right_env_config(arm_export, tmp_path, monkeypatch):
+    """The workspace and obstacle cross-evaluations: which env config each (trained, evaluated) row
+    gets (evaluation itself replaced by a recorder)."""
+    from benchmarks import paper_tables
+
+    calls = []
+
+    def record(policy, env_name, config, num_envs, eval_seeds, last_steps=10):
+        calls.append((policy.name, env_name, config))
+        per_env = {k: np.zeros((1, 2)) for k in ("target_reached", "self_collision", "obstacle_collision", "distance")}
+        return evaluation.Result(policy, env_name, config, 2, list(eval_seeds), 10, [{"metrics": {}}], per_env, 0.0)
+
+    monkeypatch.setattr(evaluation, "run", record)
+    front = _untrained_export(tmp_path / "front", workspace="front", init_range="limited")
+    full = _untrained_export(tmp_path / "full", init_range="limited")
+    paper_tables.main(["--tables", "workspace", "--out", str(tmp_path), "--workspace", f"front={front}", f"full={full}"])
+    rows = [(name.split("/")[-2], cfg.workspace, cfg.target_sampling, cfg.init_range) for name, _, cfg in calls]
+    assert rows == [
+        ("front", "front", "reachable", "limited"), ("full", "full", "reachable", "limited"),  # own workspace
+        ("front", "full", "reachable", "limited"),  # the paper's "Full" agent: limited initial range
+        ("front", "pandagym", "uniform", "limited"), ("full", "pandagym", "uniform", "limited"),
+        ("full", "upper", "reachable", "limited"), ("full", "full", "reachable", "full"),  # -> "Full Range"
+    ]
+    table = (tmp_path / "workspace_generalization.md").read_text()
+    assert "| Front | Full | 1 x 2 |" in table and "| Full | Full Range | 1 x 2 |" in table
+
+    calls.clear()
+    avoid = _untrained_export(tmp_path / "avoid", "ur5e-reach-avoid", obstacle_radius=0.1, target_radius=0.02)
+    paper_tables.main(["--tables", "obstacle", "--out", str(tmp_path), "--obstacle", f"0.1={avoid}",
+                       f"reach={arm_export}"])
+    got = [(name.split("/")[-2], env_name, cfg.obstacle_radius, cfg.target_radius, len(cfg.observation))
+           for name, env_name, cfg in calls]
+    assert got[0] == ("avoid", "ur5e-reach-avoid", 0.1, 0.02, 6)
+    # The reach agent on the reach-avoid env: its own 4-part observation, the reach-avoid runs' target.
+    assert got[1:] == [("arm0", "ur5e-reach-avoid", r, 0.02, 4) for r in (0.025, 0.05, 0.1, 0.2, 0.3)]
+    assert calls[1][2].substeps == 2  # the reach checkpoint's own settings otherwise
+
+
+def test_sac_export_acts_as_the_learner(tmp_path):
+    """A SAC state's export (policy params + observation statistics) gives the learner's actions."""
+    config = train_cli.make_config("point-mass-sac", seeds=2)
+    config = driver.dataclasses.replace(config, algo=driver.dataclasses.replace(config.algo, max_replay_size=1024,
+                                                                                min_replay_size=256))
+    env = envs.make("point-mass")
+    learner = driver.make_learner(config.algo, env.observation_size, env.action_size, 1)
+    state = jax.jit(jax.vmap(learner.init))(jax.random.split(jax.random.PRNGKey(0), 2))
+    stats = state.obs_stats.replace(mean=state.obs_stats.mean + 0.3, var=state.obs_stats.var * 2.0)  # non-trivial
+    state = state.replace(obs_stats=stats)
+    export.save(str(tmp_path / "policy"), state, driver.config_json(config), 640)
+    loaded = export.load(str(tmp_path))
+    assert loaded.config.algo_name == "sac" and loaded.seeds == [0, 1] and loaded.env_steps == 640
+    assert sum(f.stat().st_size for f in (tmp_path / "policy").iterdir()) < 100_000  # no replay buffer
+    obs = jax.random.normal(jax.random.PRNGKey(1), (5, env.observation_size))
+    ours = jax.vmap(loaded.learner.policy, in_axes=(0, None))(loaded.state, obs)
+    theirs = jax.vmap(learner.policy, in_axes=(0, None))(state, obs)
+    np.testing.assert_allclose(ours, theirs, rtol=1e-6)
+    assert not np.allclose(ours[0], ours[1])  # the seeds differ
