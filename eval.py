@@ -66,8 +66,9 @@ FINDINGS = """\
   relative control are a small random walk: 5.0 % self-collision and 0.871 m, the standstill's
   distance; under absolute control the arm flails around the middle of its range: 22.4 % and
   0.978 m, above the standstill as in the paper (30 %, 0.929 m vs 0.855 m). The pseudo-IK under
-  relative control moves its servo target only 0.1 rad per step, the arm creeps and 0.6 % reach
-  the 1 cm target; under absolute control 41.5 % (paper 36.9 %).
+  relative control (measured with action_scale 0.1, the default then) moves its servo target only
+  0.1 rad per step, the arm creeps and 0.6 % reach the 1 cm target; under absolute control 41.5 %
+  (paper 36.9 %).
 - Ours vs the paper, absolute control, 5 seeds x 4096 envs (GPU; a CPU run of the first 64 episodes
   gives identical numbers): random 0.000 / 0.224 / 0.978 m (paper 0.000 / 0.300 / 0.929 m);
   standstill 0 / 0.001 / 0.870 m (paper 0 / 0 / 0.855 m); pseudo-IK 0.415 (1 cm) and 0.570

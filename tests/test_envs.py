@@ -301,7 +301,9 @@ def test_actions_clipped_to_joint_range():
     rel = envs.make("panda-reach")
     q = jnp.asarray(high - 0.05)
     np.testing.assert_allclose(rel.action_to_ctrl(jnp.ones(7), q), high)  # clipped at the limit
-    np.testing.assert_allclose(rel.action_to_ctrl(-jnp.ones(7), q), high - 0.15, atol=1e-6)
+    assert rel.config.action_scale == 0.2
+    np.testing.assert_allclose(rel.action_to_ctrl(-jnp.ones(7), q), high - 0.05 - 0.2, atol=1e-6)
+    np.testing.assert_allclose(rel.action_to_ctrl(jnp.full(7, 0.5), q - 0.5), high - 0.55 + 0.1, atol=1e-6)
 
 
 def test_observation_parts_sizes():
