@@ -143,26 +143,39 @@ def validate(config: TrainConfig) -> None:
         raise ValueError("logdir='' is invalid with resume=True: allowed is the directory of the run to continue.")
 
 
-def make_learner(algo_config, observation_size: int, action_size: int, updates: int):
+def default_learner_cls(algo_config) -> type:
+    """The learner class of an algorithm config: PPO for a PPOConfig, SAC for a SACConfig."""
+    return PPO if isinstance(algo_config, PPOConfig) else SAC
+
+
+def make_learner(algo_config, observation_size: int, action_size: int, updates: int, learner_cls: type | None = None):
+    """The learner for `algo_config`: `learner_cls` (default `default_learner_cls`) called with the
+    default class's arguments, `(config, observation_size, action_size, total_updates)` for PPO and
+    `(config, observation_size, action_size)` for SAC."""
+    cls = learner_cls or default_learner_cls(algo_config)
     if isinstance(algo_config, PPOConfig):
-        return PPO(algo_config, observation_size, action_size, updates)
-    return SAC(algo_config, observation_size, action_size)
+        return cls(algo_config, observation_size, action_size, updates)
+    return cls(algo_config, observation_size, action_size)
 
 
 @functools.lru_cache(maxsize=8)
 def build_programs(env_name: str, env_config, algo_config, seeds: int, devices: int, updates: int,
-                   eval_envs: int, eval_last_steps: int) -> Programs:
-    """Compiled programs for one setting; cached so repeated runs (tests, resumes) reuse them."""
+                   eval_envs: int, eval_last_steps: int, learner_cls: type | None = None) -> Programs:
+    """Compiled programs for one setting; cached so repeated runs (tests, resumes) reuse them. The
+    learner class is part of the key: a class redefined (e.g. in a notebook cell) is a new object
+    and compiles anew."""
     base = envs.from_config(env_name, env_config)
     env = envs.wrap(base)
-    learner = make_learner(algo_config, env.observation_size, env.action_size, updates)
+    learner = make_learner(algo_config, env.observation_size, env.action_size, updates, learner_cls)
     return Programs(env, env, learner, algo_config.num_envs, seeds, jax.local_devices()[:devices],
                     max(eval_envs, 1), env_config.episode_length, eval_last_steps)
 
 
-def programs_for(config: TrainConfig) -> Programs:
+def programs_for(config: TrainConfig, learner_cls: type | None = None) -> Programs:
+    """The (cached) programs of `config`, with `learner_cls` in place of the default learner class."""
     return build_programs(config.env_name, config.env, config.algo, config.seeds, num_devices(config),
-                          total_updates(config), config.eval_envs, config.eval_last_steps)
+                          total_updates(config), config.eval_envs, config.eval_last_steps,
+                          learner_cls or default_learner_cls(config.algo))
 
 
 def seed_keys(config: TrainConfig) -> jax.Array:
@@ -286,14 +299,22 @@ class TrainResult:
     last_metrics: dict | None
 
 
-def train(config: TrainConfig) -> TrainResult:
+def train(config: TrainConfig, learner_cls: type | None = None) -> TrainResult:
+    """Runs (or, with `config.resume`, continues) the training run `config` describes.
+
+    `learner_cls` replaces the algorithm's learner class (`PPO` for a PPOConfig, `SAC` for a
+    SACConfig), typically a subclass that changes one piece, e.g. `class MyPPO(PPO)` overriding
+    `advantages`; it is constructed with the default class's arguments (see `make_learner`) and
+    must keep its state type (checkpoints, policy exports). The class is not stored with the run:
+    exports act with the default class's `policy`, and a resume must pass the class again.
+    """
     validate(config)
     precision = config.matmul_precision
     with contextlib.nullcontext() if precision == "default" else jax.default_matmul_precision(precision):
-        return _train(config)
+        return _train(config, learner_cls)
 
 
-def _train(config: TrainConfig) -> TrainResult:
+def _train(config: TrainConfig, learner_cls: type | None = None) -> TrainResult:
     logdir = config.logdir or os.path.join("runs", config.preset or config.env_name,
                                            datetime.datetime.now().strftime("%Y%m%d-%H%M%S"))
     config = dataclasses.replace(config, logdir=logdir)
@@ -310,7 +331,7 @@ def _train(config: TrainConfig) -> TrainResult:
     with open(os.path.join(logdir, "config.json"), "w") as f:
         json.dump(config_json(config), f, indent=2)
 
-    programs = programs_for(config)
+    programs = programs_for(config, learner_cls)
     spu = env_steps_per_update(config)
     updates_total = total_updates(config)
     if start_step is None:

@@ -136,20 +136,41 @@ class _PoisonedPPO(PPO):
         return state, metrics
 
 
-def test_nan_loss_stops_the_run_and_keeps_the_last_good_checkpoint(tmp_path, monkeypatch):
-    monkeypatch.setattr(driver, "make_learner", lambda cfg, o, a, n: _PoisonedPPO(cfg, o, a, n))
-    driver.build_programs.cache_clear()
+def test_nan_loss_stops_the_run_and_keeps_the_last_good_checkpoint(tmp_path):
     config = train_cli.make_config("point-mass-ppo", num_timesteps=6 * 5120, checkpoint_every=2 * 5120,
                                    log_every=5120, eval_envs=0, logdir=str(tmp_path / "nan"), **QUIET)
-    try:
-        with pytest.raises(driver.NonFiniteLossError, match=r"loss/total .*env step 20480.*last good checkpoint \(10240\)"):
-            driver.train(config)
-    finally:
-        driver.build_programs.cache_clear()
+    with pytest.raises(driver.NonFiniteLossError, match=r"loss/total .*env step 20480.*last good checkpoint \(10240\)"):
+        driver.train(config, learner_cls=_PoisonedPPO)  # the user's learner class (notebooks/02)
     ckpt = Checkpointer(str(tmp_path / "nan" / "checkpoints"))
     assert ckpt.latest_step() == 10240
     state, _ = ckpt.restore(10240, driver.programs_for(config).abstract_state)
     assert all(np.all(np.isfinite(np.asarray(x))) for x in jax.tree.leaves(state.learner.params))
+
+
+def _ppo_subclass():
+    """A PPO subclass, a new class object on every call (as a notebook cell that is run again)."""
+
+    class MyPPO(PPO):
+        pass
+
+    return MyPPO
+
+
+def test_learner_cls_is_part_of_the_program_cache_key():
+    """`driver.train(config, learner_cls=...)` builds its programs around that class; a redefined
+    class compiles anew, the default class (given or not) reuses the default programs. Builds the
+    programs only (nothing is compiled); the NaN test above trains with a replaced class."""
+    config = train_cli.make_config("point-mass-ppo", num_timesteps=SHORT, eval_envs=0, **QUIET)
+    default = driver.programs_for(config)
+    assert type(default.learner) is PPO and driver.programs_for(config, PPO) is default
+    first, second = _ppo_subclass(), _ppo_subclass()
+    programs = driver.programs_for(config, first)
+    assert type(programs.learner) is first and programs is not default
+    assert driver.programs_for(config, first) is programs
+    assert type(driver.programs_for(config, second).learner) is second
+    assert programs.learner.total_updates == driver.total_updates(config)  # PPO's constructor arguments
+    sac = train_cli.make_config("point-mass-sac")
+    assert type(driver.programs_for(sac).learner).__name__ == "SAC"
 
 
 BAD_INPUTS = [
