@@ -71,7 +71,9 @@ class TrainConfig(Generic[EnvConfigT, AlgoConfigT]):
     """Store the environments' states in checkpoints, so --resume continues every episode exactly
     (a resumed run then ends with the parameters of an unbroken one). False keeps checkpoints to the
     learner, RNG and step count (5 seeds x 8,192 UR5e envs hold ~0.5 GB of MJX state; the PPO learner
-    ~17 MB): a resume then starts fresh episodes. For moving runs between machines."""
+    ~17 MB) and leave out the learner's transient fields (SAC's replay buffer, ~1.2 GB for 5 seeds):
+    a resume then starts fresh episodes and SAC refills its buffer with min_replay_size random
+    steps first. For moving runs between machines."""
     log_every: int = 0
     """Log every this many env steps (0 = 50 times per run)."""
     stop_after_steps: int = 0
@@ -375,7 +377,7 @@ def _train(config: TrainConfig, learner_cls: type | None = None) -> TrainResult:
             last_metrics = metrics
             due = config.checkpoint_every and updates_done % every(config.checkpoint_every) == 0
             if due or interrupted["flag"]:
-                save_checkpoint(ckpt, step, state, config)
+                save_checkpoint(ckpt, step, state, config, programs.learner)
                 last_saved = step
             if interrupted["flag"]:
                 status = "interrupted"
@@ -384,7 +386,7 @@ def _train(config: TrainConfig, learner_cls: type | None = None) -> TrainResult:
         if status == "done" and updates_done < updates_total:
             status = "stopped"
         if last_saved != step:
-            save_checkpoint(ckpt, step, state, config)
+            save_checkpoint(ckpt, step, state, config, programs.learner)
             last_saved = step
         eval_metrics = None
         if status == "done" and config.eval_envs > 0:
@@ -401,15 +403,18 @@ def _train(config: TrainConfig, learner_cls: type | None = None) -> TrainResult:
     return TrainResult(state, updates_done * spu, status, logdir, config, eval_metrics, last_metrics)
 
 
-def _without_envs(state):
-    return state.replace(env_state=None, episode_return=None, episode_length=None)
+def _without_envs(state, learner):
+    """The state as a learner-only checkpoint stores it: no env states, no transient learner fields."""
+    transient = {name: None for name in getattr(learner, "transient_fields", ())}
+    return state.replace(learner=state.learner.replace(**transient), env_state=None, episode_return=None,
+                         episode_length=None)
 
 
-def save_checkpoint(ckpt: Checkpointer, step: int, state, config: TrainConfig) -> None:
+def save_checkpoint(ckpt: Checkpointer, step: int, state, config: TrainConfig, learner) -> None:
     """The checkpoint (without env states if `config.checkpoint_envs` is False) plus, next to it, the
     small policy export that eval.py loads (`agents.export`: policy parameters, observation
     statistics, config)."""
-    ckpt.save(step, state if config.checkpoint_envs else _without_envs(state), config_json(config))
+    ckpt.save(step, state if config.checkpoint_envs else _without_envs(state, learner), config_json(config))
     export.save(os.path.join(ckpt.step_dir(step), export.DIRNAME), state.learner, config_json(config), step)
 
 
@@ -418,9 +423,10 @@ def restore_state(ckpt: Checkpointer, step: int, programs: Programs, config: Tra
     drawn from keys that depend on the seed and the step (not on the start's keys)."""
     if with_envs:
         return ckpt.restore(step, programs.abstract_state)[0]
-    saved, _ = ckpt.restore(step, _without_envs(programs.abstract_state))
+    saved, _ = ckpt.restore(step, _without_envs(programs.abstract_state, programs.learner))
     fresh = programs.init(jax.vmap(jax.random.fold_in, (0, None))(seed_keys(config), step))
-    return fresh.replace(learner=saved.learner, key=saved.key, updates=saved.updates)
+    transient = {name: getattr(fresh.learner, name) for name in getattr(programs.learner, "transient_fields", ())}
+    return fresh.replace(learner=saved.learner.replace(**transient), key=saved.key, updates=saved.updates)
 
 
 def evaluate(programs: Programs, state, config: TrainConfig) -> dict:

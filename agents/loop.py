@@ -116,6 +116,10 @@ class Learner(Protocol):
     steps_per_update: int
     """Environment steps taken by each environment between two updates."""
 
+    transient_fields: tuple[str, ...]
+    """Fields of the learner state that learner-only checkpoints (`TrainConfig.checkpoint_envs`
+    False) leave out and a resume re-initialises (SAC: the replay buffer). Optional; default ()."""
+
     def init(self, key: jax.Array) -> Any:
         """The learner state (params, optimiser, normaliser, buffers) with *global* env axes."""
 

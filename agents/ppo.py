@@ -237,6 +237,8 @@ class PPOState:
 class PPO:
     """PPO as a `agents.loop.Learner`."""
 
+    transient_fields = ()  # every field of the learner state is checkpointed
+
     def __init__(self, config: PPOConfig, observation_size: int, action_size: int, total_updates: int):
         self.config = config
         self.observation_size, self.action_size = observation_size, action_size

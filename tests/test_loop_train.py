@@ -102,16 +102,23 @@ def test_resume_reproduces_an_unbroken_run_bit_for_bit(tmp_path):
         driver.train(driver.dataclasses.replace(changed, algo=driver.dataclasses.replace(changed.algo, learning_rate=1.0)))
 
 
+def _stored_leaf_names(step_dir: str) -> list[str]:
+    """Names of the arrays an orbax checkpoint holds (its tree metadata; the files are OCDBT shards)."""
+    with open(os.path.join(step_dir, "state", "_METADATA")) as f:
+        return list(json.load(f)["tree_metadata"])
+
+
 def test_checkpoint_without_envs_resumes_the_learner_with_fresh_episodes(tmp_path):
     base = dict(num_timesteps=SHORT, eval_envs=0, log_every=5120, checkpoint_envs=False, **QUIET)
     logdir = str(tmp_path / "small")
     first = driver.train(train_cli.make_config("point-mass-ppo", logdir=logdir, stop_after_steps=15_360, **base))
     assert first.status == "stopped"
     ckpt = Checkpointer(os.path.join(logdir, "checkpoints"))
-    stored = os.listdir(os.path.join(ckpt.step_dir(15_360), "state"))
+    stored = _stored_leaf_names(ckpt.step_dir(15_360))
     programs = driver.programs_for(first.config)
     n_env_leaves = len(jax.tree.leaves(programs.abstract_state.env_state))
     n_learner_leaves = len(jax.tree.leaves(programs.abstract_state.learner))
+    assert any("learner" in name for name in stored)
     assert n_env_leaves > 0 and not any("env_state" in name for name in stored)  # no env state on disk
     saved = driver.restore_state(ckpt, 15_360, programs, first.config, with_envs=False)
     assert len(jax.tree.leaves(saved.learner)) == n_learner_leaves
@@ -122,6 +129,30 @@ def test_checkpoint_without_envs_resumes_the_learner_with_fresh_episodes(tmp_pat
     assert not np.allclose(np.asarray(saved.env_state.obs), np.asarray(first.state.env_state.obs))
     resumed = driver.train(train_cli.make_config("point-mass-ppo", logdir=logdir, resume=True, **base))
     assert resumed.status == "done" and resumed.env_steps == SHORT
+
+
+def test_learner_only_checkpoint_of_sac_leaves_out_the_replay_buffer_and_refills_it(tmp_path):
+    base = dict(num_timesteps=3_200, eval_envs=0, log_every=1_600, checkpoint_envs=False, **QUIET)
+    logdir = str(tmp_path / "sac")
+    first = driver.train(train_cli.make_config("point-mass-sac", logdir=logdir, stop_after_steps=1_600, **base))
+    assert first.status == "stopped"
+    assert int(first.state.learner.replay.rows[0]) == 100  # 1,600 steps of 16 envs were in the buffer
+    ckpt = Checkpointer(os.path.join(logdir, "checkpoints"))
+    stored = _stored_leaf_names(ckpt.step_dir(1_600))
+    assert any("q_params" in name for name in stored)
+    assert not any("replay" in name or "env_state" in name for name in stored)
+    programs = driver.programs_for(first.config)
+    saved = driver.restore_state(ckpt, 1_600, programs, first.config, with_envs=False)
+    np.testing.assert_array_equal(np.asarray(saved.learner.replay.rows), 0)  # an empty buffer again
+    assert saved.learner.replay.data["obs"].shape == first.state.learner.replay.data["obs"].shape
+    for name in ("policy_params", "q_params", "target_q_params", "log_alpha", "q_opt", "obs_stats"):
+        for a, b in zip(jax.tree.leaves(jax.device_get(getattr(first.state.learner, name))),
+                        jax.tree.leaves(jax.device_get(getattr(saved.learner, name)))):
+            np.testing.assert_array_equal(np.asarray(a), np.asarray(b))  # everything else comes back exactly
+    resumed = driver.train(train_cli.make_config("point-mass-sac", logdir=logdir, resume=True, **base))
+    assert resumed.status == "done" and resumed.env_steps == 3_200
+    assert int(resumed.state.learner.replay.rows[0]) == 100  # refilled after the resume only
+    assert np.any(np.asarray(resumed.state.learner.replay.data["obs"][0, :100]) != 0)
 
 
 class _PoisonedPPO(PPO):
