@@ -9,6 +9,9 @@ training driver therefore writes, next to each checkpoint, `<step dir>/policy/`:
 - `policy.npz`: the policy network's parameters and the observation normaliser's statistics, each
   with the run's leading seed axis (`policy/params/hidden_0/kernel`, ..., `obs_stats/mean`, ...).
 
+`select` copies an export keeping only some trained seeds (`benchmarks/ship_checkpoint.py` makes
+the checkpoints under `results/checkpoints/` with it).
+
 `load` rebuilds the learner's own deterministic policy from it (`PPO.policy` / `SAC.policy` on a
 state holding only these arrays), so the export acts exactly as the trained learner does, without
 building or compiling the training programs. An export directory can be copied anywhere (e.g.
@@ -159,7 +162,7 @@ class MissingExport(ValueError):
 
     def __init__(self, step_dir: str):
         super().__init__(f"checkpoint {step_dir!r} has no policy export ({DIRNAME}/policy.json); write one with "
-                         f"`python eval.py --export {step_dir}` (restores the full training state once).")
+                         f"`python eval.py --checkpoint {step_dir}` (restores the full training state once).")
         self.step_dir = step_dir
 
 
@@ -227,3 +230,30 @@ def export_checkpoint(step_dir: str) -> str:
     finally:
         ckpt.close()
     return save(os.path.join(step_dir, DIRNAME), state.learner, config_json, step)
+
+
+def select(path: str, directory: str, seeds: list[int] | None = None) -> str:
+    """Writes the export that `path` names (see `find`) to `directory`, keeping only the trained
+    `seeds` (seed numbers as in policy.json, e.g. [3]; None keeps all); returns `directory`.
+    The new policy.json records where it came from under "selected_from"."""
+    source = find(path)
+    with open(os.path.join(source, "policy.json")) as f:
+        meta = json.load(f)
+    available = [int(s) for s in meta["seeds"]]
+    seeds = available if seeds is None else [int(s) for s in seeds]
+    unknown = [s for s in seeds if s not in available]
+    if not seeds or unknown or len(set(seeds)) != len(seeds):
+        raise ValueError(f"seeds={seeds!r} is invalid for {source!r}: allowed are distinct seeds out of {available}.")
+    if os.path.abspath(directory) == source:
+        raise ValueError(f"directory={directory!r} is invalid: it is the source export; allowed is another directory.")
+    index = np.array([available.index(s) for s in seeds])
+    with np.load(os.path.join(source, "policy.npz")) as data:
+        flat = {k: np.asarray(data[k])[index] for k in data.files}
+    shown = os.path.relpath(source)
+    meta = dict(meta, seeds=seeds, selected_from={"path": source if shown.startswith("..") else shown, "seeds": available})
+    os.makedirs(directory, exist_ok=True)
+    np.savez(os.path.join(directory, "policy.npz"), **flat)
+    with open(os.path.join(directory, "policy.json"), "w") as f:
+        json.dump(meta, f, indent=2)
+    return directory
+

@@ -23,7 +23,7 @@ import eval as eval_cli
 import train as train_cli
 from agents import baselines, driver, evaluation, export
 from agents.loop import episode_metrics
-from mujoco_reference import colliding_configuration
+from mujoco_reference import colliding_configuration, colliding_pairs, contact_model
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 QUIET = dict(tensorboard=False, progress=False)
@@ -166,6 +166,30 @@ def test_checkpoint_without_export_gets_one_from_the_full_state(point_run, tmp_p
     fresh = evaluation.checkpoint_policy(str(point_run))
     for a, b in zip(jax.tree.leaves(policy.export.state), jax.tree.leaves(fresh.export.state)):
         np.testing.assert_array_equal(a, b)
+
+
+def test_export_of_one_seed_acts_as_that_seed_of_the_run(point_run, tmp_path):
+    from benchmarks import ship_checkpoint
+
+    full = evaluation.checkpoint_policy(str(point_run))
+    r_full = evaluation.run(full, "point-mass", full.train_env_config, num_envs=32)
+    (tmp_path / "eval.json").write_text(json.dumps({"evaluations": [r_full.to_json()]}, default=evaluation.jsonable))
+    reached = [u["metrics"]["target_reached"] for u in r_full.units]
+    assert reached[0] != reached[1]
+    best = int(np.argmax(reached))
+    out = ship_checkpoint.main([str(point_run), str(tmp_path / "best"), "--best-from", str(tmp_path / "eval.json")])
+    one = evaluation.checkpoint_policy(out)
+    assert one.units == [best] and one.export.env_steps == 10240
+    assert json.loads((tmp_path / "best" / "policy.json").read_text())["selected_from"]["seeds"] == [0, 1]
+    for a, b in zip(jax.tree.leaves(one.export.state), jax.tree.leaves(full.export.state)):
+        np.testing.assert_array_equal(a[0], b[best])
+    r_one = evaluation.run(one, "point-mass", one.train_env_config, num_envs=32)
+    assert r_one.units[0]["metrics"] == r_full.units[best]["metrics"]
+    with pytest.raises(ValueError, match=r"seeds=\[2\] is invalid .* allowed are distinct seeds out of \[0, 1\]"):
+        export.select(str(point_run), str(tmp_path / "bad"), [2])
+    with pytest.raises(ValueError, match="no evaluation of the checkpoint at 5120 env steps"):
+        ship_checkpoint.main([str(point_run / "checkpoints" / "5120"), str(tmp_path / "old"), "--best-from",
+                              str(tmp_path / "eval.json")])
 
 
 def test_several_checkpoints_pooled(point_run, capsys):
@@ -545,3 +569,34 @@ def test_sac_export_acts_as_the_learner(tmp_path):
     theirs = jax.vmap(learner.policy, in_axes=(0, None))(state, obs)
     np.testing.assert_allclose(ours, theirs, rtol=1e-6)
     assert not np.allclose(ours[0], ours[1])  # the seeds differ
+
+
+# ------------------------------------------------------------------------------------------------
+# benchmarks/failure_report.py: episode outcomes from recorded poses (CPU MuJoCo as the reference)
+
+
+def test_failure_report_names_the_colliding_pair_and_bins_the_misses():
+    from benchmarks import failure_report
+
+    robot = envs.make("ur5e-reach").robot
+    model = contact_model(robot)
+    free = np.zeros(robot.nq, np.float32)
+    free[1], free[2] = -1.2, 1.0  # elbow bent, clear of the base
+    assert not colliding_pairs(model, free)
+    hit = colliding_configuration(robot, seed=15)
+    expected = {" / ".join(sorted((model.geom(a).name, model.geom(b).name))) for a, b in colliding_pairs(model, hit)}
+    steps, n = 6, 4
+    qpos = np.tile(free, (steps + 1, n, 1))
+    qpos[3:, 1] = hit  # env 1 collides at step 3 (its recorded poses stay there)
+    metrics = {"episode/self_collision": np.array([0, 1, 0, 0.0]), "episode/obstacle_collision": np.zeros(n),
+               "episode/target_reached": np.array([1, 0, 0, 0.0]), "episode/distance": np.array([0.005, 0.3, 0.07, 0.5])}
+    records = {"qpos": qpos, "length": np.array([6, 3, 6, 6]), "metrics": metrics}
+    rows = failure_report.classify(robot, records)
+    assert [r["outcome"] for r in rows] == ["reached", "self collision", "missed", "missed"]
+    assert " / ".join(sorted(rows[1]["what"].split(" / "))) in expected and rows[1]["step"] == 3
+    assert rows[0]["start_clearance"] > 0
+    summary = failure_report.summarize(rows)
+    assert summary["outcomes"] == {"missed": 0.5, "reached": 0.25, "self collision": 0.25}
+    assert summary["missed_final_distance"] == {"0-2 cm": 0, "2-5 cm": 0, "5-10 cm": 1, "> 10 cm": 1}
+    assert summary["collisions"]["step_quartiles"] == [3.0, 3.0, 3.0]
+    assert "self collision: " + rows[1]["what"] in failure_report.markdown(summary, "t")

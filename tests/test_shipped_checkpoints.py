@@ -1,5 +1,8 @@
 """The checkpoints shipped under results/checkpoints/ load on a CPU and do what results/README.md says.
 
+Every shipped export loads, fits its env and is the checkpoint that its results/*_eval.json
+evaluated (the best seed, for single-seed exports).
+
 The UR5e reach PPO policy (5 seeds, 147M env steps on an H200) reached the 1 cm target in 76.8 % of
 4,096 episodes per seed there. Here its first seed runs 16 full-size episodes (20 substeps, 125
 steps) on the CPU and is compared with the baselines' rates from results/baselines.json (5 x 4,096
@@ -11,8 +14,11 @@ import json
 import os
 
 import jax
+import pytest
 
+import envs
 from agents import evaluation
+from benchmarks import ship_checkpoint
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 UR5E_REACH = os.path.join(ROOT, "results", "checkpoints", "ur5e-reach-ppo")
@@ -44,3 +50,27 @@ def test_shipped_ur5e_reach_checkpoint_far_above_the_baselines():
     assert result["target_reached"]["mean"] >= 0.5 > baselines["pseudo_ik"] + 0.05
     assert result["distance"]["mean"] < 0.25
     assert result["steps_in_target"]["mean"] > 20
+
+
+SHIPPED = sorted(os.listdir(os.path.join(ROOT, "results", "checkpoints")))
+
+
+def test_every_row_of_the_results_table_ships():
+    assert SHIPPED == ["panda-reach-avoid-ppo", "panda-reach-ppo", "ur5e-reach-avoid-ppo", "ur5e-reach-ppo"]
+
+
+@pytest.mark.parametrize("name", SHIPPED)
+def test_shipped_checkpoint_loads_and_is_the_evaluated_run(name):
+    """Each export fits its env, and results/<name>_eval.json (eval.py on the GPU) evaluated that very
+    checkpoint; a single-seed export holds the best seed there."""
+    policy = evaluation.checkpoint_policy(os.path.join(ROOT, "results", "checkpoints", name))
+    assert name == f"{policy.train_env_name}-{policy.export.config.algo_name}"
+    env = envs.from_config(policy.train_env_name, policy.train_env_config)
+    evaluation.check_compatible(policy, policy.train_env_name, env)
+    eval_json = os.path.join(ROOT, "results", name.replace("-", "_") + "_eval.json")
+    with open(eval_json) as f:
+        evaluated = json.load(f)["evaluations"][0]
+    assert evaluated["policy"]["env_steps"] == policy.export.env_steps
+    assert evaluated["num_envs"] == 4096 and evaluated["env_config"]["substeps"] == 20
+    if len(policy.units) == 1:
+        assert policy.units == [ship_checkpoint.best_seed(eval_json, policy.export.env_steps)]

@@ -1,0 +1,151 @@
+"""Why a policy fails: which links collide, when, from which start, and how far the misses end.
+
+    python benchmarks/failure_report.py --checkpoint results/checkpoints/ur5e-reach-ppo --num-envs 256
+    python benchmarks/failure_report.py --checkpoint RUN --env ur5e-reach-avoid --unit 2 --json report.json
+
+Runs one episode per env with the deterministic policy of one trained seed (`--unit`, an index into
+the checkpoint's seeds) through `agents.evaluation.rollout` and sorts every episode into one outcome:
+target reached, self collision, obstacle collision, or missed (neither). For collisions it names the
+geom pair that is closest (most penetrating) at the end of the colliding step, the step, and the
+start pose's clearance (its smallest self-collision distance); for misses the final distance.
+A CPU handles a few hundred episodes in minutes (UR5e); the Panda is slow on CPUs (README).
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import json
+import os
+import sys
+
+import numpy as np
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+if ROOT not in sys.path:
+    sys.path.insert(0, ROOT)
+
+MISS_BINS = (0.02, 0.05, 0.10)
+"""Upper edges (m) of the final-distance bins of missed episodes; the last bin is open."""
+
+
+def _names(robot, geoms) -> list[str]:
+    return [robot.mj_model.geom(int(g)).name for g in geoms]
+
+
+def classify(robot, records: dict) -> list[dict]:
+    """One dict per env: outcome, step (episode length), start clearance and, by outcome, the
+    colliding pair / geom or the final distance. `records` as `evaluation.rollout` returns them."""
+    import jax
+    import jax.numpy as jnp
+
+    metrics = records["metrics"]
+    qpos = np.asarray(records["qpos"])
+    length = np.asarray(records["length"]).astype(int)
+    n = qpos.shape[1]
+    end_q = qpos[np.minimum(length, qpos.shape[0] - 1), np.arange(n)]
+    kin_start, kin_end = robot.kinematics(jnp.asarray(qpos[0])), robot.kinematics(jnp.asarray(end_q))
+    self_start = np.asarray(robot.self_distances(kin_start.geom_xpos, kin_start.geom_xmat))
+    self_end = np.asarray(robot.self_distances(kin_end.geom_xpos, kin_end.geom_xmat))
+    if "obstacle_pos" in records:
+        center = jnp.asarray(np.asarray(records["obstacle_pos"])[0])
+        radius = robot.mj_model.geom_size[robot.mj_model.geom("obstacle").id, 0]
+        obstacle_end = np.asarray(jax.vmap(lambda c, x, m: robot.obstacle_distances(x, m, c, radius))(
+            center, kin_end.geom_xpos, kin_end.geom_xmat))
+    pair_names = [" / ".join(_names(robot, pair)) for pair in robot.self_pairs]
+    out = []
+    for i in range(n):
+        row = {"env": i, "step": int(length[i]), "start_clearance": float(self_start[i].min())}
+        if metrics["episode/self_collision"][i] > 0:
+            row.update(outcome="self collision", what=pair_names[int(np.argmin(self_end[i]))])
+        elif metrics.get("episode/obstacle_collision", np.zeros(n))[i] > 0:
+            geom = robot.obstacle_geoms[int(np.argmin(obstacle_end[i]))]
+            row.update(outcome="obstacle collision", what=_names(robot, [geom])[0])
+        elif metrics["episode/target_reached"][i] > 0:
+            row.update(outcome="reached")
+        else:
+            row.update(outcome="missed", final_distance=float(metrics["episode/distance"][i]))
+        out.append(row)
+    return out
+
+
+def summarize(rows: list[dict]) -> dict:
+    """Counts and rates of outcomes, collisions by pair/geom, steps and clearances, miss distances."""
+    n = len(rows)
+    by = collections.defaultdict(list)
+    for r in rows:
+        by[r["outcome"]].append(r)
+    summary = {"episodes": n, "outcomes": {k: len(v) / n for k, v in sorted(by.items())}}
+    collided = by["self collision"] + by["obstacle collision"]
+    if collided:
+        steps = np.array([r["step"] for r in collided])
+        summary["collisions"] = {
+            "by_part": dict(collections.Counter(f"{r['outcome']}: {r['what']}" for r in collided).most_common()),
+            "step_quartiles": [float(q) for q in np.percentile(steps, [25, 50, 75])],
+            "within_first_5_steps": float(np.mean(steps <= 5)),
+            "start_clearance_median": float(np.median([r["start_clearance"] for r in collided])),
+        }
+    summary["start_clearance_median_all"] = float(np.median([r["start_clearance"] for r in rows]))
+    misses = np.array([r["final_distance"] for r in by["missed"]])
+    if misses.size:
+        edges = (0.0,) + MISS_BINS + (np.inf,)
+        labels = [f"{a * 100:g}-{b * 100:g} cm" if np.isfinite(b) else f"> {a * 100:g} cm" for a, b in zip(edges, edges[1:])]
+        summary["missed_final_distance"] = {lab: int(np.sum((misses >= a) & (misses < b)))
+                                            for lab, a, b in zip(labels, edges, edges[1:])}
+    return summary
+
+
+def markdown(summary: dict, title: str) -> str:
+    pct = lambda x: f"{100 * x:.1f} %"
+    lines = [f"### {title}", "", f"{summary['episodes']} episodes", "", "| outcome | share |", "|---|---:|"]
+    lines += [f"| {k} | {pct(v)} |" for k, v in summary["outcomes"].items()]
+    if "collisions" in summary:
+        c = summary["collisions"]
+        lines += ["", "| collision | episodes |", "|---|---:|"] + [f"| {k} | {v} |" for k, v in c["by_part"].items()]
+        q = c["step_quartiles"]
+        lines += ["", f"collision step quartiles {q[0]:g} / {q[1]:g} / {q[2]:g}; within the first 5 steps "
+                      f"{pct(c['within_first_5_steps'])}; start clearance (median) of collided episodes "
+                      f"{c['start_clearance_median'] * 100:.1f} cm against {summary['start_clearance_median_all'] * 100:.1f} cm "
+                      "over all episodes"]
+    if "missed_final_distance" in summary:
+        lines += ["", "missed episodes by final distance: " + ", ".join(
+            f"{k}: {v}" for k, v in summary["missed_final_distance"].items())]
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: list[str] | None = None) -> dict:
+    from agents import evaluation
+
+    p = argparse.ArgumentParser(prog="benchmarks/failure_report.py", description=__doc__.splitlines()[0])
+    p.add_argument("--checkpoint", required=True, help="train.py logdir, checkpoint step directory or policy export")
+    p.add_argument("--env", help="registered env name (default: the checkpoint's)")
+    p.add_argument("--num-envs", type=int, default=256)
+    p.add_argument("--unit", type=int, default=0, help="index of the trained seed in the checkpoint (default 0)")
+    p.add_argument("--seed", type=int, default=7, help="evaluation seed (default 7)")
+    p.add_argument("--json", metavar="PATH", help="write the summary and every episode's row")
+    args = p.parse_args(argv)
+    policy = evaluation.checkpoint_policy(args.checkpoint)
+    if not 0 <= args.unit < len(policy.units):
+        raise ValueError(f"--unit {args.unit} is invalid: allowed is 0 ... {len(policy.units) - 1} "
+                         f"(the checkpoint's seeds {policy.units}).")
+    if args.num_envs < 1:
+        raise ValueError(f"--num-envs {args.num_envs} is invalid: allowed is an integer >= 1.")
+    env_name = args.env or policy.train_env_name
+    config = evaluation.env_config_for(env_name, policy.train_env_config)
+    records = evaluation.rollout(policy, env_name, config, num_envs=args.num_envs, eval_seed=args.seed, unit=args.unit)
+    import envs
+
+    rows = classify(envs.from_config(env_name, config).robot, records)
+    summary = summarize(rows)
+    print(markdown(summary, f"{args.checkpoint} (seed {policy.units[args.unit]}) on {env_name}, eval seed {args.seed}"))
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump({"command": " ".join(["python", "benchmarks/failure_report.py"] + (argv or sys.argv[1:])),
+                       "device": evaluation.device_description(), "summary": summary, "episodes": rows}, f, indent=1)
+    return summary
+
+
+if __name__ == "__main__":
+    from benchmarks import run_cli
+
+    run_cli(main)

@@ -1,0 +1,72 @@
+"""Copy a trained policy into `results/checkpoints/`: its policy export (`agents.export`), keeping only
+the chosen trained seeds, so the repository carries a few hundred kB per row instead of a checkpoint.
+
+    python benchmarks/ship_checkpoint.py .ckpt/panda-reach-ppo results/checkpoints/panda-reach-ppo \\
+        --best-from results/panda_reach_ppo_eval.json     # the seed with the highest target-reached rate
+    python benchmarks/ship_checkpoint.py RUN DST --seeds 0 3                 # or name the seeds
+
+SRC is a train.py logdir (its newest checkpoint), a checkpoint step directory or an export; a
+checkpoint without an export gets one written first. `--best-from` reads an `eval.py --json` file
+of that same checkpoint and keeps the seed with the highest target-reached rate (ties: fewer
+collisions).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+if ROOT not in sys.path:
+    sys.path.insert(0, ROOT)
+
+from agents import evaluation, export  # noqa: E402
+
+
+def best_seed(eval_json: str, env_steps: int) -> int:
+    """The trained seed with the highest target-reached rate in an eval.py JSON of the checkpoint
+    that has `env_steps` (ties: the lower self + obstacle collision rate)."""
+    with open(eval_json) as f:
+        data = json.load(f)
+    runs = [e for e in data.get("evaluations", []) if e.get("policy", {}).get("env_steps") == env_steps]
+    if not runs:
+        found = sorted({e.get("policy", {}).get("env_steps") for e in data.get("evaluations", [])}, key=str)
+        raise ValueError(f"--best-from {eval_json!r} is invalid: it holds no evaluation of the checkpoint at "
+                         f"{env_steps} env steps (it has {found}); allowed is an eval.py --json of that checkpoint.")
+    scores = {}
+    for unit in runs[0]["units"]:
+        m = unit["metrics"]
+        score = (m["target_reached"], -(m.get("self_collision", 0.0) + m.get("obstacle_collision", 0.0)))
+        seed = int(unit["policy_seed"])
+        scores[seed] = max(score, scores.get(seed, score))
+    return max(scores, key=lambda s: scores[s])
+
+
+def ship(src: str, dst: str, seeds: list[int] | None = None, best_from: str | None = None) -> str:
+    policy = evaluation.checkpoint_policy(src)  # writes a missing export
+    if best_from:
+        if seeds:
+            raise ValueError("--seeds and --best-from are exclusive: allowed is one of them.")
+        seeds = [best_seed(best_from, policy.export.env_steps)]
+    return export.select(policy.export.path, dst, seeds)
+
+
+def main(argv: list[str] | None = None) -> str:
+    p = argparse.ArgumentParser(prog="benchmarks/ship_checkpoint.py", description=__doc__.splitlines()[0])
+    p.add_argument("src", help="train.py logdir (newest checkpoint), checkpoint step directory or policy export")
+    p.add_argument("dst", help="directory to write the export to (e.g. results/checkpoints/<preset>)")
+    p.add_argument("--seeds", type=int, nargs="+", help="trained seeds to keep (default: all)")
+    p.add_argument("--best-from", metavar="EVAL_JSON", help="keep the best seed of this eval.py --json file")
+    args = p.parse_args(argv)
+    out = ship(args.src, args.dst, args.seeds, args.best_from)
+    with open(os.path.join(out, "policy.json")) as f:
+        print(f"wrote {out}: seeds {json.load(f)['seeds']}")
+    return out
+
+
+if __name__ == "__main__":
+    from benchmarks import run_cli
+
+    run_cli(main)
