@@ -59,6 +59,10 @@ class TrainConfig(Generic[EnvConfigT, AlgoConfigT]):
     """Independent runs trained together in one compiled program (vmapped)."""
     devices: int = 0
     """Local devices to split the environments over (0 = all)."""
+    multi_device: Literal["shard_map", "gspmd"] = "shard_map"
+    """How several devices share the work: shard_map (each device runs the chunk on its envs; the
+    learners average gradients explicitly) or gspmd (the one-device program under jit with sharded
+    env axes; XLA inserts the collectives). Same results up to float rounding; ignored on one device."""
     logdir: str = ""
     """Output directory ("" = runs/<preset>/<date-time>)."""
     resume: bool = False
@@ -102,7 +106,7 @@ class TrainConfig(Generic[EnvConfigT, AlgoConfigT]):
 
 
 # Fields that may differ between a checkpoint's config and a resuming command line.
-RUN_FIELDS = ("num_timesteps", "devices", "logdir", "resume", "checkpoint_every", "keep_checkpoints", "checkpoint_envs", "log_every",
+RUN_FIELDS = ("num_timesteps", "devices", "multi_device", "logdir", "resume", "checkpoint_every", "keep_checkpoints", "checkpoint_envs", "log_every",
               "stop_after_steps", "eval_envs", "eval_seed", "eval_last_steps", "tensorboard", "progress")
 
 
@@ -139,6 +143,8 @@ def validate(config: TrainConfig) -> None:
                       ("checkpoint_every", 0), ("log_every", 0), ("stop_after_steps", 0), ("eval_envs", 0)):
         if int(getattr(config, name)) < low:
             raise ValueError(f"{name}={getattr(config, name)!r} is invalid: allowed is an integer >= {low}.")
+    if config.multi_device not in ("shard_map", "gspmd"):
+        raise ValueError(f"multi_device={config.multi_device!r} is unknown: allowed are shard_map, gspmd.")
     if config.matmul_precision not in ("default", "high", "highest"):
         raise ValueError(f"matmul_precision={config.matmul_precision!r} is unknown: allowed are default, high, highest.")
     if config.resume and not config.logdir:
@@ -162,7 +168,8 @@ def make_learner(algo_config, observation_size: int, action_size: int, updates: 
 
 @functools.lru_cache(maxsize=8)
 def build_programs(env_name: str, env_config, algo_config, seeds: int, devices: int, updates: int,
-                   eval_envs: int, eval_last_steps: int, learner_cls: type | None = None) -> Programs:
+                   eval_envs: int, eval_last_steps: int, learner_cls: type | None = None,
+                   multi_device: str = "shard_map") -> Programs:
     """Compiled programs for one setting; cached so repeated runs (tests, resumes) reuse them. The
     learner class is part of the key: a class redefined (e.g. in a notebook cell) is a new object
     and compiles anew."""
@@ -170,14 +177,14 @@ def build_programs(env_name: str, env_config, algo_config, seeds: int, devices: 
     env = envs.wrap(base)
     learner = make_learner(algo_config, env.observation_size, env.action_size, updates, learner_cls)
     return Programs(env, env, learner, algo_config.num_envs, seeds, jax.local_devices()[:devices],
-                    max(eval_envs, 1), env_config.episode_length, eval_last_steps)
+                    max(eval_envs, 1), env_config.episode_length, eval_last_steps, multi_device)
 
 
 def programs_for(config: TrainConfig, learner_cls: type | None = None) -> Programs:
     """The (cached) programs of `config`, with `learner_cls` in place of the default learner class."""
     return build_programs(config.env_name, config.env, config.algo, config.seeds, num_devices(config),
                           total_updates(config), config.eval_envs, config.eval_last_steps,
-                          learner_cls or default_learner_cls(config.algo))
+                          learner_cls or default_learner_cls(config.algo), config.multi_device)
 
 
 def seed_keys(config: TrainConfig) -> jax.Array:

@@ -15,7 +15,9 @@ Data parallelism: the environments are split evenly over the devices (`shard_map
 named "dev"); parameters are replicated and learners average gradients and normaliser moments with
 `Parallel.pmean` / `psum`. Random numbers are drawn per *global* environment index, so a run on two
 devices reproduces the one-device run up to float summation order. With one device no `shard_map`
-is built and every collective is a no-op.
+is built and every collective is a no-op. The alternative `multi_device="gspmd"` runs that
+one-device program under `jit` with the state's env axes sharded and lets XLA's partitioner insert
+the collectives (for XLA versions whose GPU compiler fails on the shard_map program).
 
 Seeds: every leaf of `TrainState` carries a leading seed axis and the chunk is `jax.vmap`ped over it.
 """
@@ -325,11 +327,15 @@ class Programs:
     """
 
     def __init__(self, env, eval_env, learner: Learner, num_envs: int, num_seeds: int, devices,
-                 eval_envs: int, episode_length: int, eval_last_steps: int = 10):
+                 eval_envs: int, episode_length: int, eval_last_steps: int = 10, multi_device: str = "shard_map"):
         self.env, self.learner, self.num_envs, self.num_seeds = env, learner, num_envs, num_seeds
         self.devices = list(devices)
         nd = len(self.devices)
-        par = Parallel(num_envs, nd, AXIS if nd > 1 else None)
+        gspmd = nd > 1 and multi_device == "gspmd"
+        # shard_map: each device runs the chunk on its envs and the learners' collectives combine them.
+        # gspmd: the chunk is written for all envs at once (no collectives) and XLA's partitioner
+        # splits it along the sharded env axes of the state.
+        par = Parallel(num_envs, nd, AXIS) if nd > 1 and not gspmd else Parallel(num_envs)
         self.parallel = par
         self.mesh = Mesh(self.devices, (AXIS,))
 
@@ -344,12 +350,17 @@ class Programs:
         self.init = jax.jit(init_all, out_shardings=self.shardings)
 
         chunk = jax.vmap(make_chunk(env, learner, par), in_axes=(0, None))
-        if nd > 1:
-            # check_vma=False: MJX's constraint solver (a lax.cond inside a scan) fails shard_map's
-            # varying-axis type check; learners therefore average gradients explicitly.
-            chunk = jax.shard_map(chunk, mesh=self.mesh, in_specs=(self.specs, P()), out_specs=(self.specs, P()),
-                                  check_vma=False)
-        self.chunk = jax.jit(chunk, donate_argnums=0)
+        if gspmd:
+            replicated = NamedSharding(self.mesh, P())
+            self.chunk = jax.jit(chunk, in_shardings=(self.shardings, replicated),
+                                 out_shardings=(self.shardings, replicated), donate_argnums=0)
+        else:
+            if nd > 1:
+                # check_vma=False: MJX's constraint solver (a lax.cond inside a scan) fails shard_map's
+                # varying-axis type check; learners therefore average gradients explicitly.
+                chunk = jax.shard_map(chunk, mesh=self.mesh, in_specs=(self.specs, P()), out_specs=(self.specs, P()),
+                                      check_vma=False)
+            self.chunk = jax.jit(chunk, donate_argnums=0)
 
         evaluate = jax.vmap(make_evaluate(eval_env, learner, eval_envs, episode_length, eval_last_steps), in_axes=(0, None))
         self.evaluate = jax.jit(evaluate)

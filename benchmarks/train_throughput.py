@@ -3,6 +3,7 @@ of the same environment in the same run, and on 1..N local GPUs at the same per-
 
     python benchmarks/train_throughput.py --out results/train_throughput            # one GPU
     python benchmarks/train_throughput.py --devices 1 2 --out results/multi_gpu     # scaling
+    python benchmarks/train_throughput.py --devices 2 --multi-device gspmd shard_map --skip-env-only
 
 Training rate: the compiled chunk of `--updates` PPO updates (rollouts, GAE, 5 epochs x 64
 minibatches of gradient steps) timed after a one-update warm-up that compiles it; env steps per
@@ -56,6 +57,8 @@ def main():
     parser.add_argument("--seeds", type=int, default=1)
     parser.add_argument("--devices", type=int, nargs="+", default=[1], help="device counts to measure")
     parser.add_argument("--env-steps", type=int, default=100, help="env steps per timed call of the env-only rate")
+    parser.add_argument("--multi-device", nargs="+", default=["shard_map"], choices=["shard_map", "gspmd"],
+                        help="how several devices share the work (TrainConfig.multi_device), each measured")
     parser.add_argument("--skip-env-only", action="store_true")
     parser.add_argument("--out", default="results/train_throughput")
     args = parser.parse_args()
@@ -66,23 +69,24 @@ def main():
     if not args.skip_env_only:
         env_only = env_rate(base.env_name, base.algo.num_envs, args.env_steps, 3, base.env.substeps)
         print(f"env only, {base.algo.num_envs} envs, 1 device: {env_only:,.0f} env steps/s", flush=True)
-    for devices in args.devices:
+    settings = [(d, m) for d in args.devices for m in (args.multi_device if d > 1 else ["shard_map"])]
+    for devices, mode in settings:
         algo = base.algo
         if devices > 1:  # keep the per-device batch: weak scaling
             algo = dataclasses.replace(algo, num_envs=algo.num_envs * devices, batch_size=algo.batch_size * devices)
-        config = dataclasses.replace(base, algo=algo, devices=devices,
+        config = dataclasses.replace(base, algo=algo, devices=devices, multi_device=mode,
                                      num_timesteps=(args.updates + 1) * algo.env_steps_per_update)
         driver.validate(config)
         rate, compile_s = training_rate(config, args.updates)
-        row = {"devices": devices, "num_envs": algo.num_envs, "batch_size": algo.batch_size, "seeds": args.seeds,
-               "env_steps_per_update": algo.env_steps_per_update, "train_steps_per_s": rate,
-               "compile_and_first_update_s": compile_s}
+        row = {"devices": devices, "multi_device": mode if devices > 1 else None, "num_envs": algo.num_envs,
+               "batch_size": algo.batch_size, "seeds": args.seeds, "env_steps_per_update": algo.env_steps_per_update,
+               "train_steps_per_s": rate, "compile_and_first_update_s": compile_s}
         if devices == 1 and env_only:
             row["env_only_steps_per_s"] = env_only
             row["fraction_of_env_only"] = rate / env_only
         rows.append(row)
-        print(f"{devices} device(s), {algo.num_envs} envs, batch {algo.batch_size}: {rate:,.0f} env steps/s "
-              f"(compile + first update {compile_s:.0f} s)", flush=True)
+        print(f"{devices} device(s){' ' + mode if devices > 1 else ''}, {algo.num_envs} envs, batch {algo.batch_size}: "
+              f"{rate:,.0f} env steps/s (compile + first update {compile_s:.0f} s)", flush=True)
     for row in rows:
         row["speedup_vs_1_device"] = row["train_steps_per_s"] / rows[0]["train_steps_per_s"] if rows[0]["devices"] == 1 else None
 
@@ -96,10 +100,10 @@ def main():
     out.with_suffix(".json").write_text(json.dumps({"meta": meta, "rows": rows}, indent=2))
     lines = [f"# Training throughput: {args.preset} ({meta['device']} x{meta['local_devices']}, {meta['date']})", "",
              f"Command: `{meta['command']}`, jax {meta['jax']}, {args.seeds} seed(s), {args.updates} timed updates.", "",
-             "| devices | envs | batch | env steps/update | training env steps/s | env-only env steps/s | fraction | speed-up |",
-             "|---:|---:|---:|---:|---:|---:|---:|---:|"]
+             "| devices | multi-device | envs | batch | env steps/update | training env steps/s | env-only env steps/s | fraction | speed-up |",
+             "|---:|---|---:|---:|---:|---:|---:|---:|---:|"]
     for r in rows:
-        lines.append(f"| {r['devices']} | {r['num_envs']:,} | {r['batch_size']} | {r['env_steps_per_update']:,} | "
+        lines.append(f"| {r['devices']} | {r['multi_device'] or ''} | {r['num_envs']:,} | {r['batch_size']} | {r['env_steps_per_update']:,} | "
                      f"{r['train_steps_per_s']:,.0f} | {r.get('env_only_steps_per_s', float('nan')):,.0f} | "
                      f"{r.get('fraction_of_env_only', float('nan')):.0%} | {r['speedup_vs_1_device'] or float('nan'):.2f} |")
     out.with_suffix(".md").write_text("\n".join(lines) + "\n")

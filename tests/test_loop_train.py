@@ -232,6 +232,9 @@ BAD_INPUTS = [
      r"algo.max_replay_size=1000 is invalid: allowed are multiples of algo.num_envs=16"),
     (lambda: train_cli.parse(["point-mass-sac", "--algo.min-replay-size", "64000"]), r"algo.min_replay_size=64000 is invalid"),
     (lambda: train_cli.parse(["point-mass-ppo", "--resume"]), r"logdir='' is invalid with resume=True"),
+    (lambda: train_cli.parse(["point-mass-ppo", "--multi-device", "pmap"]), None),  # tyro: not a Literal choice
+    (lambda: driver.validate(train_cli.make_config("point-mass-ppo", multi_device="pmap")),
+     r"multi_device='pmap' is unknown: allowed are shard_map, gspmd"),
 ]
 
 
@@ -266,29 +269,30 @@ TWO_DEVICES = textwrap.dedent("""
     for preset, steps in (("point-mass-ppo", 2 * 5120), ("point-mass-sac", 40 * 16)):
         algo = dict(num_envs=16, min_replay_size=256) if preset.endswith("sac") else {}
         runs = []
-        for devices in (1, 2):
-            cfg = T.make_config(preset, num_timesteps=steps, devices=devices, seeds=2, eval_envs=0,
-                                logdir=f"{TMP}/{preset}-{devices}", tensorboard=False, progress=False)
+        for devices, mode in ((1, "shard_map"), (2, "shard_map"), (2, "gspmd")):
+            cfg = T.make_config(preset, num_timesteps=steps, devices=devices, multi_device=mode, seeds=2, eval_envs=0,
+                                logdir=f"{TMP}/{preset}-{devices}-{mode}", tensorboard=False, progress=False)
             cfg = driver.dataclasses.replace(cfg, algo=driver.dataclasses.replace(cfg.algo, **algo))
             r = driver.train(cfg)
             runs.append(r)
-        sharding = runs[1].state.env_state.obs.sharding
-        a, b = (jax.tree.leaves(jax.device_get(r.state.learner)) for r in runs)
-        pa, pb = (jax.tree.leaves(jax.device_get(r.state.learner.policy_params if preset.endswith("sac") else r.state.learner.params)) for r in runs)
-        out[preset] = {
-            "max_diff": max(float(np.max(np.abs(x - y)) / (np.max(np.abs(x)) + 1e-3)) if x.size else 0.0 for x, y in zip(a, b)),
-            "param_scale": max(float(np.max(np.abs(x))) for x in pa),
-            "moved": max(float(np.max(np.abs(x))) for x in jax.tree.leaves(jax.device_get(runs[0].state.learner)) if x.size) > 0,
-            "env_shards": len(sharding.device_set),
-            "returns": [runs[0].last_metrics["episode/return"].tolist(), runs[1].last_metrics["episode/return"].tolist()],
-        }
-    # The MJX arm on two devices (its constraint solver needs shard_map's check_vma=False).
-    cfg = T.make_config("ur5e-reach-ppo-cpu", num_timesteps=1280, devices=2, eval_envs=0, logdir=f"{TMP}/arm",
-                        tensorboard=False, progress=False)
-    cfg = driver.dataclasses.replace(cfg, env=driver.dataclasses.replace(cfg.env, substeps=2, sampling_candidates=4))
-    r = driver.train(cfg)
-    out["arm"] = {"env_shards": len(r.state.env_state.obs.sharding.device_set),
-                  "losses_finite": bool(all(np.isfinite(v).all() for k, v in r.last_metrics.items() if k.startswith("loss/")))}
+        one = jax.tree.leaves(jax.device_get(runs[0].state.learner))
+        for mode, run in (("shard_map", runs[1]), ("gspmd", runs[2])):
+            two = jax.tree.leaves(jax.device_get(run.state.learner))
+            out[f"{preset} {mode}"] = {
+                "max_diff": max(float(np.max(np.abs(x - y)) / (np.max(np.abs(x)) + 1e-3)) if x.size else 0.0 for x, y in zip(one, two)),
+                "moved": max(float(np.max(np.abs(x))) for x in one if x.size) > 0,
+                "env_shards": len(run.state.env_state.obs.sharding.device_set),
+                "returns": [runs[0].last_metrics["episode/return"].tolist(), run.last_metrics["episode/return"].tolist()],
+            }
+    # The MJX arm on two devices (its constraint solver needs shard_map's check_vma=False), both ways.
+    for mode in ("shard_map", "gspmd"):
+        cfg = T.make_config("ur5e-reach-ppo-cpu", num_timesteps=1280, devices=2, multi_device=mode, eval_envs=0,
+                            logdir=f"{TMP}/arm-{mode}", tensorboard=False, progress=False)
+        cfg = driver.dataclasses.replace(cfg, env=driver.dataclasses.replace(cfg.env, substeps=2, sampling_candidates=4))
+        r = driver.train(cfg)
+        out[f"arm {mode}"] = {"env_shards": len(r.state.env_state.obs.sharding.device_set),
+                              "losses_finite": bool(all(np.isfinite(v).all() for k, v in r.last_metrics.items() if k.startswith("loss/"))),
+                              "policy": jax.tree.leaves(jax.device_get(r.state.learner.params))[-1].ravel()[:8].tolist()}
     print("RESULT" + json.dumps(out))
 """)
 
@@ -299,9 +303,13 @@ def test_two_devices_match_one_device(tmp_path):
     proc = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr[-3000:]
     result = json.loads(proc.stdout.split("RESULT", 1)[1])
-    arm = result.pop("arm")
-    assert arm == {"env_shards": 2, "losses_finite": True}
-    for preset, r in result.items():
-        assert r["env_shards"] == 2, preset  # the environments really were split over both devices
-        assert r["max_diff"] < 1e-4, (preset, r)  # relative to each leaf's scale
+    arms = [result.pop("arm shard_map"), result.pop("arm gspmd")]
+    for arm in arms:
+        assert arm["env_shards"] == 2 and arm["losses_finite"]
+    np.testing.assert_allclose(arms[0]["policy"], arms[1]["policy"], rtol=1e-3, atol=1e-5)  # the same update
+    assert sorted(result) == ["point-mass-ppo gspmd", "point-mass-ppo shard_map", "point-mass-sac gspmd",
+                              "point-mass-sac shard_map"]
+    for name, r in result.items():
+        assert r["moved"] and r["env_shards"] == 2, name  # the environments really were split over both devices
+        assert r["max_diff"] < 1e-4, (name, r)  # relative to each leaf's scale
         np.testing.assert_allclose(r["returns"][0], r["returns"][1], rtol=1e-4)
