@@ -35,8 +35,10 @@ from agents import driver  # noqa: E402
 from env_throughput import env_rate  # noqa: E402
 
 
-def training_rate(config, updates: int) -> tuple[float, float]:
-    """(env steps/s, compile seconds) of `updates` updates of the config's compiled chunk."""
+def training_rate(config, updates: int, trace_dir: str | None = None) -> tuple[float, float]:
+    """(env steps/s, compile seconds) of `updates` updates of the config's compiled chunk. With
+    `trace_dir`, one more update runs under the JAX profiler afterwards (TensorBoard / Perfetto trace
+    of where an update's time goes; not part of the timing)."""
     programs = driver.programs_for(config)
     state = programs.init(driver.seed_keys(config))
     start = time.perf_counter()
@@ -47,6 +49,10 @@ def training_rate(config, updates: int) -> tuple[float, float]:
     state, metrics = programs.chunk(state, jnp.int32(updates))
     jax.block_until_ready(metrics)
     seconds = time.perf_counter() - start
+    if trace_dir:
+        with jax.profiler.trace(trace_dir):
+            state, metrics = programs.chunk(state, jnp.int32(1))
+            jax.block_until_ready(metrics)
     return updates * driver.env_steps_per_update(config) * config.seeds / seconds, compile_seconds
 
 
@@ -60,6 +66,7 @@ def main():
     parser.add_argument("--multi-device", nargs="+", default=["shard_map"], choices=["shard_map", "gspmd"],
                         help="how several devices share the work (TrainConfig.multi_device), each measured")
     parser.add_argument("--skip-env-only", action="store_true")
+    parser.add_argument("--trace", metavar="DIR", help="also write a profiler trace of one update per setting to DIR/<setting>")
     parser.add_argument("--out", default="results/train_throughput")
     args = parser.parse_args()
 
@@ -77,7 +84,8 @@ def main():
         config = dataclasses.replace(base, algo=algo, devices=devices, multi_device=mode,
                                      num_timesteps=(args.updates + 1) * algo.env_steps_per_update)
         driver.validate(config)
-        rate, compile_s = training_rate(config, args.updates)
+        trace = str(Path(args.trace) / (f"{devices}dev-{mode}" if devices > 1 else "1dev")) if args.trace else None
+        rate, compile_s = training_rate(config, args.updates, trace)
         row = {"devices": devices, "multi_device": mode if devices > 1 else None, "num_envs": algo.num_envs,
                "batch_size": algo.batch_size, "seeds": args.seeds, "env_steps_per_update": algo.env_steps_per_update,
                "train_steps_per_s": rate, "compile_and_first_update_s": compile_s}
