@@ -1,4 +1,5 @@
-"""The checkpoints shipped under results/checkpoints/ load on a CPU and do what results/README.md says.
+"""The checkpoints shipped under results/checkpoints/ load on a CPU and do what results/README.md says;
+the headline tables there and in README.md quote the eval.py JSON files.
 
 Every shipped export loads, fits its env and is the checkpoint that its results/*_eval.json
 evaluated (the best seed, for single-seed exports).
@@ -74,3 +75,37 @@ def test_shipped_checkpoint_loads_and_is_the_evaluated_run(name):
     assert evaluated["num_envs"] == 4096 and evaluated["env_config"]["substeps"] == 20
     if len(policy.units) == 1:
         assert policy.units == [ship_checkpoint.best_seed(eval_json, policy.export.env_steps)]
+
+
+HEADLINE_ROWS = {  # results/README.md row label -> (eval.py JSON, collision kinds in the row)
+    "UR5e reach, 1 cm target": ("ur5e_reach_ppo_eval.json", ("self",)),
+    "Panda reach, 1 cm target": ("panda_reach_ppo_eval.json", ("self",)),
+    "UR5e reach-avoid, 2 cm, 0.1 m obstacle": ("ur5e_reach_avoid_ppo_eval.json", ("self", "obstacle")),
+    "Panda reach-avoid, 2 cm, 0.1 m obstacle": ("panda_reach_avoid_ppo_eval.json", ("self", "obstacle")),
+    "UR5e reach, SAC": ("ur5e_reach_sac_eval.json", ("self",)),
+}
+
+
+def _percent(stats: dict) -> str:
+    return f"{100 * stats['mean']:.1f} ± {100 * stats['std_units']:.1f} %"
+
+
+@pytest.mark.parametrize("label", sorted(HEADLINE_ROWS))
+def test_results_tables_quote_the_evaluation_files(label):
+    """The headline numbers in results/README.md and README.md are the ones in the eval.py JSON files."""
+    name, kinds = HEADLINE_ROWS[label]
+    with open(os.path.join(ROOT, "results", name)) as f:
+        evaluated = json.load(f)["evaluations"][0]
+    summary = evaluated["summary"]
+    assert evaluated["num_envs"] == 4096 and summary["target_reached"]["units"] == 5
+    expected = [_percent(summary["target_reached"])] + [
+        f"{_percent(summary[kind + '_collision'])[:-2]} % {kind}" for kind in kinds]
+    with open(os.path.join(ROOT, "results", "README.md"), encoding="utf-8") as f:
+        rows = [line for line in f if line.startswith(f"| {label} |")]
+    assert len(rows) == 1, label
+    cells = [c.strip() for c in rows[0].split("|")[1:-1]]
+    assert cells[3] == expected[0] and cells[4] == ", ".join(expected[1:]), (cells, expected)
+    assert cells[5] == f"{evaluated['policy']['env_steps'] / 1e6:.{0 if evaluated['policy']['env_steps'] >= 1e7 else 1}f}M"
+    with open(os.path.join(ROOT, "README.md"), encoding="utf-8") as f:
+        readme = f.read()
+    assert " / ".join(e.split(" %")[0] + " %" for e in expected) in readme, expected
