@@ -410,9 +410,14 @@ def _train(config: TrainConfig, learner_cls: type | None = None) -> TrainResult:
     return TrainResult(state, updates_done * spu, status, logdir, config, eval_metrics, last_metrics)
 
 
-def _without_envs(state, learner):
+def _transient_fields(learner) -> tuple[str, ...]:
+    """Learner-state fields that learner-only checkpoints leave out (`Learner.transient_fields`)."""
+    return tuple(getattr(learner, "transient_fields", ()))
+
+
+def _learner_only(state, learner):
     """The state as a learner-only checkpoint stores it: no env states, no transient learner fields."""
-    transient = {name: None for name in getattr(learner, "transient_fields", ())}
+    transient = {name: None for name in _transient_fields(learner)}
     return state.replace(learner=state.learner.replace(**transient), env_state=None, episode_return=None,
                          episode_length=None)
 
@@ -421,7 +426,7 @@ def save_checkpoint(ckpt: Checkpointer, step: int, state, config: TrainConfig, l
     """The checkpoint (without env states if `config.checkpoint_envs` is False) plus, next to it, the
     small policy export that eval.py loads (`agents.export`: policy parameters, observation
     statistics, config)."""
-    ckpt.save(step, state if config.checkpoint_envs else _without_envs(state, learner), config_json(config))
+    ckpt.save(step, state if config.checkpoint_envs else _learner_only(state, learner), config_json(config))
     export.save(os.path.join(ckpt.step_dir(step), export.DIRNAME), state.learner, config_json(config), step)
 
 
@@ -430,9 +435,9 @@ def restore_state(ckpt: Checkpointer, step: int, programs: Programs, config: Tra
     drawn from keys that depend on the seed and the step (not on the start's keys)."""
     if with_envs:
         return ckpt.restore(step, programs.abstract_state)[0]
-    saved, _ = ckpt.restore(step, _without_envs(programs.abstract_state, programs.learner))
+    saved, _ = ckpt.restore(step, _learner_only(programs.abstract_state, programs.learner))
     fresh = programs.init(jax.vmap(jax.random.fold_in, (0, None))(seed_keys(config), step))
-    transient = {name: getattr(fresh.learner, name) for name in getattr(programs.learner, "transient_fields", ())}
+    transient = {name: getattr(fresh.learner, name) for name in _transient_fields(programs.learner)}
     return fresh.replace(learner=saved.learner.replace(**transient), key=saved.key, updates=saved.updates)
 
 

@@ -76,24 +76,25 @@ def main():
     if not args.skip_env_only:
         env_only = env_rate(base.env_name, base.algo.num_envs, args.env_steps, 3, base.env.substeps)
         print(f"env only, {base.algo.num_envs} envs, 1 device: {env_only:,.0f} env steps/s", flush=True)
-    settings = [(d, m) for d in args.devices for m in (args.multi_device if d > 1 else ["shard_map"])]
+    # Several devices: each --multi-device mode; one device: no mode (None runs the default program).
+    settings = [(d, m) for d in args.devices for m in (args.multi_device if d > 1 else [None])]
     for devices, mode in settings:
+        label = f"{devices}dev" + (f"-{mode}" if mode else "")
         algo = base.algo
         if devices > 1:  # keep the per-device batch: weak scaling
             algo = dataclasses.replace(algo, num_envs=algo.num_envs * devices, batch_size=algo.batch_size * devices)
-        config = dataclasses.replace(base, algo=algo, devices=devices, multi_device=mode,
+        config = dataclasses.replace(base, algo=algo, devices=devices, multi_device=mode or base.multi_device,
                                      num_timesteps=(args.updates + 1) * algo.env_steps_per_update)
         driver.validate(config)
-        trace = str(Path(args.trace) / (f"{devices}dev-{mode}" if devices > 1 else "1dev")) if args.trace else None
-        rate, compile_s = training_rate(config, args.updates, trace)
-        row = {"devices": devices, "multi_device": mode if devices > 1 else None, "num_envs": algo.num_envs,
+        rate, compile_s = training_rate(config, args.updates, str(Path(args.trace) / label) if args.trace else None)
+        row = {"devices": devices, "multi_device": mode, "num_envs": algo.num_envs,
                "batch_size": algo.batch_size, "seeds": args.seeds, "env_steps_per_update": algo.env_steps_per_update,
                "train_steps_per_s": rate, "compile_and_first_update_s": compile_s}
         if devices == 1 and env_only:
             row["env_only_steps_per_s"] = env_only
             row["fraction_of_env_only"] = rate / env_only
         rows.append(row)
-        print(f"{devices} device(s){' ' + mode if devices > 1 else ''}, {algo.num_envs} envs, batch {algo.batch_size}: "
+        print(f"{label}, {algo.num_envs} envs, batch {algo.batch_size}: "
               f"{rate:,.0f} env steps/s (compile + first update {compile_s:.0f} s)", flush=True)
     for row in rows:
         row["speedup_vs_1_device"] = row["train_steps_per_s"] / rows[0]["train_steps_per_s"] if rows[0]["devices"] == 1 else None
