@@ -48,9 +48,10 @@ def classify(robot, records: dict) -> list[dict]:
     self_start = np.asarray(robot.self_distances(kin_start.geom_xpos, kin_start.geom_xmat))
     self_end = np.asarray(robot.self_distances(kin_end.geom_xpos, kin_end.geom_xmat))
     if "obstacle_pos" in records:
+        # Distances to the obstacle's centre: its radius shifts them all alike, so the geom that
+        # collided (the nearest) does not depend on it.
         center = jnp.asarray(np.asarray(records["obstacle_pos"])[0])
-        radius = robot.mj_model.geom_size[robot.mj_model.geom("obstacle").id, 0]
-        obstacle_end = np.asarray(jax.vmap(lambda c, x, m: robot.obstacle_distances(x, m, c, radius))(
+        obstacle_end = np.asarray(jax.vmap(lambda c, x, m: robot.obstacle_distances(x, m, c, 0.0))(
             center, kin_end.geom_xpos, kin_end.geom_xmat))
     pair_names = [" / ".join(_names(robot, pair)) for pair in robot.self_pairs]
     out = []
