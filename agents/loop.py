@@ -195,8 +195,11 @@ def make_chunk(env, learner: Learner, par: Parallel):
     def rollout(ls, carry, key):
         def step(c, k):
             env_state, ep_ret, ep_len, acc = c
-            action, extras = learner.act(ls, env_state.obs, k, par)
-            nxt = env.step(env_state, action)
+            # Named scopes label the pieces in profiler traces (benchmarks/trace_summary.py).
+            with jax.named_scope("act"):
+                action, extras = learner.act(ls, env_state.obs, k, par)
+            with jax.named_scope("env_step"):
+                nxt = env.step(env_state, action)
             truncation = nxt.info["truncation"]
             done = nxt.done
             tr = Transition(
@@ -233,7 +236,8 @@ def make_chunk(env, learner: Learner, par: Parallel):
             (env_state, ep_ret, ep_len, acc), batch = rollout(
                 st.learner, (st.env_state, st.episode_return, st.episode_length, acc), k_roll
             )
-            ls, metrics = learner.update(st.learner, batch, k_update, par)
+            with jax.named_scope("update"):
+                ls, metrics = learner.update(st.learner, batch, k_update, par)
             lm = jax.tree.map(jnp.add, lm, metrics)
             st = TrainState(ls, env_state, key, ep_ret, ep_len, st.updates + 1)
             return st, acc, lm

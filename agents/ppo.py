@@ -288,6 +288,7 @@ class PPO:
     def policy(self, state: PPOState, obs):
         return self._dist(state.params["policy"], self._obs(state, obs)).mode()
 
+    @jax.named_scope("advantages")
     def advantages(self, params, obs_stats, value_stats, data: Transition):
         """GAE per unroll; `data` leaves are (envs, unrolls, unroll_length, ...)."""
         c = self.config
@@ -347,6 +348,7 @@ class PPO:
             terms["std"] = jnp.mean(dist.std)
             return ppo_total_loss(terms, c.value_loss_coef, c.entropy_coef), terms
 
+        @jax.named_scope("sgd_step")
         def sgd_step(carry, mb):
             p, opt_state, stopped = carry
             adv = mb["advantages"]
@@ -380,7 +382,8 @@ class PPO:
             k_mb, k_ent = jax.random.split(k)
             # Noise of the one-sample entropy estimate, keyed by global env index (device-invariant).
             tree["noise"] = env_random(k_ent, par, data.extras["raw_action"].shape[1:])
-            mbs = self.minibatches(tree, k_mb, par)
+            with jax.named_scope("minibatches"):
+                mbs = self.minibatches(tree, k_mb, par)
             return jax.lax.scan(sgd_step, (p, opt_state, stopped), mbs)
 
         (params, opt_state, _), terms = jax.lax.scan(

@@ -4,6 +4,7 @@ of the same environment in the same run, and on 1..N local GPUs at the same per-
     python benchmarks/train_throughput.py --out results/train_throughput            # one GPU
     python benchmarks/train_throughput.py --devices 1 2 --out results/multi_gpu     # scaling
     python benchmarks/train_throughput.py --devices 2 --multi-device gspmd shard_map --skip-env-only
+    python benchmarks/train_throughput.py --trace traces/  # + profile: benchmarks/trace_summary.py traces/1dev
 
 Training rate: the compiled chunk of `--updates` PPO updates (rollouts, GAE, 5 epochs x 64
 minibatches of gradient steps) timed after a one-update warm-up that compiles it; env steps per
@@ -50,7 +51,11 @@ def training_rate(config, updates: int, trace_dir: str | None = None) -> tuple[f
     jax.block_until_ready(metrics)
     seconds = time.perf_counter() - start
     if trace_dir:
-        with jax.profiler.trace(trace_dir):
+        # The compiled program's HLO maps kernel names to JAX name scopes (benchmarks/trace_summary.py).
+        Path(trace_dir).mkdir(parents=True, exist_ok=True)
+        hlo = programs.chunk.lower(state, jnp.int32(1)).compile().as_text()
+        (Path(trace_dir) / "chunk.hlo.txt").write_text(hlo)
+        with jax.profiler.trace(trace_dir, create_perfetto_trace=True):
             state, metrics = programs.chunk(state, jnp.int32(1))
             jax.block_until_ready(metrics)
     return updates * driver.env_steps_per_update(config) * config.seeds / seconds, compile_seconds

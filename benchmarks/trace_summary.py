@@ -1,0 +1,180 @@
+"""Where the GPU time of a profiled program goes: a text summary of a JAX profiler trace.
+
+    python benchmarks/train_throughput.py --trace traces/      # writes traces/<setting>/...
+    python benchmarks/trace_summary.py traces/1dev             # summary of that trace
+
+Reads the `perfetto_trace.json.gz` that `jax.profiler.trace(..., create_perfetto_trace=True)`
+writes (the newest one under the given directory). For each device it reports the traced span,
+the time at least one kernel ran (busy; the rest of the span is launch and synchronisation
+overhead), the kernel count, and the device time per *scope*. A kernel's scope is the first of
+`--scopes` in the name stack of the HLO op that launched it, read from the compiled program's HLO
+text (`--hlo`; train_throughput.py writes `chunk.hlo.txt` beside its trace): `agents.loop` labels
+"act", "env_step" and "update", `agents.ppo` "advantages", "minibatches" and "sgd_step" (with
+`jax.named_scope`). The order of `--scopes` decides: put nested (more specific) scopes first.
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import gzip
+import json
+import re
+from pathlib import Path
+
+DEFAULT_SCOPES = ("sgd_step", "advantages", "minibatches", "act", "env_step", "update")
+
+
+def load_events(path: Path) -> tuple[list[dict], dict[int, str]]:
+    """(complete events, process names) of the newest perfetto trace under `path` (or `path` itself)."""
+    files = [path] if path.is_file() else sorted(path.rglob("perfetto_trace.json.gz"), key=lambda p: p.stat().st_mtime)
+    if not files:
+        raise ValueError(f"trace={str(path)!r} holds no perfetto_trace.json.gz: allowed is a directory written by "
+                         "jax.profiler.trace(..., create_perfetto_trace=True) or such a file.")
+    with gzip.open(files[-1], "rt") as f:
+        events = json.load(f)["traceEvents"]
+    names = {e["pid"]: e["args"]["name"] for e in events if e.get("ph") == "M" and e.get("name") == "process_name"}
+    return [e for e in events if e.get("ph") == "X"], names
+
+
+def busy_time(intervals: list[tuple[float, float]]) -> float:
+    """Length of the union of (start, end) intervals."""
+    total, end = 0.0, float("-inf")
+    for a, b in sorted(intervals):
+        if b <= end:
+            continue
+        total += b - max(a, end)
+        end = b
+    return total
+
+
+def _key(op: str) -> str:
+    # Kernel names spell an HLO op's "." and "-" as "_" ("loop_add_fusion.12" -> "loop_add_fusion_12").
+    return re.sub(r"[.\-]", "_", op)
+
+
+def op_names(hlo_text: str) -> dict[str, str]:
+    """HLO instruction name -> its `op_name` metadata (the JAX name stack), from compiled HLO text."""
+    out = {}
+    for m in re.finditer(r'^\s*(?:ROOT\s+)?%?([\w.\-]+)\s*=[^\n]*?metadata=\{[^}\n]*?op_name="([^"]*)"', hlo_text, re.M):
+        out[_key(m.group(1))] = m.group(2)
+    return out
+
+
+def scope_of(event: dict, scopes, names: dict[str, str]) -> str:
+    """The first scope of `scopes` in the event's name stack (or, without one, its name and
+    arguments), else "other"."""
+    args = event.get("args", {})
+    # A kernel inside a CUDA graph names the graph ("command_buffer_12") as its hlo_op, but its
+    # own name is its fusion's; ops outside graphs carry the name stack in args["name"].
+    text = (names.get(_key(event["name"])) or names.get(_key(args.get("hlo_op", "")))
+            or event["name"] + " " + " ".join(str(v) for v in args.values()))
+    for scope in scopes:
+        if re.search(r"(^|[/ (])" + re.escape(scope) + r"($|[/ )])", text):
+            return scope
+    return "other"
+
+
+def kernel_family(name: str) -> str:
+    """A kernel name without XLA's numeric suffixes ("loop_add_fusion_12" -> "loop_add_fusion")."""
+    return re.sub(r"([._]\d+)+$", "", name)
+
+
+def summarize(events: list[dict], process_names: dict[int, str], scopes=DEFAULT_SCOPES, top: int = 15,
+              hlo_names: dict[str, str] | None = None, process: str = "GPU|TPU") -> dict:
+    """Per device (processes whose name matches the regex `process`): span, busy time and kernel
+    count (microseconds), time per scope and the top kernel families. On a CPU trace pass
+    `process="host:CPU"`: only events naming an HLO op count there."""
+    out, names = {}, hlo_names or {}
+    for pid, pname in sorted(process_names.items()):
+        if not re.search(process, pname):
+            continue
+        kernels = [e for e in events if e["pid"] == pid and e.get("dur", 0) > 0
+                   and ("GPU" in pname or "TPU" in pname or "hlo_op" in e.get("args", {}))]
+        if not kernels:
+            continue
+        start = min(e["ts"] for e in kernels)
+        end = max(e["ts"] + e["dur"] for e in kernels)
+        per_scope = collections.Counter()
+        count_scope = collections.Counter()
+        families = collections.Counter()
+        family_count = collections.Counter()
+        for e in kernels:
+            s = scope_of(e, scopes, names)
+            per_scope[s] += e["dur"]
+            count_scope[s] += 1
+            f = kernel_family(e["name"])
+            families[f] += e["dur"]
+            family_count[f] += 1
+        out[pname] = {
+            "span_us": end - start,
+            "busy_us": busy_time([(e["ts"], e["ts"] + e["dur"]) for e in kernels]),
+            "kernels": len(kernels),
+            "scopes": {s: {"us": per_scope[s], "kernels": count_scope[s]} for s, _ in per_scope.most_common()},
+            "top_kernels": [{"name": f, "us": t, "count": family_count[f]} for f, t in families.most_common(top)],
+        }
+    return out
+
+
+def host_summary(events: list[dict], process_names: dict[int, str], top: int = 12) -> list[dict]:
+    """The host events that repeat (at least 10 times), by total host time: on a GPU, the thunks
+    the host executes one by one (graph launches, library calls, loops). When the device is idle
+    part of the span, these are what it waits for."""
+    hosts = {pid for pid, name in process_names.items() if "host" in name.lower()}
+    total, count = collections.Counter(), collections.Counter()
+    for e in events:
+        if e["pid"] in hosts and not e["name"].startswith("$"):
+            key = e["name"] + (f" ({e['args']['hlo_op']})" if "hlo_op" in e.get("args", {}) else "")
+            total[key] += e.get("dur", 0.0)
+            count[key] += 1
+    return [{"name": k, "us": t, "count": count[k]} for k, t in total.most_common() if count[k] >= 10][:top]
+
+
+def format_summary(summary: dict, host: list[dict] | None = None) -> str:
+    lines = []
+    if host:
+        lines += ["## host: repeated events by total time", "", "| event | host ms | count | us each |", "|---|---:|---:|---:|"]
+        lines += [f"| {h['name'][:70]} | {h['us'] / 1e3:.1f} | {h['count']:,} | {h['us'] / h['count']:.1f} |" for h in host]
+        lines.append("")
+    for device, d in summary.items():
+        span, busy = d["span_us"], d["busy_us"]
+        lines += [f"## {device}",
+                  f"span {span / 1e3:.1f} ms, kernels busy {busy / 1e3:.1f} ms ({busy / max(span, 1e-9):.0%}), "
+                  f"{d['kernels']:,} kernels ({span / max(d['kernels'], 1):.1f} us of span per kernel)",
+                  "", "| scope | device ms | kernels |", "|---|---:|---:|"]
+        lines += [f"| {s} | {v['us'] / 1e3:.1f} | {v['kernels']:,} |" for s, v in d["scopes"].items()]
+        lines += ["", "| kernel family | device ms | count |", "|---|---:|---:|"]
+        lines += [f"| {k['name'][:70]} | {k['us'] / 1e3:.1f} | {k['count']:,} |" for k in d["top_kernels"]]
+        lines.append("")
+    return "\n".join(lines)
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("trace", help="trace directory (or perfetto_trace.json.gz file)")
+    parser.add_argument("--scopes", nargs="+", default=list(DEFAULT_SCOPES), help="scope names, most specific first")
+    parser.add_argument("--top", type=int, default=15, help="kernel families listed per device")
+    parser.add_argument("--hlo", help="compiled HLO text of the traced program (default: *.hlo.txt beside the trace)")
+    parser.add_argument("--process", default="GPU|TPU", help="regex of the trace processes to summarise (CPU: host:CPU)")
+    parser.add_argument("--json", help="also write the summary as JSON here")
+    args = parser.parse_args()
+    trace = Path(args.trace)
+    events, names = load_events(trace)
+    hlo = [Path(args.hlo)] if args.hlo else sorted(trace.rglob("*.hlo.txt")) if trace.is_dir() else []
+    hlo_names = {}
+    for path in hlo:
+        hlo_names.update(op_names(path.read_text()))
+    summary = summarize(events, names, args.scopes, args.top, hlo_names, args.process)
+    if not summary:
+        raise ValueError(f"trace={args.trace!r} has no device events (a CPU-only trace has none).")
+    host = host_summary(events, names)
+    print(format_summary(summary, host))
+    if args.json:
+        Path(args.json).write_text(json.dumps({"devices": summary, "host": host}, indent=2))
+
+
+if __name__ == "__main__":
+    try:
+        main()
+    except ValueError as e:
+        raise SystemExit(f"error: {e}")

@@ -1,0 +1,59 @@
+"""benchmarks/trace_summary.py on a hand-made trace whose totals are known."""
+
+import gzip
+import json
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+
+import trace_summary as ts  # noqa: E402
+
+HLO = """
+HloModule jit_chunk
+%body {
+  %loop_add_fusion.12 = f32[8]{0} fusion(%p), kind=kLoop, calls=%f1, metadata={op_name="jit(chunk)/while/body/env_step/vmap()/add" stack_frame_id=3}
+  %gemm_fusion_dot.3 = f32[8,4]{1,0} fusion(%q), kind=kCustom, calls=%f2, metadata={op_name="jit(chunk)/while/body/update/while/body/sgd_step/dot_general" stack_frame_id=4}
+  ROOT %cholesky.95 = f32[8,6,6]{2,1,0} custom-call(%r), custom_call_target="cusolver", metadata={op_name="jit(chunk)/while/body/env_step/step/cholesky"}
+}
+"""
+
+
+def _trace(tmp_path):
+    gpu, host = 1, 701
+    x = lambda pid, ts_, dur, name, **args: {"ph": "X", "pid": pid, "tid": 1, "ts": ts_, "dur": dur, "name": name, "args": args}
+    events = [
+        {"ph": "M", "pid": gpu, "name": "process_name", "args": {"name": "/device:GPU:0"}},
+        {"ph": "M", "pid": host, "name": "process_name", "args": {"name": "/host:CPU"}},
+        # inside a CUDA graph: the hlo_op names the graph, the kernel name is the fusion's
+        x(gpu, 0.0, 10.0, "loop_add_fusion_12", hlo_op="command_buffer_7"),
+        x(gpu, 5.0, 10.0, "loop_add_fusion_12", hlo_op="command_buffer_7"),   # overlaps the first by 5
+        x(gpu, 30.0, 4.0, "potrf_kernel", hlo_op="cholesky.95"),                # a library call outside graphs
+        x(gpu, 40.0, 6.0, "gemm_fusion_dot_3", hlo_op="command_buffer_9"),
+        x(gpu, 50.0, 2.0, "memcpy32_post", hlo_op="command_buffer_9"),          # no op: "other"
+    ] + [x(host, float(i), 3.0, "cuGraphLaunch") for i in range(10)] + [x(host, 0.0, 50.0, "$python frame")]
+    with gzip.open(tmp_path / "perfetto_trace.json.gz", "wt") as f:
+        json.dump({"traceEvents": events}, f)
+    (tmp_path / "chunk.hlo.txt").write_text(HLO)
+
+
+def test_busy_time_is_the_union_of_intervals():
+    assert ts.busy_time([(0, 10), (5, 15), (30, 34), (31, 32)]) == 19
+
+
+def test_summary_of_a_known_trace(tmp_path):
+    _trace(tmp_path)
+    events, names = ts.load_events(tmp_path)
+    hlo_names = ts.op_names((tmp_path / "chunk.hlo.txt").read_text())
+    assert hlo_names["loop_add_fusion_12"].endswith("env_step/vmap()/add")
+    summary = ts.summarize(events, names, ts.DEFAULT_SCOPES, top=10, hlo_names=hlo_names)
+    assert list(summary) == ["/device:GPU:0"]
+    d = summary["/device:GPU:0"]
+    assert d["span_us"] == 52.0 and d["busy_us"] == 27.0 and d["kernels"] == 5
+    assert d["scopes"] == {"env_step": {"us": 24.0, "kernels": 3}, "sgd_step": {"us": 6.0, "kernels": 1},
+                           "other": {"us": 2.0, "kernels": 1}}
+    assert d["top_kernels"][0] == {"name": "loop_add_fusion", "us": 20.0, "count": 2}
+    host = ts.host_summary(events, names)
+    assert host == [{"name": "cuGraphLaunch", "us": 30.0, "count": 10}]  # python frames and one-offs left out
+    text = ts.format_summary(summary, host)
+    assert "kernels busy 0.0 ms (52%)" in text and "| env_step | 0.0 | 3 |" in text
