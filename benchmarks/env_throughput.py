@@ -31,6 +31,7 @@ import mujoco  # noqa: E402
 from mujoco import mjx  # noqa: E402
 
 import envs  # noqa: E402
+from envs.fast_mjx import fast_mjx  # noqa: E402
 from envs.robots import ROBOTS  # noqa: E402
 
 
@@ -44,8 +45,8 @@ def time_calls(fn, args, repeats):
     return statistics.median(times)
 
 
-def env_rate(name, num_envs, steps, repeats, substeps, auto_reset=True):
-    env = envs.make(name, substeps=substeps)
+def env_rate(name, num_envs, steps, repeats, substeps=None, auto_reset=True):
+    env = envs.make(name) if substeps is None else envs.make(name, substeps=substeps)
     batched = envs.wrap(env) if auto_reset else envs.wrappers.VmapWrapper(env)
     state = jax.jit(batched.reset)(jax.random.split(jax.random.PRNGKey(0), num_envs))
 
@@ -62,7 +63,9 @@ def env_rate(name, num_envs, steps, repeats, substeps, auto_reset=True):
     return num_envs * steps / seconds
 
 
-def ceiling_rate(robot_name, num_envs, steps, repeats, substeps):
+def ceiling_rate(robot_name, num_envs, steps, repeats, substeps, fast=None):
+    """Raw `mjx.step` rate; `fast` as in `envs.fast_mjx.fast_mjx` (None: as the envs step, False:
+    MJX as shipped)."""
     robot = ROBOTS[robot_name]()
     model = robot.mjx_model
     low, high = robot.joint_low, robot.joint_high
@@ -85,7 +88,7 @@ def ceiling_rate(robot_name, num_envs, steps, repeats, substeps):
             data, _ = jax.lax.scan(physics, data, length=substeps)
             return data, None
 
-        with jax.default_matmul_precision("highest"):
+        with jax.default_matmul_precision("highest"), fast_mjx(fast):
             data, _ = jax.lax.scan(env_step, data, jax.random.split(key, steps))
         return data
 
@@ -102,28 +105,12 @@ def main():
     parser.add_argument("--substeps", type=int, default=20)
     parser.add_argument("--no-reset-variant", action="store_true",
                         help="also time each env without auto-reset (shows what resets cost)")
+    parser.add_argument("--stock-ceiling", action="store_true",
+                        help="also measure the ceiling of MJX as shipped (without envs.fast_mjx)")
     parser.add_argument("--out", default="results/env_throughput", help="output path without extension")
     args = parser.parse_args()
 
     device = jax.devices()[0]
-    rows = []
-    robots = sorted({name.split("-")[0] for name in args.envs})
-    for size in args.sizes:
-        ceilings = {}
-        for robot in robots:
-            ceilings[robot] = ceiling_rate(robot, size, args.steps, args.repeats, args.substeps)
-            print(f"{size:>6} envs  {robot:<18} ceiling {ceilings[robot]:>12,.0f} steps/s", flush=True)
-        for name in args.envs:
-            rate = env_rate(name, size, args.steps, args.repeats, args.substeps)
-            row = {"env": name, "num_envs": size, "steps_per_s": rate,
-                   "ceiling_steps_per_s": ceilings[name.split("-")[0]],
-                   "fraction_of_ceiling": rate / ceilings[name.split("-")[0]]}
-            if args.no_reset_variant:
-                row["no_reset_steps_per_s"] = env_rate(name, size, args.steps, args.repeats, args.substeps, auto_reset=False)
-            rows.append(row)
-            print(f"{size:>6} envs  {name:<18} {rate:>12,.0f} steps/s  ({row['fraction_of_ceiling']:.0%} of ceiling)"
-                  + (f"  no reset {row['no_reset_steps_per_s']:,.0f}" if args.no_reset_variant else ""), flush=True)
-
     meta = {
         "device": device.device_kind, "platform": device.platform, "num_devices": jax.device_count(),
         "jax": jax.__version__, "mujoco": mujoco.__version__, "python": platform.python_version(),
@@ -132,22 +119,50 @@ def main():
     }
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
+    rows = []
+    robots = sorted({name.split("-")[0] for name in args.envs})
+    for size in args.sizes:
+        ceilings, stock = {}, {}
+        for robot in robots:
+            ceilings[robot] = ceiling_rate(robot, size, args.steps, args.repeats, args.substeps)
+            print(f"{size:>6} envs  {robot:<18} ceiling {ceilings[robot]:>12,.0f} steps/s", flush=True)
+            if args.stock_ceiling:
+                stock[robot] = ceiling_rate(robot, size, args.steps, args.repeats, args.substeps, fast=False)
+                print(f"{size:>6} envs  {robot:<18} stock MJX ceiling {stock[robot]:>12,.0f} steps/s", flush=True)
+        for name in args.envs:
+            rate = env_rate(name, size, args.steps, args.repeats, args.substeps)
+            row = {"env": name, "num_envs": size, "steps_per_s": rate,
+                   "ceiling_steps_per_s": ceilings[name.split("-")[0]],
+                   "fraction_of_ceiling": rate / ceilings[name.split("-")[0]]}
+            if args.stock_ceiling:
+                row["stock_ceiling_steps_per_s"] = stock[name.split("-")[0]]
+            if args.no_reset_variant:
+                row["no_reset_steps_per_s"] = env_rate(name, size, args.steps, args.repeats, args.substeps, auto_reset=False)
+            rows.append(row)
+            print(f"{size:>6} envs  {name:<18} {rate:>12,.0f} steps/s  ({row['fraction_of_ceiling']:.0%} of ceiling)"
+                  + (f"  no reset {row['no_reset_steps_per_s']:,.0f}" if args.no_reset_variant else ""), flush=True)
+            write_tables(out, meta, rows, args)  # after every row: a cut-off run keeps what it measured
+    print(out.with_suffix(".md").read_text())
+
+
+def write_tables(out: Path, meta: dict, rows: list, args) -> None:
     out.with_suffix(".json").write_text(json.dumps({"meta": meta, "rows": rows}, indent=2))
-    extra = " no auto-reset |" if args.no_reset_variant else ""
+    extra = (" no auto-reset |" if args.no_reset_variant else "") + (" stock MJX ceiling |" if args.stock_ceiling else "")
     lines = [
         f"# Environment throughput ({meta['device']}, {meta['date']})", "",
         f"Command: `{meta['command']}`  ",
         f"jax {meta['jax']}, mujoco {meta['mujoco']}, {args.substeps} substeps of 2 ms per env step, random actions,"
-        " auto-reset with fresh sampling. Ceiling: the same robot model, raw `mjx.step` in `lax.scan`, no env logic.", "",
+        " auto-reset with fresh sampling. Ceiling: the same robot model, raw `mjx.step` in `lax.scan`, no env logic,"
+        " with the envs' GPU replacements (`envs.fast_mjx`); stock: MJX as shipped.", "",
         f"| env | envs | env steps/s | ceiling steps/s | fraction |{extra}",
-        "|---|---:|---:|---:|---:|" + ("---:|" if extra else ""),
+        "|---|---:|---:|---:|---:|" + "---:|" * extra.count("|"),
     ]
     for r in rows:
         lines.append(f"| {r['env']} | {r['num_envs']:,} | {r['steps_per_s']:,.0f} | {r['ceiling_steps_per_s']:,.0f} | "
-                     f"{r['fraction_of_ceiling']:.0%} |" + (f" {r['no_reset_steps_per_s']:,.0f} |" if extra else ""))
+                     f"{r['fraction_of_ceiling']:.0%} |"
+                     + (f" {r['no_reset_steps_per_s']:,.0f} |" if args.no_reset_variant else "")
+                     + (f" {r['stock_ceiling_steps_per_s']:,.0f} |" if args.stock_ceiling else ""))
     out.with_suffix(".md").write_text("\n".join(lines) + "\n")
-    print("\n".join(lines))
-
 
 if __name__ == "__main__":
     main()
