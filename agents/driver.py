@@ -59,10 +59,12 @@ class TrainConfig(Generic[EnvConfigT, AlgoConfigT]):
     """Independent runs trained together in one compiled program (vmapped)."""
     devices: int = 0
     """Local devices to split the environments over (0 = all)."""
-    multi_device: Literal["shard_map", "gspmd"] = "shard_map"
-    """How several devices share the work: shard_map (each device runs the chunk on its envs; the
-    learners average gradients explicitly) or gspmd (the one-device program under jit with sharded
-    env axes; XLA inserts the collectives). Same results up to float rounding; ignored on one device."""
+    multi_device: Literal["shard_map", "gspmd"] = "gspmd"
+    """How several devices share the work: gspmd (the one-device program under jit with sharded env
+    axes; XLA inserts the collectives) or shard_map (each device runs the chunk on its envs; the
+    learners average gradients explicitly). Same results up to float rounding; ignored on one device.
+    gspmd is the default because XLA's GPU compiler (jax 0.11.2) crashed on the shard_map program of
+    the MJX arms, while gspmd trained them 1.95x faster on 2 H200s than on one (results/README.md)."""
     logdir: str = ""
     """Output directory ("" = runs/<preset>/<date-time>)."""
     resume: bool = False
@@ -169,7 +171,7 @@ def make_learner(algo_config, observation_size: int, action_size: int, updates: 
 @functools.lru_cache(maxsize=8)
 def build_programs(env_name: str, env_config, algo_config, seeds: int, devices: int, updates: int,
                    eval_envs: int, eval_last_steps: int, learner_cls: type | None = None,
-                   multi_device: str = "shard_map") -> Programs:
+                   multi_device: str = "gspmd") -> Programs:
     """Compiled programs for one setting; cached so repeated runs (tests, resumes) reuse them. The
     learner class is part of the key: a class redefined (e.g. in a notebook cell) is a new object
     and compiles anew."""

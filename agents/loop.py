@@ -11,13 +11,14 @@ program). Each update
 A learner is any object with this interface (see `Learner`): `init`, `act`, `update`, `policy`,
 `steps_per_update` and `env_axes`. Everything a learner needs about devices comes in `Parallel`.
 
-Data parallelism: the environments are split evenly over the devices (`shard_map` over a 1-D mesh
-named "dev"); parameters are replicated and learners average gradients and normaliser moments with
-`Parallel.pmean` / `psum`. Random numbers are drawn per *global* environment index, so a run on two
-devices reproduces the one-device run up to float summation order. With one device no `shard_map`
-is built and every collective is a no-op. The alternative `multi_device="gspmd"` runs that
-one-device program under `jit` with the state's env axes sharded and lets XLA's partitioner insert
-the collectives (for XLA versions whose GPU compiler fails on the shard_map program).
+Data parallelism: the environments are split evenly over the devices of a 1-D mesh named "dev";
+parameters are replicated. Two ways, same results up to float summation order: `multi_device=
+"gspmd"` (the default) runs the one-device program under `jit` with the state's env axes sharded
+and lets XLA's partitioner insert the collectives; `"shard_map"` runs the chunk per device and the
+learners average gradients and normaliser moments with `Parallel.pmean` / `psum` (XLA's GPU
+compiler in jax 0.11.2 crashed on that program for the MJX arms). Random numbers are drawn per
+*global* environment index, so a run on two devices reproduces the one-device run. With one device
+no sharding is built and every collective is a no-op.
 
 Seeds: every leaf of `TrainState` carries a leading seed axis and the chunk is `jax.vmap`ped over it.
 """
@@ -331,7 +332,7 @@ class Programs:
     """
 
     def __init__(self, env, eval_env, learner: Learner, num_envs: int, num_seeds: int, devices,
-                 eval_envs: int, episode_length: int, eval_last_steps: int = 10, multi_device: str = "shard_map"):
+                 eval_envs: int, episode_length: int, eval_last_steps: int = 10, multi_device: str = "gspmd"):
         self.env, self.learner, self.num_envs, self.num_seeds = env, learner, num_envs, num_seeds
         self.devices = list(devices)
         nd = len(self.devices)
