@@ -4,14 +4,17 @@ piece out or change one setting (METHOD: time variants, take differences).
     python benchmarks/ppo_breakdown.py --out results/ppo_breakdown     # on the GPU machine
 
 Variants: `rollout only` replaces the learner's update by a no-op (env steps + policy sampling +
-episode bookkeeping); the others change one PPOConfig / env field. Each row: env steps/s of
-`--updates` updates after a compiling warm-up, and seconds per update.
+episode bookkeeping), `transitions kept` makes that no-op read the recorded transitions, `random
+actions` also replaces the policy; the others change one PPOConfig field. `--env-only` adds the env
+alone (random actions, no training loop) as the reference. Each row: env steps/s of `--updates`
+updates after a compiling warm-up, and seconds per update.
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import datetime
 import json
 import sys
 import time
@@ -26,11 +29,15 @@ import jax.numpy as jnp  # noqa: E402
 import envs  # noqa: E402
 import train as train_cli  # noqa: E402
 from agents import driver  # noqa: E402
-from agents.loop import Programs  # noqa: E402
+from agents.loop import Programs, env_random  # noqa: E402
+
+sys.path.insert(0, str(ROOT / "benchmarks"))
+from env_throughput import env_rate  # noqa: E402
 
 
 class RolloutOnly:
-    """The PPO learner with its update replaced by a no-op."""
+    """The PPO learner with its update replaced by a no-op: XLA drops the unused transitions, so
+    this times env steps, policy sampling and episode bookkeeping."""
 
     def __init__(self, learner):
         self.inner = learner
@@ -43,10 +50,26 @@ class RolloutOnly:
         return state, {"loss/none": jnp.zeros(())}
 
 
-def seconds_per_update(config, updates, rollout_only=False):
-    if rollout_only:
+class RolloutKeep(RolloutOnly):
+    """As `RolloutOnly`, but the update reads every recorded transition (one sum), so they are stored."""
+
+    def update(self, state, batch, key, par):
+        return state, {"loss/none": sum(jnp.sum(x) for x in jax.tree.leaves(batch))}
+
+
+class RandomActions(RolloutKeep):
+    """As `RolloutKeep`, with uniform random actions instead of the policy network."""
+
+    def act(self, state, obs, key, par):
+        return env_random(key, par, (self.inner.action_size,), "uniform"), {}
+
+
+def seconds_per_update(config, updates, wrapper=None):
+    """Seconds per update of the config's compiled chunk; `wrapper` (e.g. `RolloutOnly`) replaces
+    parts of the learner."""
+    if wrapper is not None:
         env = envs.wrap(envs.from_config(config.env_name, config.env))
-        learner = RolloutOnly(driver.make_learner(config.algo, env.observation_size, env.action_size, updates))
+        learner = wrapper(driver.make_learner(config.algo, env.observation_size, env.action_size, updates))
         programs = Programs(env, env, learner, config.algo.num_envs, config.seeds, jax.local_devices()[:1], 1,
                             config.env.episode_length)
     else:
@@ -64,31 +87,45 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--preset", default="ur5e-reach-ppo")
     parser.add_argument("--updates", type=int, default=8)
+    parser.add_argument("--variants", nargs="+", help="names of the variants to time (default: all)")
+    parser.add_argument("--env-only", action="store_true", help="also time the env alone (benchmarks/env_throughput.py)")
     parser.add_argument("--out", default="results/ppo_breakdown")
     args = parser.parse_args()
     base = train_cli.make_config(args.preset, eval_envs=0, progress=False, tensorboard=False, num_timesteps=10**9)
     algo, env = base.algo, base.env
-    variants = [
-        ("full update", base, False),
-        ("rollout only", base, True),
-        ("no advantage recompute per epoch", dataclasses.replace(base, algo=dataclasses.replace(algo, recompute_advantages=False)), False),
-        ("no value normalisation", dataclasses.replace(base, algo=dataclasses.replace(algo, normalize_value_targets=False)), False),
-        ("no gradient clipping", dataclasses.replace(base, algo=dataclasses.replace(algo, max_grad_norm=0.0)), False),
-        ("1 epoch instead of 5", dataclasses.replace(base, algo=dataclasses.replace(algo, updates_per_batch=1)), False),
-        ("8 sampling candidates", dataclasses.replace(base, env=dataclasses.replace(env, sampling_candidates=8)), False),
-        ("rollout only, 8 candidates", dataclasses.replace(base, env=dataclasses.replace(env, sampling_candidates=8)), True),
-    ]
+    with_algo = lambda **kw: dataclasses.replace(base, algo=dataclasses.replace(algo, **kw))
+    variants = {
+        "full update": (base, None),
+        "rollout only": (base, RolloutOnly),
+        "rollout, transitions kept": (base, RolloutKeep),
+        "rollout, random actions, transitions kept": (base, RandomActions),
+        "no advantage recompute per epoch": (with_algo(recompute_advantages=False), None),
+        "no value normalisation": (with_algo(normalize_value_targets=False), None),
+        "no gradient clipping": (with_algo(max_grad_norm=0.0), None),
+        "1 epoch instead of 5": (with_algo(updates_per_batch=1), None),
+    }
+    chosen = args.variants or list(variants)
+    unknown = [v for v in chosen if v not in variants]
+    if unknown:
+        raise SystemExit(f"error: --variants {unknown} unknown: allowed are {', '.join(map(repr, variants))}")
     rows = []
     spu = algo.env_steps_per_update
-    for name, config, rollout_only in variants:
-        s = seconds_per_update(config, args.updates, rollout_only)
-        rows.append({"variant": name, "seconds_per_update": s, "env_steps_per_s": spu / s})
-        print(f"{name:40s} {s * 1000:8.1f} ms/update {spu / s:12,.0f} env steps/s", flush=True)
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    meta = {"device": jax.devices()[0].device_kind, "jax": jax.__version__, "command": " ".join(["python"] + sys.argv)}
-    out.with_suffix(".json").write_text(json.dumps({"meta": meta, "rows": rows}, indent=2))
+    meta = {"device": jax.devices()[0].device_kind, "jax": jax.__version__, "date": datetime.date.today().isoformat(),
+            "command": " ".join(["python"] + sys.argv), "preset": args.preset, "updates": args.updates}
 
+    def record(name, seconds):  # written after every row, so a cut-off run keeps what it measured
+        rows.append({"variant": name, "seconds_per_update": seconds, "env_steps_per_s": spu / seconds})
+        print(f"{name:45s} {seconds * 1000:8.1f} ms/update {spu / seconds:12,.0f} env steps/s", flush=True)
+        out.with_suffix(".json").write_text(json.dumps({"meta": meta, "rows": rows}, indent=2))
+
+    if args.env_only:
+        rate = env_rate(base.env_name, algo.num_envs, spu // algo.num_envs, 3, getattr(env, "substeps", None))
+        record("env only (random actions, no training loop)", spu / rate)
+    for name in chosen:
+        config, wrapper = variants[name]
+        record(name, seconds_per_update(config, args.updates, wrapper))
 
 if __name__ == "__main__":
     main()
