@@ -29,7 +29,7 @@ import numpy as np
 import envs
 from agents import export
 from agents.checkpoint import Checkpointer, config_to_dict, dataclass_from_dict
-from agents.loop import Programs
+from agents.loop import MULTI_DEVICE_MODES, Programs
 from agents.ppo import PPO, PPOConfig
 from agents.sac import SAC, SACConfig
 
@@ -145,8 +145,8 @@ def validate(config: TrainConfig) -> None:
                       ("checkpoint_every", 0), ("log_every", 0), ("stop_after_steps", 0), ("eval_envs", 0)):
         if int(getattr(config, name)) < low:
             raise ValueError(f"{name}={getattr(config, name)!r} is invalid: allowed is an integer >= {low}.")
-    if config.multi_device not in ("shard_map", "gspmd"):
-        raise ValueError(f"multi_device={config.multi_device!r} is unknown: allowed are shard_map, gspmd.")
+    if config.multi_device not in MULTI_DEVICE_MODES:
+        raise ValueError(f"multi_device={config.multi_device!r} is unknown: allowed are {', '.join(MULTI_DEVICE_MODES)}.")
     if config.matmul_precision not in ("default", "high", "highest"):
         raise ValueError(f"matmul_precision={config.matmul_precision!r} is unknown: allowed are default, high, highest.")
     if config.resume and not config.logdir:
@@ -170,8 +170,8 @@ def make_learner(algo_config, observation_size: int, action_size: int, updates: 
 
 @functools.lru_cache(maxsize=8)
 def build_programs(env_name: str, env_config, algo_config, seeds: int, devices: int, updates: int,
-                   eval_envs: int, eval_last_steps: int, learner_cls: type | None = None,
-                   multi_device: str = "gspmd") -> Programs:
+                   eval_envs: int, eval_last_steps: int, learner_cls: type | None,
+                   multi_device: str) -> Programs:
     """Compiled programs for one setting; cached so repeated runs (tests, resumes) reuse them. The
     learner class is part of the key: a class redefined (e.g. in a notebook cell) is a new object
     and compiles anew."""

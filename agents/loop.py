@@ -35,6 +35,8 @@ from flax import struct
 from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
 
 AXIS = "dev"
+MULTI_DEVICE_MODES = ("shard_map", "gspmd")
+"""How several devices can share the chunk (`Programs(multi_device=...)`, `TrainConfig.multi_device`)."""
 
 
 class Transition(NamedTuple):

@@ -26,32 +26,25 @@ sys.path.insert(0, str(ROOT))
 import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 
-import envs  # noqa: E402
 import train as train_cli  # noqa: E402
 from agents import driver  # noqa: E402
-from agents.loop import Programs, env_random  # noqa: E402
+from agents.loop import env_random  # noqa: E402
+from agents.ppo import PPO  # noqa: E402
 
 sys.path.insert(0, str(ROOT / "benchmarks"))
 from env_throughput import env_rate  # noqa: E402
 
 
-class RolloutOnly:
-    """The PPO learner with its update replaced by a no-op: XLA drops the unused transitions, so
-    this times env steps, policy sampling and episode bookkeeping."""
-
-    def __init__(self, learner):
-        self.inner = learner
-        self.steps_per_update = learner.steps_per_update
-
-    def __getattr__(self, name):
-        return getattr(self.inner, name)
+class RolloutOnly(PPO):
+    """PPO with its update replaced by a no-op: XLA drops the unused transitions, so this times env
+    steps, policy sampling and episode bookkeeping."""
 
     def update(self, state, batch, key, par):
         return state, {"loss/none": jnp.zeros(())}
 
 
-class RolloutKeep(RolloutOnly):
-    """As `RolloutOnly`, but the update reads every recorded transition (one sum), so they are stored."""
+class RolloutKeep(PPO):
+    """PPO whose update only reads every recorded transition (one sum), so they are stored."""
 
     def update(self, state, batch, key, par):
         return state, {"loss/none": sum(jnp.sum(x) for x in jax.tree.leaves(batch))}
@@ -61,19 +54,13 @@ class RandomActions(RolloutKeep):
     """As `RolloutKeep`, with uniform random actions instead of the policy network."""
 
     def act(self, state, obs, key, par):
-        return env_random(key, par, (self.inner.action_size,), "uniform"), {}
+        return env_random(key, par, (self.action_size,), "uniform"), {}
 
 
-def seconds_per_update(config, updates, wrapper=None):
-    """Seconds per update of the config's compiled chunk; `wrapper` (e.g. `RolloutOnly`) replaces
-    parts of the learner."""
-    if wrapper is not None:
-        env = envs.wrap(envs.from_config(config.env_name, config.env))
-        learner = wrapper(driver.make_learner(config.algo, env.observation_size, env.action_size, updates))
-        programs = Programs(env, env, learner, config.algo.num_envs, config.seeds, jax.local_devices()[:1], 1,
-                            config.env.episode_length)
-    else:
-        programs = driver.programs_for(config)
+def seconds_per_update(config, updates, learner_cls=None):
+    """Seconds per update of the config's compiled chunk; `learner_cls` (e.g. `RolloutOnly`) in
+    place of PPO (`agents.driver.train`'s hook for modified learners)."""
+    programs = driver.programs_for(config, learner_cls)
     state = programs.init(driver.seed_keys(config))
     state, metrics = programs.chunk(state, jnp.int32(0))  # compile
     jax.block_until_ready(metrics)
@@ -91,7 +78,9 @@ def main():
     parser.add_argument("--env-only", action="store_true", help="also time the env alone (benchmarks/env_throughput.py)")
     parser.add_argument("--out", default="results/ppo_breakdown")
     args = parser.parse_args()
-    base = train_cli.make_config(args.preset, eval_envs=0, progress=False, tensorboard=False, num_timesteps=10**9)
+    # One device, whatever the machine has (the default, devices=0, would split the envs over all).
+    base = train_cli.make_config(args.preset, eval_envs=0, progress=False, tensorboard=False, num_timesteps=10**9,
+                                 devices=1)
     algo, env = base.algo, base.env
     with_algo = lambda **kw: dataclasses.replace(base, algo=dataclasses.replace(algo, **kw))
     variants = {

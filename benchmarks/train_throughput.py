@@ -33,6 +33,7 @@ import jax.numpy as jnp  # noqa: E402
 
 import train as train_cli  # noqa: E402
 from agents import driver  # noqa: E402
+from agents.loop import MULTI_DEVICE_MODES  # noqa: E402
 from env_throughput import env_rate  # noqa: E402
 
 
@@ -68,7 +69,7 @@ def main():
     parser.add_argument("--seeds", type=int, default=1)
     parser.add_argument("--devices", type=int, nargs="+", default=[1], help="device counts to measure")
     parser.add_argument("--env-steps", type=int, default=100, help="env steps per timed call of the env-only rate")
-    parser.add_argument("--multi-device", nargs="+", default=["gspmd"], choices=["shard_map", "gspmd"],
+    parser.add_argument("--multi-device", nargs="+", default=["gspmd"], choices=MULTI_DEVICE_MODES,
                         help="how several devices share the work (TrainConfig.multi_device), each measured")
     parser.add_argument("--skip-env-only", action="store_true")
     parser.add_argument("--trace", metavar="DIR", help="also write a profiler trace of one update per setting to DIR/<setting>")

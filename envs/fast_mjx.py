@@ -123,6 +123,12 @@ def _swap(module, name, value):
     return previous
 
 
+def _replacements():
+    """(module, attribute, replacement) of everything `fast_mjx` swaps."""
+    return ((jax.scipy.linalg, "cho_factor", cho_factor), (jax.scipy.linalg, "cho_solve", cho_solve),
+            (_mjx_solver, "_while_loop_scan", unrolled_while_loop_scan))
+
+
 @contextlib.contextmanager
 def fast_mjx(enabled: bool | None = None):
     """Applies this module's replacements while open (re-entrant). `enabled=None`: on when JAX's
@@ -132,12 +138,10 @@ def fast_mjx(enabled: bool | None = None):
     if not enabled:
         yield
         return
-    saved = jax.scipy.linalg.cho_factor, jax.scipy.linalg.cho_solve
-    jax.scipy.linalg.cho_factor, jax.scipy.linalg.cho_solve = cho_factor, cho_solve
-    saved_loop = _swap(_mjx_solver, "_while_loop_scan", unrolled_while_loop_scan)
+    saved = [(module, name, _swap(module, name, new)) for module, name, new in _replacements()]
     try:
         yield
     finally:
-        jax.scipy.linalg.cho_factor, jax.scipy.linalg.cho_solve = saved
-        if saved_loop is not None:
-            _swap(_mjx_solver, "_while_loop_scan", saved_loop)
+        for module, name, previous in reversed(saved):
+            if previous is not None:
+                _swap(module, name, previous)
