@@ -19,7 +19,7 @@ from __future__ import annotations
 import dataclasses
 import sys
 
-from agents.driver import NonFiniteLossError, TrainConfig, train, validate
+from agents.driver import NonFiniteLossError, TrainConfig, learning_rate_note, train, validate
 from agents.ppo import PPOConfig
 from agents.sac import SACConfig
 import envs
@@ -106,6 +106,9 @@ def main(argv: list[str] | None = None):
     config = parse(sys.argv[1:] if argv is None else argv)
     result = train(config)
     print(f"{result.status} after {result.env_steps} env steps; logs and checkpoints in {result.logdir}")
+    note = learning_rate_note(result.config, result.env_steps)
+    if note:
+        print(note)
     if result.eval_metrics:
         means = {k: sum(v) / len(v) for k, v in result.eval_metrics.items()}
         print("evaluation (mean over seeds): " + ", ".join(f"{k.split('/', 1)[-1]} {v:.4g}" for k, v in sorted(means.items())))

@@ -27,7 +27,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import envs
-from agents import export
+from agents import export, ppo
 from agents.checkpoint import Checkpointer, config_to_dict, dataclass_from_dict
 from agents.loop import MULTI_DEVICE_MODES, Programs
 from agents.ppo import PPO, PPOConfig
@@ -126,6 +126,23 @@ def env_steps_per_update(config: TrainConfig) -> int:
 
 def total_updates(config: TrainConfig) -> int:
     return math.ceil(config.num_timesteps / env_steps_per_update(config))
+
+
+def learning_rate_note(config: TrainConfig, env_steps: int) -> str | None:
+    """For a PPO run that ends before its decaying learning-rate schedule does: a line saying where the
+    learning rate stands. A policy evaluated there has not had the schedule's low-rate end, which matters
+    for precise reaching (results/README.md, "The learning-rate schedule"). None for finished runs and
+    schedules that do not decay."""
+    algo = config.algo
+    if not isinstance(algo, PPOConfig) or algo.lr_schedule == "constant":
+        return None
+    updates = env_steps // env_steps_per_update(config)
+    if updates >= total_updates(config):
+        return None
+    fraction = float(ppo.learning_rate(algo, np.float32(updates / total_updates(config)))) / algo.learning_rate
+    return (f"the learning rate is at {fraction:.0%} of its start: its {algo.lr_schedule} schedule runs to "
+            f"--num-timesteps {config.num_timesteps:,}. --resume continues it; for a shorter run, set "
+            "--num-timesteps to the steps it will really train.")
 
 
 def validate(config: TrainConfig) -> None:

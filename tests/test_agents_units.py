@@ -1,5 +1,6 @@
 """The formulas of the learners on hand-computed numbers (no training)."""
 
+import dataclasses
 import math
 
 import jax
@@ -145,6 +146,21 @@ def test_learning_rate_schedules():
     assert float(learning_rate(cfg, jnp.array(0.5))) == pytest.approx(0.55)
     assert float(learning_rate(cfg.__class__(learning_rate=1.0, lr_schedule="cosine", lr_end_fraction=0.0), jnp.array(0.5))) == pytest.approx(0.5)
     assert float(learning_rate(cfg.__class__(learning_rate=2.0, lr_schedule="constant"), jnp.array(0.9))) == 2.0
+
+
+def test_learning_rate_note_for_runs_stopped_before_their_schedule_ends():
+    """train.py's closing line for a PPO run cut short: 160 of 916 updates of 327,680 steps done under a
+    linear schedule to 10 % -> 1 - 0.9 * 160 / 916 = 84.3 % of the start rate."""
+    from agents.driver import TrainConfig, learning_rate_note
+    from agents.sac import SACConfig
+
+    config = TrainConfig(env=None, algo=PPOConfig(), env_name="panda-reach", num_timesteps=300_000_000)
+    note = learning_rate_note(config, 160 * 327_680)
+    assert note.startswith("the learning rate is at 84% of its start") and "--num-timesteps 300,000,000" in note
+    assert learning_rate_note(config, 916 * 327_680) is None  # the schedule's last update is done
+    constant = dataclasses.replace(config, algo=PPOConfig(lr_schedule="constant"))
+    assert learning_rate_note(constant, 327_680) is None
+    assert learning_rate_note(dataclasses.replace(config, algo=SACConfig()), 1_000) is None
 
 
 def test_popart_preserves_value_outputs():
