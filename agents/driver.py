@@ -27,10 +27,10 @@ import jax.numpy as jnp
 import numpy as np
 
 import envs
-from agents import export, ppo
+from agents import export
 from agents.checkpoint import Checkpointer, config_to_dict, dataclass_from_dict
 from agents.loop import MULTI_DEVICE_MODES, Programs
-from agents.ppo import PPO, PPOConfig
+from agents.ppo import PPO, PPOConfig, learning_rate
 from agents.sac import SAC, SACConfig
 
 EnvConfigT = TypeVar("EnvConfigT")
@@ -136,10 +136,11 @@ def learning_rate_note(config: TrainConfig, env_steps: int) -> str | None:
     algo = config.algo
     if not isinstance(algo, PPOConfig) or algo.lr_schedule == "constant":
         return None
-    updates = env_steps // env_steps_per_update(config)
-    if updates >= total_updates(config):
+    updates, planned = env_steps // env_steps_per_update(config), total_updates(config)
+    if updates >= planned:
         return None
-    fraction = float(ppo.learning_rate(algo, np.float32(updates / total_updates(config)))) / algo.learning_rate
+    # The same progress the PPO learner feeds its schedule: updates done / updates planned.
+    fraction = float(learning_rate(algo, np.float32(updates / planned))) / algo.learning_rate
     return (f"the learning rate is at {fraction:.0%} of its start: its {algo.lr_schedule} schedule runs to "
             f"--num-timesteps {config.num_timesteps:,}. --resume continues it; for a shorter run, set "
             "--num-timesteps to the steps it will really train.")
