@@ -1,5 +1,6 @@
 """The checkpoints shipped under results/checkpoints/ load on a CPU and do what results/README.md says;
-the headline tables there and in README.md quote the eval.py JSON files.
+the headline tables there and in README.md quote the eval.py JSON files, and the cross-evaluation
+tables in results/README.md quote benchmarks/paper_tables.py's JSON files.
 
 Every shipped export loads, fits its env and is the checkpoint that its results/*_eval.json
 evaluated (the best seed, for single-seed exports).
@@ -110,3 +111,30 @@ def test_results_tables_quote_the_evaluation_files(label):
     with open(os.path.join(ROOT, "README.md"), encoding="utf-8") as f:
         readme = f.read()
     assert " / ".join(e.split(" %")[0] + " %" for e in expected) in readme, expected
+
+
+CROSS_TABLES = {  # results/*.json written by benchmarks/paper_tables.py -> (row key, row label cells, ours cells)
+    "workspace_generalization.json": (lambda r: [_WORKSPACE_NAMES[r["trained"]], _WORKSPACE_NAMES[r["evaluated"]]],
+                                      4, ("target_reached", "self_collision")),
+    "obstacle_size.json": (lambda r: [r["trained"], f"{r['evaluated']:g}"], 3,
+                           ("target_reached", "self_collision", "obstacle_collision")),
+}
+_WORKSPACE_NAMES = {"pandagym": "PandaGym", "front": "Front", "upper": "Upper", "full": "Full", "full-range": "Full Range"}
+
+
+@pytest.mark.parametrize("name", sorted(CROSS_TABLES))
+def test_cross_evaluation_tables_in_readme_quote_their_json(name):
+    """Every row of a cross-evaluation table (paper_tables.py's JSON: 5 trained seeds x 4,096 episodes) appears
+    once in results/README.md with the same numbers in the "ours" columns."""
+    label, first, metrics = CROSS_TABLES[name]
+    with open(os.path.join(ROOT, "results", name)) as f:
+        rows = json.load(f)["rows"]
+    with open(os.path.join(ROOT, "results", "README.md"), encoding="utf-8") as f:
+        lines = [[c.strip() for c in line.split("|")[1:-1]] for line in f if line.startswith("| ")]
+    assert len(rows) >= 13
+    for row in rows:
+        assert row["num_envs"] == 4096 and row["summary"]["target_reached"]["units"] == 5
+        key = label(row)
+        found = [cells for cells in lines if cells[:2] == key and len(cells) >= first + len(metrics)]
+        assert len(found) == 1, (name, key)
+        assert found[0][first:first + len(metrics)] == [_percent(row["summary"][m]) for m in metrics], (name, key, found[0])
