@@ -20,7 +20,7 @@ import pytest
 
 import envs
 from agents import evaluation
-from benchmarks import ship_checkpoint
+from benchmarks import paper_tables, ship_checkpoint
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 UR5E_REACH = os.path.join(ROOT, "results", "checkpoints", "ur5e-reach-ppo")
@@ -113,13 +113,13 @@ def test_results_tables_quote_the_evaluation_files(label):
     assert " / ".join(e.split(" %")[0] + " %" for e in expected) in readme, expected
 
 
-CROSS_TABLES = {  # results/*.json written by benchmarks/paper_tables.py -> (row key, row label cells, ours cells)
-    "workspace_generalization.json": (lambda r: [_WORKSPACE_NAMES[r["trained"]], _WORKSPACE_NAMES[r["evaluated"]]],
+CROSS_TABLES = {  # paper_tables.py JSON -> (its row's first two README cells, index of the first "ours" cell, metrics)
+    "workspace_generalization.json": (lambda r: [paper_tables.WORKSPACE_NAMES[r["trained"]],
+                                                 paper_tables.WORKSPACE_NAMES[r["evaluated"]]],
                                       4, ("target_reached", "self_collision")),
     "obstacle_size.json": (lambda r: [r["trained"], f"{r['evaluated']:g}"], 3,
                            ("target_reached", "self_collision", "obstacle_collision")),
 }
-_WORKSPACE_NAMES = {"pandagym": "PandaGym", "front": "Front", "upper": "Upper", "full": "Full", "full-range": "Full Range"}
 
 
 @pytest.mark.parametrize("name", sorted(CROSS_TABLES))
