@@ -50,7 +50,8 @@ class ReachConfig:
     action_scale: float = 0.2
     """Radians per step commanded by a relative action of magnitude 1 (ignored for absolute). The
     paper does not state it; 0.2 trained the UR5e reach ~4x faster than 0.1 (results/README.md,
-    "What limits learning"). The joints' damping keeps them within their velocity limits either way."""
+    "What limits learning"), and the UR5e PPO presets in train.py use 0.3, better again on that arm.
+    The joints' damping keeps them within their velocity limits either way."""
     observation: tuple[str, ...] = ("joint_pos", "ee_pos", "target_pos", "ee_to_target")
     """Observation parts, concatenated in this order. Reach: joint_pos, joint_vel, joint_acc,
     ee_pos, ee_vel, target_pos, ee_to_target, prev_action; reach-avoid adds obstacle_pos,

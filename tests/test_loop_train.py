@@ -187,6 +187,20 @@ def _ppo_subclass():
     return MyPPO
 
 
+def test_presets_set_their_env_options_and_the_command_line_overrides_them():
+    """A preset's env options replace the env's defaults (the UR5e PPO presets' action scale 0.3, the
+    absolute preset's action mode and observation); an option on the command line replaces the preset's."""
+    assert train_cli.envs.default_config("ur5e-reach").action_scale == 0.2
+    for name in ("ur5e-reach-ppo", "ur5e-reach-avoid-ppo"):
+        assert train_cli.parse([name]).env.action_scale == 0.3, name
+    for name in ("panda-reach-ppo", "panda-reach-avoid-ppo", "ur5e-reach-sac", "ur5e-reach-ppo-cpu"):
+        assert train_cli.parse([name]).env.action_scale == 0.2, name
+    assert train_cli.parse(["ur5e-reach-ppo", "--env.action-scale", "0.25"]).env.action_scale == 0.25
+    absolute = train_cli.parse(["ur5e-reach-absolute-ppo"])
+    assert absolute.env.action == "absolute" and absolute.env.observation[-1] == "prev_action"
+    assert absolute.algo.updates_per_batch == 7 and absolute.algo.policy_hidden_sizes == (256,) * 4
+
+
 def test_learner_cls_is_part_of_the_program_cache_key():
     """`driver.train(config, learner_cls=...)` builds its programs around that class; a redefined
     class compiles anew, the default class (given or not) reuses the default programs. Builds the
