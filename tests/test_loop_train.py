@@ -12,6 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+import envs
 import train as train_cli
 from agents import driver
 from agents.checkpoint import Checkpointer
@@ -190,7 +191,7 @@ def _ppo_subclass():
 def test_presets_set_their_env_options_and_the_command_line_overrides_them():
     """A preset's env options replace the env's defaults (the UR5e PPO presets' action scale 0.3, the
     absolute preset's action mode and observation); an option on the command line replaces the preset's."""
-    assert train_cli.envs.default_config("ur5e-reach").action_scale == 0.2
+    assert envs.default_config("ur5e-reach").action_scale == 0.2
     for name in ("ur5e-reach-ppo", "ur5e-reach-avoid-ppo"):
         assert train_cli.parse([name]).env.action_scale == 0.3, name
     for name in ("panda-reach-ppo", "panda-reach-avoid-ppo", "ur5e-reach-sac", "ur5e-reach-ppo-cpu"):

@@ -92,6 +92,12 @@ def _percent(stats: dict) -> str:
     return f"{100 * stats['mean']:.1f} ± {100 * stats['std_units']:.1f} %"
 
 
+def _results_table_rows() -> list[list[str]]:
+    """The cells of every markdown table row in results/README.md."""
+    with open(os.path.join(ROOT, "results", "README.md"), encoding="utf-8") as f:
+        return [[c.strip() for c in line.split("|")[1:-1]] for line in f if line.startswith("| ")]
+
+
 @pytest.mark.parametrize("label", sorted(HEADLINE_ROWS))
 def test_results_tables_quote_the_evaluation_files(label):
     """The headline numbers in results/README.md and README.md are the ones in the eval.py JSON files."""
@@ -102,10 +108,9 @@ def test_results_tables_quote_the_evaluation_files(label):
     assert evaluated["num_envs"] == 4096 and summary["target_reached"]["units"] == 5
     expected = [_percent(summary["target_reached"])] + [
         f"{_percent(summary[kind + '_collision'])[:-2]} % {kind}" for kind in kinds]
-    with open(os.path.join(ROOT, "results", "README.md"), encoding="utf-8") as f:
-        rows = [line for line in f if line.startswith(f"| {label} |")]
+    rows = [cells for cells in _results_table_rows() if cells[0] == label]
     assert len(rows) == 1, label
-    cells = [c.strip() for c in rows[0].split("|")[1:-1]]
+    cells = rows[0]
     assert cells[3] == expected[0] and cells[4] == ", ".join(expected[1:]), (cells, expected)
     assert cells[5] == f"{evaluated['policy']['env_steps'] / 1e6:.{0 if evaluated['policy']['env_steps'] >= 1e7 else 1}f}M"
     with open(os.path.join(ROOT, "README.md"), encoding="utf-8") as f:
@@ -129,8 +134,7 @@ def test_cross_evaluation_tables_in_readme_quote_their_json(name):
     label, first, metrics = CROSS_TABLES[name]
     with open(os.path.join(ROOT, "results", name)) as f:
         rows = json.load(f)["rows"]
-    with open(os.path.join(ROOT, "results", "README.md"), encoding="utf-8") as f:
-        lines = [[c.strip() for c in line.split("|")[1:-1]] for line in f if line.startswith("| ")]
+    lines = _results_table_rows()
     assert len(rows) >= 13
     for row in rows:
         assert row["num_envs"] == 4096 and row["summary"]["target_reached"]["units"] == 5
