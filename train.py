@@ -44,6 +44,11 @@ SAC_PAPER = SACConfig()  # 128 envs, batch 256, lr 1e-4, reward scale 20, gamma 
 
 _ABSOLUTE = dict(action="absolute", observation=("joint_pos", "ee_pos", "target_pos", "ee_to_target", "prev_action"))
 _UR5E_RELATIVE = dict(action_scale=0.3)
+# Not in the paper: sin/cos of the joint angles and the self-collision pair distances next to the
+# paper's parts (envs.config.ReachConfig.observation); on the UR5e they cut self collisions 10x.
+_PLUS_REACH = ("joint_pos", "joint_sin_cos", "ee_pos", "target_pos", "ee_to_target", "self_dist")
+_UR5E_PLUS = dict(_UR5E_RELATIVE, observation=_PLUS_REACH)
+_UR5E_PLUS_AVOID = dict(_UR5E_RELATIVE, observation=_PLUS_REACH + ("obstacle_pos", "link_obstacle_dist"))
 PPO_CPU = dataclasses.replace(PPO_PAPER, num_envs=16, batch_size=32, num_minibatches=4)
 
 # Small, fast settings of the pure-JAX probe task (CPU: well under a minute).
@@ -68,6 +73,14 @@ PRESETS: dict[str, Preset] = {
     "ur5e-reach-absolute-ppo": Preset("UR5e reach with absolute position control (paper: + previous action, 4x256, 7 epochs)",
                                       "ur5e-reach", PPO_PAPER_ABSOLUTE, env=_ABSOLUTE, run=dict(num_timesteps=200_000_000)),
     "ur5e-reach-sac": Preset("UR5e reach with SAC (paper)", "ur5e-reach", SAC_PAPER, run=dict(num_timesteps=20_000_000)),
+    # Ours beyond the paper: its UR5e presets plus the observation parts joint_sin_cos and self_dist.
+    "ur5e-reach-ppo-plus": Preset("ur5e-reach-ppo + joint sin/cos and self-collision distances observed (not in the paper)",
+                                  "ur5e-reach", PPO_PAPER, env=_UR5E_PLUS, run=dict(num_timesteps=150_000_000)),
+    "ur5e-reach-avoid-ppo-plus": Preset("ur5e-reach-avoid-ppo + joint sin/cos and self-collision distances observed "
+                                        "(not in the paper)", "ur5e-reach-avoid", PPO_PAPER_REACH_AVOID,
+                                        env=_UR5E_PLUS_AVOID, run=dict(num_timesteps=200_000_000)),
+    "ur5e-reach-sac-plus": Preset("ur5e-reach-sac + joint sin/cos and self-collision distances observed (not in the paper)",
+                                  "ur5e-reach", SAC_PAPER, env=dict(observation=_PLUS_REACH), run=dict(num_timesteps=20_000_000)),
     "panda-reach-sac": Preset("Panda reach with SAC (paper)", "panda-reach", SAC_PAPER, run=dict(num_timesteps=20_000_000)),
     "ur5e-reach-avoid-ppo": Preset("UR5e reach-avoid, 0.1 m obstacle, semi-sparse reward, 4x256 (paper), action scale 0.3",
                                    "ur5e-reach-avoid", PPO_PAPER_REACH_AVOID, env=_UR5E_RELATIVE,
@@ -93,7 +106,7 @@ def make_config(preset: str, **overrides) -> TrainConfig:
 def parse(argv: list[str]) -> TrainConfig:
     """Preset name first, then tyro-generated options; validated (ValueError) before anything compiles."""
     if not argv or argv[0] in ("-h", "--help"):
-        lines = [f"  {name:24s} {p.description}" for name, p in sorted(PRESETS.items())]
+        lines = [f"  {name:26s} {p.description}" for name, p in sorted(PRESETS.items())]
         print("usage: train.py PRESET [OPTIONS]   (train.py PRESET --help lists the options)\n\npresets:\n" + "\n".join(lines))
         raise SystemExit(0)
     import tyro

@@ -248,7 +248,7 @@ class ArmEnv(Env):
     def _observation_sizes(self) -> dict[str, int]:
         n = self.robot.nq
         return {"joint_pos": n, "joint_vel": n, "joint_acc": n, "ee_pos": 3, "ee_vel": 3, "target_pos": 3,
-                "ee_to_target": 3, "prev_action": n}
+                "ee_to_target": 3, "prev_action": n, "joint_sin_cos": 2 * n, "self_dist": len(self.robot.self_pairs)}
 
     def observation_parts(self, data, xpos, ee, info) -> dict:
         """Functions computing each observation part (only the configured ones are called)."""
@@ -261,6 +261,8 @@ class ArmEnv(Env):
             "target_pos": lambda: info["target_pos"],
             "ee_to_target": lambda: info["target_pos"] - ee,
             "prev_action": lambda: info["prev_action"],
+            "joint_sin_cos": lambda: jnp.concatenate([jnp.sin(data.qpos), jnp.cos(data.qpos)]),
+            "self_dist": lambda: self.robot.self_distances(data.geom_xpos, data.geom_xmat),
         }
 
     def observation(self, data, xpos, ee, info) -> jax.Array:

@@ -20,6 +20,7 @@ INIT_RANGES = ("full", "limited")
 LINK_DISTANCES = ("origin", "surface")
 REACH_OBSERVATIONS = (
     "joint_pos", "joint_vel", "joint_acc", "ee_pos", "ee_vel", "target_pos", "ee_to_target", "prev_action",
+    "joint_sin_cos", "self_dist",
 )
 OBSTACLE_OBSERVATIONS = ("obstacle_pos", "obstacle_size", "link_obstacle_dist")
 
@@ -54,8 +55,10 @@ class ReachConfig:
     The joints' damping keeps them within their velocity limits either way."""
     observation: tuple[str, ...] = ("joint_pos", "ee_pos", "target_pos", "ee_to_target")
     """Observation parts, concatenated in this order. Reach: joint_pos, joint_vel, joint_acc,
-    ee_pos, ee_vel, target_pos, ee_to_target, prev_action; reach-avoid adds obstacle_pos,
-    obstacle_size, link_obstacle_dist."""
+    ee_pos, ee_vel, target_pos, ee_to_target, prev_action, and two not in the paper: joint_sin_cos
+    (sin and cos of each joint angle: one value per physical pose, where a UR5e joint's 720 degree
+    range gives each pose up to two angles) and self_dist (signed distance of each self-collision
+    pair, < 0 in collision); reach-avoid adds obstacle_pos, obstacle_size, link_obstacle_dist."""
     reward: Literal["sparse", "semi_sparse", "dense"] = "dense"
     """Reward formulation: sparse (+1 in target), semi_sparse (paper eq. 1), dense (paper eq. 2)."""
     w_reach: float = 1.0

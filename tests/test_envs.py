@@ -9,6 +9,7 @@ import dataclasses
 
 import jax
 import jax.numpy as jnp
+import mujoco
 import numpy as np
 import pytest
 
@@ -315,6 +316,24 @@ def test_observation_parts_sizes():
     state = env.reset(jax.random.PRNGKey(0))
     assert state.obs.shape == (env.observation_size,)
 
+
+def test_joint_sin_cos_and_self_distance_observations():
+    """The two parts that are not in the paper, against numpy and CPU MuJoCo's geom distances."""
+    env = envs.make("ur5e-reach", observation=("joint_pos", "joint_sin_cos", "self_dist"))
+    pairs = env.robot.self_pairs
+    assert env.observation_size == 6 + 12 + len(pairs) and len(pairs) == 18
+    state = env.reset(jax.random.PRNGKey(3))
+    obs, q = np.asarray(state.obs), np.asarray(state.pipeline_state.qpos)
+    np.testing.assert_allclose(obs[:6], q)
+    np.testing.assert_allclose(obs[6:12], np.sin(q), atol=1e-6)
+    np.testing.assert_allclose(obs[12:18], np.cos(q), atol=1e-6)
+    m = env.robot.mj_model
+    d = mujoco.MjData(m)
+    d.qpos[:] = q
+    mujoco.mj_kinematics(m, d)
+    expected = [mujoco.mj_geomDistance(m, d, int(g1), int(g2), 10.0, None) for g1, g2 in pairs]
+    np.testing.assert_allclose(obs[18:], expected, atol=2e-5)
+    assert obs[18:].min() > 0  # a reset pose is collision-free
 
 @pytest.mark.parametrize("options, field", [
     (dict(workspace="kitchen"), "workspace"),
