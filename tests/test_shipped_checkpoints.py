@@ -20,6 +20,7 @@ import pytest
 
 import envs
 from agents import evaluation
+import train as train_cli
 from benchmarks import paper_tables, ship_checkpoint
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -59,7 +60,8 @@ SHIPPED = sorted(os.listdir(os.path.join(ROOT, "results", "checkpoints")))
 
 
 def test_every_row_of_the_results_table_ships():
-    assert SHIPPED == ["panda-reach-avoid-ppo", "panda-reach-ppo", "ur5e-reach-avoid-ppo", "ur5e-reach-ppo"]
+    assert SHIPPED == ["panda-reach-avoid-ppo", "panda-reach-ppo", "ur5e-reach-avoid-ppo", "ur5e-reach-avoid-ppo-plus",
+                       "ur5e-reach-ppo", "ur5e-reach-ppo-plus"]
 
 
 @pytest.mark.parametrize("name", SHIPPED)
@@ -67,7 +69,9 @@ def test_shipped_checkpoint_loads_and_is_the_evaluated_run(name):
     """Each export fits its env, and results/<name>_eval.json (eval.py on the GPU) evaluated that very
     checkpoint; a single-seed export holds the best seed there."""
     policy = evaluation.checkpoint_policy(os.path.join(ROOT, "results", "checkpoints", name))
-    assert name == f"{policy.train_env_name}-{policy.export.config.algo_name}"
+    assert name == policy.export.config.preset and name.startswith(f"{policy.train_env_name}-{policy.export.config.algo_name}")
+    preset = train_cli.PRESETS[name]
+    assert all(getattr(policy.train_env_config, k) == v for k, v in preset.env.items())  # trained as the preset says
     env = envs.from_config(policy.train_env_name, policy.train_env_config)
     evaluation.check_compatible(policy, policy.train_env_name, env)
     eval_json = os.path.join(ROOT, "results", name.replace("-", "_") + "_eval.json")
@@ -85,6 +89,9 @@ HEADLINE_ROWS = {  # results/README.md row label -> (eval.py JSON, collision kin
     "UR5e reach-avoid, 2 cm, 0.1 m obstacle": ("ur5e_reach_avoid_ppo_eval.json", ("self", "obstacle")),
     "Panda reach-avoid, 2 cm, 0.1 m obstacle": ("panda_reach_avoid_ppo_eval.json", ("self", "obstacle")),
     "UR5e reach, SAC": ("ur5e_reach_sac_eval.json", ("self",)),
+    "UR5e reach, 1 cm target, plus observations": ("ur5e_reach_ppo_plus_eval.json", ("self",)),
+    "UR5e reach-avoid, 2 cm, 0.1 m obstacle, plus observations": ("ur5e_reach_avoid_ppo_plus_eval.json", ("self", "obstacle")),
+    "UR5e reach, SAC, plus observations": ("ur5e_reach_sac_plus_eval.json", ("self",)),
 }
 
 
