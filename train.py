@@ -78,7 +78,7 @@ PRESETS: dict[str, Preset] = {
                                   "ur5e-reach", PPO_PAPER, env=_UR5E_PLUS, run=dict(num_timesteps=150_000_000)),
     "ur5e-reach-avoid-ppo-plus": Preset("ur5e-reach-avoid-ppo + joint sin/cos and self-collision distances observed "
                                         "(not in the paper)", "ur5e-reach-avoid", PPO_PAPER_REACH_AVOID,
-                                        env=_UR5E_PLUS_AVOID, run=dict(num_timesteps=200_000_000)),
+                                        env=_UR5E_PLUS_AVOID, run=dict(num_timesteps=160_000_000)),
     "ur5e-reach-sac-plus": Preset("ur5e-reach-sac + joint sin/cos and self-collision distances observed (not in the paper)",
                                   "ur5e-reach", SAC_PAPER, env=dict(observation=_PLUS_REACH), run=dict(num_timesteps=20_000_000)),
     "panda-reach-sac": Preset("Panda reach with SAC (paper)", "panda-reach", SAC_PAPER, run=dict(num_timesteps=20_000_000)),

@@ -335,6 +335,7 @@ def test_joint_sin_cos_and_self_distance_observations():
     np.testing.assert_allclose(obs[18:], expected, atol=2e-5)
     assert obs[18:].min() > 0  # a reset pose is collision-free
 
+
 @pytest.mark.parametrize("options, field", [
     (dict(workspace="kitchen"), "workspace"),
     (dict(action="torque"), "action"),

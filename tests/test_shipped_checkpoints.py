@@ -20,8 +20,8 @@ import pytest
 
 import envs
 from agents import evaluation
-import train as train_cli
 from benchmarks import paper_tables, ship_checkpoint
+import train as train_cli
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 UR5E_REACH = os.path.join(ROOT, "results", "checkpoints", "ur5e-reach-ppo")
