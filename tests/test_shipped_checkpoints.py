@@ -69,9 +69,10 @@ def test_shipped_checkpoint_loads_and_is_the_evaluated_run(name):
     """Each export fits its env, and results/<name>_eval.json (eval.py on the GPU) evaluated that very
     checkpoint; a single-seed export holds the best seed there."""
     policy = evaluation.checkpoint_policy(os.path.join(ROOT, "results", "checkpoints", name))
-    assert name == policy.export.config.preset and name.startswith(f"{policy.train_env_name}-{policy.export.config.algo_name}")
+    assert name == policy.export.config.preset  # each export is named after the preset it was trained with
     preset = train_cli.PRESETS[name]
-    assert all(getattr(policy.train_env_config, k) == v for k, v in preset.env.items())  # trained as the preset says
+    assert policy.train_env_name == preset.env_name and policy.export.config.algo == preset.algo
+    assert all(getattr(policy.train_env_config, k) == v for k, v in preset.env.items())
     env = envs.from_config(policy.train_env_name, policy.train_env_config)
     evaluation.check_compatible(policy, policy.train_env_name, env)
     eval_json = os.path.join(ROOT, "results", name.replace("-", "_") + "_eval.json")
