@@ -40,12 +40,15 @@ class Preset:
 PPO_PAPER = PPOConfig()  # batch 512, 64 minibatches, lr 8e-4, gamma 0.97, 5 epochs, unroll 10, 3x256
 PPO_PAPER_ABSOLUTE = dataclasses.replace(PPO_PAPER, updates_per_batch=7, policy_hidden_sizes=(256,) * 4, value_hidden_sizes=(256,) * 4)
 PPO_PAPER_REACH_AVOID = dataclasses.replace(PPO_PAPER, policy_hidden_sizes=(256,) * 4, value_hidden_sizes=(256,) * 4)
-SAC_PAPER = SACConfig()  # 128 envs, batch 256, lr 1e-4, reward scale 20, gamma 0.97, replay 102,400 ... 2,048,000
+# 128 envs, batch 256, lr 1e-4, reward scale 20, gamma 0.97, replay 102,400 ... 2,048,000. The paper does not state the
+# gradient steps per env step: Brax's default 1 learned little on UR5e reach (1.5 % at 8.2M steps), 8 reached 29.9 %
+# at 24.6M and 32 collapsed into self collisions (results/README.md, "SAC: gradient steps per env step").
+SAC_PAPER = SACConfig(grad_updates_per_step=8)
 
 _ABSOLUTE = dict(action="absolute", observation=("joint_pos", "ee_pos", "target_pos", "ee_to_target", "prev_action"))
 _UR5E_RELATIVE = dict(action_scale=0.3)
 # Not in the paper: sin/cos of the joint angles and the self-collision pair distances next to the
-# paper's parts (envs.config.ReachConfig.observation); on the UR5e they cut self collisions 10x.
+# paper's parts (envs.config.ReachConfig.observation); on the UR5e they cut self collisions 10x, on the Panda 2x.
 _PLUS_REACH = ("joint_pos", "joint_sin_cos", "ee_pos", "target_pos", "ee_to_target", "self_dist")
 _UR5E_PLUS = dict(_UR5E_RELATIVE, observation=_PLUS_REACH)
 _UR5E_PLUS_AVOID = dict(_UR5E_RELATIVE, observation=_PLUS_REACH + ("obstacle_pos", "link_obstacle_dist"))
@@ -72,16 +75,20 @@ PRESETS: dict[str, Preset] = {
                               PPO_PAPER, run=dict(num_timesteps=200_000_000)),
     "ur5e-reach-absolute-ppo": Preset("UR5e reach with absolute position control (paper: + previous action, 4x256, 7 epochs)",
                                       "ur5e-reach", PPO_PAPER_ABSOLUTE, env=_ABSOLUTE, run=dict(num_timesteps=200_000_000)),
-    "ur5e-reach-sac": Preset("UR5e reach with SAC (paper)", "ur5e-reach", SAC_PAPER, run=dict(num_timesteps=20_000_000)),
-    # Ours beyond the paper: its UR5e presets plus the observation parts joint_sin_cos and self_dist.
+    "ur5e-reach-sac": Preset("UR5e reach with SAC (paper; 8 gradient steps per env step)", "ur5e-reach", SAC_PAPER,
+                             run=dict(num_timesteps=40_000_000)),
+    # Ours beyond the paper: its presets plus the observation parts joint_sin_cos and self_dist.
     "ur5e-reach-ppo-plus": Preset("ur5e-reach-ppo + joint sin/cos and self-collision distances observed (not in the paper)",
                                   "ur5e-reach", PPO_PAPER, env=_UR5E_PLUS, run=dict(num_timesteps=150_000_000)),
     "ur5e-reach-avoid-ppo-plus": Preset("ur5e-reach-avoid-ppo + joint sin/cos and self-collision distances observed "
                                         "(not in the paper)", "ur5e-reach-avoid", PPO_PAPER_REACH_AVOID,
                                         env=_UR5E_PLUS_AVOID, run=dict(num_timesteps=160_000_000)),
     "ur5e-reach-sac-plus": Preset("ur5e-reach-sac + joint sin/cos and self-collision distances observed (not in the paper)",
-                                  "ur5e-reach", SAC_PAPER, env=dict(observation=_PLUS_REACH), run=dict(num_timesteps=20_000_000)),
-    "panda-reach-sac": Preset("Panda reach with SAC (paper)", "panda-reach", SAC_PAPER, run=dict(num_timesteps=20_000_000)),
+                                  "ur5e-reach", SAC_PAPER, env=dict(observation=_PLUS_REACH), run=dict(num_timesteps=40_000_000)),
+    "panda-reach-ppo-plus": Preset("panda-reach-ppo + joint sin/cos and self-collision distances observed (not in the paper)",
+                                   "panda-reach", PPO_PAPER, env=dict(observation=_PLUS_REACH), run=dict(num_timesteps=65_000_000)),
+    "panda-reach-sac": Preset("Panda reach with SAC (paper; 8 gradient steps per env step)", "panda-reach", SAC_PAPER,
+                              run=dict(num_timesteps=40_000_000)),
     "ur5e-reach-avoid-ppo": Preset("UR5e reach-avoid, 0.1 m obstacle, semi-sparse reward, 4x256 (paper), action scale 0.3",
                                    "ur5e-reach-avoid", PPO_PAPER_REACH_AVOID, env=_UR5E_RELATIVE,
                                    run=dict(num_timesteps=300_000_000)),

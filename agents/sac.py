@@ -53,7 +53,8 @@ class SACConfig:
     max_replay_size: int = 2_048_000
     """Replay capacity in transitions (a multiple of num_envs); oldest are overwritten."""
     grad_updates_per_step: int = 1
-    """Gradient steps per environment step of all envs (Brax's default; not stated in the paper)."""
+    """Gradient steps per environment step of all envs (Brax's default 1; not stated in the paper; the train.py
+    SAC presets use 8, which learned far faster on the UR5e per env step and per second, results/README.md)."""
     init_alpha: float = 1.0
     """Initial temperature."""
     target_entropy: float | None = None

@@ -200,6 +200,10 @@ def test_presets_set_their_env_options_and_the_command_line_overrides_them():
     absolute = train_cli.parse(["ur5e-reach-absolute-ppo"])
     assert absolute.env.action == "absolute" and absolute.env.observation[-1] == "prev_action"
     assert absolute.algo.updates_per_batch == 7 and absolute.algo.policy_hidden_sizes == (256,) * 4
+    for name in ("ur5e-reach-sac", "ur5e-reach-sac-plus", "panda-reach-sac"):  # not stated in the paper; Brax's is 1
+        assert train_cli.parse([name]).algo.grad_updates_per_step == 8, name
+    plus = train_cli.parse(["panda-reach-ppo-plus"]).env.observation
+    assert plus == train_cli.parse(["ur5e-reach-ppo-plus"]).env.observation and plus[1] == "joint_sin_cos" and plus[-1] == "self_dist"
 
 
 def test_learner_cls_is_part_of_the_program_cache_key():
