@@ -9,7 +9,8 @@
 
 What runs: `--num-envs` environments per evaluation seed (`--seeds` seeds from `--seed`, by default
 the training driver's eval seed, so a run's own env config reproduces its eval.json), one episode
-each, deterministic policy (`agents.loop.make_evaluate`). A checkpoint contributes one unit per
+each, deterministic policy (`agents.loop.make_evaluate`; `--stochastic` samples the actions from the
+policy's distribution instead, as in training). A checkpoint contributes one unit per
 trained seed, a baseline one; the table gives mean ± std over units (seeds / checkpoints); the JSON
 also gives every unit's numbers and the std over all episodes. Metrics (the paper's): target
 reached, self collision, obstacle collision, distance to the target (mean over the episode's last
@@ -119,6 +120,8 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--seeds", type=int, default=1, help="evaluation seeds, each a fresh set of episodes (default 1)")
     p.add_argument("--seed", type=int, default=1_000_000,
                    help="first evaluation seed (default: the training driver's eval seed)")
+    p.add_argument("--stochastic", action="store_true",
+                   help="sample a checkpoint's actions from its policy's distribution instead of taking the mode")
     p.add_argument("--last-steps", type=int, default=10, help="steps the final distance is averaged over (default 10)")
     p.add_argument("--json", metavar="PATH", help="write every number and the full configuration as JSON")
     p.add_argument("--csv", metavar="PATH", help="write one row per unit (policy seed x eval seed) as CSV")
@@ -191,6 +194,9 @@ def main(argv: list[str] | None = None) -> list:
             raise ValueError(f"--video={args.video!r} is invalid: allowed are .mp4 and .gif files.")
         if importlib.util.find_spec("imageio") is None:
             raise ValueError("--video needs imageio (and imageio-ffmpeg for .mp4): pip install -e '.[viz]'")
+    if args.stochastic and args.policy:
+        raise ValueError(f"--stochastic is invalid with --policy {args.policy}: allowed only with --checkpoint (the "
+                         "baselines have no action distribution).")
     if args.checkpoint:
         policies = [evaluation.checkpoint_policy(path) for path in args.checkpoint]
     else:
@@ -216,7 +222,8 @@ def main(argv: list[str] | None = None) -> list:
     for policy, config in zip(policies, configs):
         print(f"evaluating {policy.name} on {env_name} ({len(policy.units)} x {len(eval_seeds)} unit(s) x "
               f"{args.num_envs} envs) ...", file=sys.stderr, flush=True)
-        results.append(evaluation.run(policy, env_name, config, args.num_envs, eval_seeds, args.last_steps))
+        results.append(evaluation.run(policy, env_name, config, args.num_envs, eval_seeds, args.last_steps,
+                                      stochastic=args.stochastic))
 
     command = "python eval.py " + " ".join(shlex.quote(a) for a in argv)
     print(evaluation.markdown(results))

@@ -167,11 +167,13 @@ def check_compatible(policy: Policy, env_name: str, env) -> None:
 
 
 @functools.lru_cache(maxsize=16)
-def _evaluator(env_name: str, env_config, algo_config, obs_size: int, act_size: int, num_envs: int, last_steps: int):
+def _evaluator(env_name: str, env_config, algo_config, obs_size: int, act_size: int, num_envs: int, last_steps: int,
+               stochastic: bool = False):
     """(batched env, compiled `evaluate(params, key) -> (per-env metrics, records)`), cached per
     setting so that several checkpoints / seeds / baselines (and a video of as many envs) share one
     compilation. The env is not auto-reset (`_NoAutoReset`): only each env's first episode counts,
-    and its poses are recorded for rendering."""
+    and its poses are recorded for rendering. `stochastic`: a checkpoint's actions are drawn from its
+    policy's distribution (the learner's `stochastic_policy`, a fresh key per step) instead of its mode."""
     base = envs.from_config(env_name, env_config)
     env = envs.wrappers.VmapWrapper(_NoAutoReset(envs.wrappers.EpisodeWrapper(base, env_config.episode_length)))
     length = env_config.episode_length
@@ -182,7 +184,8 @@ def _evaluator(env_name: str, env_config, algo_config, obs_size: int, act_size: 
     from agents.driver import make_learner
 
     learner = make_learner(algo_config, obs_size, act_size, 1)
-    fn = make_evaluate(env, learner, num_envs, length, last_steps, per_env=True, record=_record)
+    act = (lambda ls, state, start, key: learner.stochastic_policy(ls, state.obs, key)) if stochastic else None
+    fn = make_evaluate(env, learner, num_envs, length, last_steps, act=act, per_env=True, record=_record)
     return env, jax.jit(jax.vmap(fn, in_axes=(0, None)))
 
 
@@ -222,6 +225,8 @@ class Result:
     """{name: array (units, num_envs)}: every episode's value (for stds over episodes)."""
     seconds: float
     """Wall time of the evaluation, compilation included."""
+    stochastic: bool = False
+    """Actions drawn from the policy's distribution instead of its mode (deterministic, the default)."""
 
     def summary(self) -> dict:
         return summarize(self.per_env)
@@ -235,6 +240,7 @@ class Result:
             "eval_seeds": list(self.eval_seeds),
             "last_steps": self.last_steps,
             "episodes": int(self.num_envs * len(self.units)),
+            "actions": "stochastic" if self.stochastic else "deterministic",
             "seconds": round(self.seconds, 2),
             "summary": self.summary(),
             "units": self.units,
@@ -264,8 +270,12 @@ def _metric_names(per_step: dict, last_steps: int) -> dict:
 
 
 def run(policy: Policy, env_name: str, env_config, num_envs: int = 4096, eval_seeds=(DEFAULT_EVAL_SEED,),
-        last_steps: int = 10) -> Result:
-    """Evaluates `policy` on `num_envs` episodes per unit and evaluation seed (see module doc)."""
+        last_steps: int = 10, stochastic: bool = False) -> Result:
+    """Evaluates `policy` on `num_envs` episodes per unit and evaluation seed (see module doc);
+    `stochastic=True` samples a checkpoint's actions instead of taking its deterministic mode."""
+    if stochastic and policy.export is None:
+        raise ValueError(f"stochastic=True is invalid for the baseline {policy.name!r}: allowed only for checkpoints "
+                         "(the baselines have no action distribution).")
     if int(num_envs) < 1:
         raise ValueError(f"num_envs={num_envs!r} is invalid: allowed is an integer >= 1.")
     if not eval_seeds:
@@ -273,7 +283,7 @@ def run(policy: Policy, env_name: str, env_config, num_envs: int = 4096, eval_se
     algo = policy.export.config.algo if policy.export else None
     obs = policy.export.observation_size if policy.export else 0
     act = policy.export.action_size if policy.export else 0
-    env, evaluate = _evaluator(env_name, env_config, algo, obs, act, int(num_envs), int(last_steps))
+    env, evaluate = _evaluator(env_name, env_config, algo, obs, act, int(num_envs), int(last_steps), bool(stochastic))
     check_compatible(policy, env_name, env)
     params = policy.export.state if policy.export else baselines.index(policy.name)
     t0 = time.perf_counter()
@@ -295,7 +305,7 @@ def run(policy: Policy, env_name: str, env_config, num_envs: int = 4096, eval_se
         for i, unit in enumerate(units):
             unit["metrics"].update({name: float(np.nanmean(v[i])) for name, v in derived.items()})
     return Result(policy, env_name, env_config, int(num_envs), [int(s) for s in eval_seeds], int(last_steps), units,
-                  per_env, time.perf_counter() - t0)
+                  per_env, time.perf_counter() - t0, bool(stochastic))
 
 
 def collided_distances(per_env: dict) -> dict:
@@ -363,7 +373,8 @@ def label(result: Result) -> str:
     p = result.policy
     if p.export is None:
         return p.name
-    return f"{p.name} ({p.export.config.algo_name}, {p.export.env_steps:,} steps)"
+    mode = ", stochastic" if result.stochastic else ""
+    return f"{p.name} ({p.export.config.algo_name}, {p.export.env_steps:,} steps{mode})"
 
 
 def markdown(results: list[Result], spread: str = "std_units") -> str:

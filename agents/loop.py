@@ -142,6 +142,9 @@ class Learner(Protocol):
     def policy(self, state: Any, obs: jax.Array) -> jax.Array:
         """Deterministic actions for evaluation."""
 
+    def stochastic_policy(self, state: Any, obs: jax.Array, key: jax.Array) -> jax.Array:
+        """Actions drawn from the policy's distribution (`eval.py --stochastic`). Optional."""
+
 
 @struct.dataclass
 class TrainState:

@@ -288,6 +288,9 @@ class PPO:
     def policy(self, state: PPOState, obs):
         return self._dist(state.params["policy"], self._obs(state, obs)).mode()
 
+    def stochastic_policy(self, state: PPOState, obs, key):
+        return jnp.tanh(self._dist(state.params["policy"], self._obs(state, obs)).sample_raw(key))
+
     @jax.named_scope("advantages")
     def advantages(self, params, obs_stats, value_stats, data: Transition):
         """GAE per unroll; `data` leaves are (envs, unrolls, unroll_length, ...)."""

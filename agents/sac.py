@@ -236,6 +236,9 @@ class SAC:
     def policy(self, state: SACState, obs):
         return self._dist(state.policy_params, self._obs(state.obs_stats, obs)).mode()
 
+    def stochastic_policy(self, state: SACState, obs, key):
+        return jnp.tanh(self._dist(state.policy_params, self._obs(state.obs_stats, obs)).sample_raw(key))
+
     def insert(self, replay: Replay, batch: Transition) -> Replay:
         steps = batch.reward.shape[0]
         rows = (replay.position + jnp.arange(steps)) % self.rows

@@ -192,6 +192,31 @@ def test_export_of_one_seed_acts_as_that_seed_of_the_run(point_run, tmp_path):
                               str(tmp_path / "eval.json")])
 
 
+def test_stochastic_evaluation_samples_the_policy(point_run):
+    """`eval.py --stochastic`: the actions are tanh(mean + std * noise) of the policy's distribution
+    (mean and std by hand from the network's output), not the mode tanh(mean); the episodes are
+    reproducible for one key and differ from the deterministic ones."""
+    policy = evaluation.checkpoint_policy(str(point_run))
+    learner, state = policy.export.learner, jax.tree.map(lambda x: x[0], policy.export.state)
+    obs = jax.random.normal(jax.random.PRNGKey(1), (5, policy.export.observation_size))
+    key = jax.random.PRNGKey(2)
+    out = np.asarray(learner.policy_net.apply(state.params["policy"], learner._obs(state, obs)), np.float64)
+    mean, raw = np.split(out, 2, axis=-1)
+    std = np.log1p(np.exp(raw)) + learner.config.min_std  # softplus
+    noise = np.asarray(jax.random.normal(key, mean.shape))
+    np.testing.assert_allclose(learner.stochastic_policy(state, obs, key), np.tanh(mean + std * noise), rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(learner.policy(state, obs), np.tanh(mean), rtol=1e-5, atol=1e-6)
+    config = policy.train_env_config
+    det = evaluation.run(policy, "point-mass", config, num_envs=32)
+    sto = evaluation.run(policy, "point-mass", config, num_envs=32, stochastic=True)
+    again = evaluation.run(policy, "point-mass", config, num_envs=32, stochastic=True)
+    assert sto.units == again.units and sto.units != det.units
+    assert sto.to_json()["actions"] == "stochastic" and det.to_json()["actions"] == "deterministic"
+    assert evaluation.markdown([sto]).count(", stochastic)") == 1
+    with pytest.raises(ValueError, match="stochastic=True is invalid for the baseline 'random'"):
+        evaluation.run(evaluation.baseline_policy("random"), "point-mass", config, num_envs=4, stochastic=True)
+
+
 def test_several_checkpoints_pooled(point_run, capsys):
     step = str(point_run / "checkpoints" / "5120")
     results = eval_cli.main(["--checkpoint", str(point_run), step, "--num-envs", "16", "--seeds", "2"])
@@ -438,6 +463,7 @@ BAD = [
     (lambda d, t: ["--env", "point-mass", "--policy", "pseudo_ik"], r"needs an arm environment"),
     (lambda d, t: ["--env", "ur5-reach", "--policy", "random"], r"env='ur5-reach' is unknown: allowed are"),
     (lambda d, t: ["--policy", "random"], r"--policy needs --env NAME"),
+    (lambda d, t: ["--env", "point-mass", "--policy", "random", "--stochastic"], r"--stochastic is invalid with --policy random"),
     (lambda d, t: ["--env", "ur5e-reach"], r"give exactly one of --checkpoint"),
     (lambda d, t: ["--env", "ur5e-reach", "--policy", "random", "--checkpoint", str(d["arm"])], r"give exactly one of"),
     (lambda d, t: ["--env", "ur5e-reach", "--policy", "random", "--num-envs", "0"], r"--num-envs=0 is invalid"),
@@ -569,6 +595,11 @@ def test_sac_export_acts_as_the_learner(tmp_path):
     theirs = jax.vmap(learner.policy, in_axes=(0, None))(state, obs)
     np.testing.assert_allclose(ours, theirs, rtol=1e-6)
     assert not np.allclose(ours[0], ours[1])  # the seeds differ
+    key = jax.random.PRNGKey(3)  # sampled actions: tanh(mean + std * noise) of seed 0's distribution
+    first = jax.tree.map(lambda x: x[0], loaded.state)
+    dist = learner._dist(first.policy_params, learner._obs(first.obs_stats, obs))
+    expected = np.tanh(np.asarray(dist.mean) + np.asarray(dist.std) * np.asarray(jax.random.normal(key, dist.mean.shape)))
+    np.testing.assert_allclose(loaded.learner.stochastic_policy(first, obs, key), expected, rtol=1e-5, atol=1e-6)
 
 
 # ------------------------------------------------------------------------------------------------
