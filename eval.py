@@ -246,9 +246,8 @@ def main(argv: list[str] | None = None) -> list:
     if args.csv:
         _write_csv(args.csv, results)
     if args.video:
-        write_video(args.video, policies[0], env_name, evaluation.env_config_for(env_name, policies[0].train_env_config,
-                                                                                 **overrides),
-                    args.video_envs, args.seed, args.video_size)
+        write_video(args.video, policies[0], env_name, configs[0], args.video_envs, args.seed, args.video_size,
+                    stochastic=args.stochastic)
         print(f"video: {args.video}", file=sys.stderr)
     return results
 
@@ -281,8 +280,10 @@ def _video_size(size: str) -> tuple[int, int]:
     return width, height
 
 
-def write_video(path: str, policy, env_name: str, env_config, num_envs: int, seed: int, size: str = "480x360") -> None:
-    """Renders each of `num_envs` envs' first episode (a grid of views) to an mp4 or gif."""
+def write_video(path: str, policy, env_name: str, env_config, num_envs: int, seed: int, size: str = "480x360",
+                stochastic: bool = False) -> None:
+    """Renders each of `num_envs` envs' first episode (a grid of views) to an mp4 or gif, with the
+    actions the evaluation took (sampled with `stochastic`)."""
     from agents import evaluation
     from benchmarks import render
 
@@ -290,7 +291,7 @@ def write_video(path: str, policy, env_name: str, env_config, num_envs: int, see
     import envs
 
     env = envs.from_config(env_name, env_config)
-    records = evaluation.rollout(policy, env_name, env_config, num_envs, seed)
+    records = evaluation.rollout(policy, env_name, env_config, num_envs, seed, stochastic=stochastic)
     frames = render.rollout_frames(env, records, width=width, height=height)
     _makedirs_for(path)
     render.write_video(path, frames, fps=round(1.0 / env.dt))

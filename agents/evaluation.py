@@ -189,6 +189,19 @@ def _evaluator(env_name: str, env_config, algo_config, obs_size: int, act_size: 
     return env, jax.jit(jax.vmap(fn, in_axes=(0, None)))
 
 
+def _evaluate_fn(policy: Policy, env_name: str, env_config, num_envs: int, last_steps: int, stochastic: bool):
+    """The cached compiled evaluation (`_evaluator`) for `policy`'s network on this env, after checking that
+    the env fits the policy and that a stochastic evaluation has a distribution to sample."""
+    if stochastic and policy.export is None:
+        raise ValueError(f"stochastic=True is invalid for the baseline {policy.name!r}: allowed only for checkpoints "
+                         "(the baselines have no action distribution).")
+    e = policy.export
+    env, evaluate = _evaluator(env_name, env_config, e.config.algo if e else None, e.observation_size if e else 0,
+                               e.action_size if e else 0, int(num_envs), int(last_steps), bool(stochastic))
+    check_compatible(policy, env_name, env)
+    return evaluate
+
+
 class _NoAutoReset(envs.wrappers.AutoResetWrapper):
     """The training stack's episodes (AutoResetWrapper's reset: the same initial states as
     `envs.wrap` and the driver's evaluation for one key) without the auto-reset: an env whose
@@ -273,18 +286,11 @@ def run(policy: Policy, env_name: str, env_config, num_envs: int = 4096, eval_se
         last_steps: int = 10, stochastic: bool = False) -> Result:
     """Evaluates `policy` on `num_envs` episodes per unit and evaluation seed (see module doc);
     `stochastic=True` samples a checkpoint's actions instead of taking its deterministic mode."""
-    if stochastic and policy.export is None:
-        raise ValueError(f"stochastic=True is invalid for the baseline {policy.name!r}: allowed only for checkpoints "
-                         "(the baselines have no action distribution).")
     if int(num_envs) < 1:
         raise ValueError(f"num_envs={num_envs!r} is invalid: allowed is an integer >= 1.")
     if not eval_seeds:
         raise ValueError("eval_seeds=[] is invalid: allowed is at least one seed.")
-    algo = policy.export.config.algo if policy.export else None
-    obs = policy.export.observation_size if policy.export else 0
-    act = policy.export.action_size if policy.export else 0
-    env, evaluate = _evaluator(env_name, env_config, algo, obs, act, int(num_envs), int(last_steps), bool(stochastic))
-    check_compatible(policy, env_name, env)
+    evaluate = _evaluate_fn(policy, env_name, env_config, num_envs, last_steps, stochastic)
     params = policy.export.state if policy.export else baselines.index(policy.name)
     t0 = time.perf_counter()
     units, per_env = [], {}
@@ -430,15 +436,12 @@ def device_description() -> str:
 
 
 def rollout(policy: Policy, env_name: str, env_config, num_envs: int = 1, eval_seed: int = DEFAULT_EVAL_SEED,
-            unit: int = 0) -> dict:
+            unit: int = 0, stochastic: bool = False) -> dict:
     """Joint positions, target and obstacle of each env's first episode (for `benchmarks.render`):
     {"qpos": (T + 1, n, nq), "target_pos": ..., ["obstacle_pos": ...], "length": (n,), "metrics": {...}}
-    with the policy's unit `unit` (a trained seed's index)."""
-    algo = policy.export.config.algo if policy.export else None
-    obs = policy.export.observation_size if policy.export else 0
-    act = policy.export.action_size if policy.export else 0
-    env, evaluate = _evaluator(env_name, env_config, algo, obs, act, int(num_envs), 10)
-    check_compatible(policy, env_name, env)
+    with the policy's unit `unit` (a trained seed's index); the episodes that `run` evaluates with as
+    many envs, the same seed and the same `stochastic`."""
+    evaluate = _evaluate_fn(policy, env_name, env_config, num_envs, 10, stochastic)
     if policy.export:
         params = jax.tree.map(lambda x: x[unit:unit + 1], policy.export.state)
         out, records = jax.device_get(evaluate(params, jax.random.PRNGKey(int(eval_seed))))

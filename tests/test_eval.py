@@ -213,6 +213,10 @@ def test_stochastic_evaluation_samples_the_policy(point_run):
     assert sto.units == again.units and sto.units != det.units
     assert sto.to_json()["actions"] == "stochastic" and det.to_json()["actions"] == "deterministic"
     assert evaluation.markdown([sto]).count(", stochastic)") == 1
+    # A video's rollout shows the evaluated episodes: sampled actions with --stochastic, the mode without.
+    for result, stochastic in ((sto, True), (det, False)):
+        records = evaluation.rollout(policy, "point-mass", config, num_envs=32, stochastic=stochastic)
+        np.testing.assert_allclose(records["metrics"]["episode/return"], result.per_env["return"][0], rtol=1e-5, atol=1e-6)
     with pytest.raises(ValueError, match="stochastic=True is invalid for the baseline 'random'"):
         evaluation.run(evaluation.baseline_policy("random"), "point-mass", config, num_envs=4, stochastic=True)
 
