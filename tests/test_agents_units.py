@@ -14,7 +14,7 @@ from agents.distributions import TanhNormal
 from agents.loop import Parallel
 from agents.networks import MLP, TwinQ
 from agents.ppo import PPO, PPOConfig, gae, learning_rate, popart_preserve, ppo_loss_terms, ppo_total_loss
-from agents.sac import actor_loss, critic_loss, critic_target, polyak, temperature_loss
+from agents.sac import SAC, SACConfig, actor_loss, critic_loss, critic_target, polyak, temperature_loss
 
 
 # -- tanh-Gaussian ----------------------------------------------------------------------------
@@ -216,6 +216,9 @@ def test_sac_temperature_update_on_hand_computed_numbers():
     assert float(optax.apply_updates(log_alpha, updates)) == pytest.approx(math.log(0.5) - 1e-2, rel=1e-5)
     target = polyak({"w": jnp.array(1.0)}, {"w": jnp.array(3.0)}, 0.005)
     assert float(target["w"]) == pytest.approx(1.01)
+    # The entropy target: -action_size unless the config names one (Brax's -0.5 * action_size learned slower).
+    assert SAC(SACConfig(), observation_size=4, action_size=6).target_entropy == -6.0
+    assert SAC(SACConfig(target_entropy=-3.0), observation_size=4, action_size=6).target_entropy == -3.0
 
 
 def test_twin_q_and_mlp_shapes():
