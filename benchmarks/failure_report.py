@@ -8,6 +8,8 @@ the checkpoint's seeds) through `agents.evaluation.rollout` and sorts every epis
 target reached, self collision, obstacle collision, or missed (neither). For collisions it names the
 geom pair that is closest (most penetrating) at the end of the colliding step, the step, and the
 start pose's clearance (its smallest self-collision distance); for misses the final distance.
+Every episode also lists the joints that end it at a range limit (a UR5e joint that turns 720° can
+pin there: reaching on may need a full turn back the other way).
 A CPU handles a few hundred episodes in minutes (UR5e); the Panda is slow on CPUs (README).
 """
 
@@ -27,6 +29,8 @@ if ROOT not in sys.path:
 
 MISS_BINS = (0.02, 0.05, 0.10)
 """Upper edges (m) of the final-distance bins of missed episodes; the last bin is open."""
+LIMIT_MARGIN = 0.05
+"""A joint within this many radians of either end of its range counts as at its limit."""
 
 
 def _names(robot, geoms) -> list[str]:
@@ -54,9 +58,12 @@ def classify(robot, records: dict) -> list[dict]:
         obstacle_end = np.asarray(jax.vmap(lambda c, x, m: robot.obstacle_distances(x, m, c, 0.0))(
             center, kin_end.geom_xpos, kin_end.geom_xmat))
     pair_names = [" / ".join(_names(robot, pair)) for pair in robot.self_pairs]
+    joint_names = [robot.mj_model.joint(j).name for j in range(robot.nq)]
+    at_limit = np.minimum(end_q - robot.joint_low, robot.joint_high - end_q) < LIMIT_MARGIN
     out = []
     for i in range(n):
-        row = {"env": i, "step": int(length[i]), "start_clearance": float(self_start[i].min())}
+        row = {"env": i, "step": int(length[i]), "start_clearance": float(self_start[i].min()),
+               "at_limit": [joint_names[j] for j in np.flatnonzero(at_limit[i])]}
         if metrics["episode/self_collision"][i] > 0:
             row.update(outcome="self collision", what=pair_names[int(np.argmin(self_end[i]))])
         elif metrics.get("episode/obstacle_collision", np.zeros(n))[i] > 0:
@@ -93,6 +100,11 @@ def summarize(rows: list[dict]) -> dict:
         labels = [f"{a * 100:g}-{b * 100:g} cm" if np.isfinite(b) else f"> {a * 100:g} cm" for a, b in zip(edges, edges[1:])]
         summary["missed_final_distance"] = {lab: int(np.sum((misses >= a) & (misses < b)))
                                             for lab, a, b in zip(labels, edges, edges[1:])}
+    summary["ending_at_a_joint_limit"] = {k: float(np.mean([bool(r["at_limit"]) for r in v]))
+                                          for k, v in sorted(by.items()) if v}
+    if by["missed"]:
+        summary["missed_by_joint_at_limit"] = dict(collections.Counter(
+            j for r in by["missed"] for j in r["at_limit"]).most_common())
     return summary
 
 
@@ -111,6 +123,11 @@ def markdown(summary: dict, title: str) -> str:
     if "missed_final_distance" in summary:
         lines += ["", "missed episodes by final distance: " + ", ".join(
             f"{k}: {v}" for k, v in summary["missed_final_distance"].items())]
+    lines += ["", f"episodes ending with a joint within {LIMIT_MARGIN} rad of its range limit: " + ", ".join(
+        f"{k} {pct(v)}" for k, v in summary["ending_at_a_joint_limit"].items())]
+    if summary.get("missed_by_joint_at_limit"):
+        lines += ["", "joints at a limit at the end of missed episodes: " + ", ".join(
+            f"{k}: {v}" for k, v in summary["missed_by_joint_at_limit"].items())]
     return "\n".join(lines) + "\n"
 
 

@@ -623,6 +623,8 @@ def test_failure_report_names_the_colliding_pair_and_bins_the_misses():
     steps, n = 6, 4
     qpos = np.tile(free, (steps + 1, n, 1))
     qpos[3:, 1] = hit  # env 1 collides at step 3 (its recorded poses stay there)
+    qpos[4:, 2, 1] = robot.joint_high[1] - 0.01  # env 2 misses with its shoulder-lift joint pinned at the limit
+    qpos[4:, 3, 1] = robot.joint_low[1] + 0.2  # env 3 misses 0.2 rad from the other limit: not at it
     metrics = {"episode/self_collision": np.array([0, 1, 0, 0.0]), "episode/obstacle_collision": np.zeros(n),
                "episode/target_reached": np.array([1, 0, 0, 0.0]), "episode/distance": np.array([0.005, 0.3, 0.07, 0.5])}
     records = {"qpos": qpos, "length": np.array([6, 3, 6, 6]), "metrics": metrics}
@@ -635,3 +637,7 @@ def test_failure_report_names_the_colliding_pair_and_bins_the_misses():
     assert summary["missed_final_distance"] == {"0-2 cm": 0, "2-5 cm": 0, "5-10 cm": 1, "> 10 cm": 1}
     assert summary["collisions"]["step_quartiles"] == [3.0, 3.0, 3.0]
     assert "self collision: " + rows[1]["what"] in failure_report.markdown(summary, "t")
+    shoulder = robot.mj_model.joint(1).name
+    assert [r["at_limit"] for r in rows] == [[], [], [shoulder], []]
+    assert summary["ending_at_a_joint_limit"] == {"missed": 0.5, "reached": 0.0, "self collision": 0.0}
+    assert summary["missed_by_joint_at_limit"] == {shoulder: 1}
