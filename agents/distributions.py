@@ -49,6 +49,10 @@ class TanhNormal:
         """A pre-squash sample u (apply `jnp.tanh` for the action)."""
         return self.mean + self.std * jax.random.normal(key, self.mean.shape, self.mean.dtype)
 
+    def sample(self, key: jax.Array) -> jax.Array:
+        """A squashed action tanh(u), u ~ N(mean, std): the stochastic counterpart of `mode`."""
+        return jnp.tanh(self.sample_raw(key))
+
     def normal_log_prob(self, u: jax.Array) -> jax.Array:
         """log N(u; mean, std), summed over the action dimensions."""
         return self.base.log_prob(u)

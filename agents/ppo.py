@@ -289,7 +289,7 @@ class PPO:
         return self._dist(state.params["policy"], self._obs(state, obs)).mode()
 
     def stochastic_policy(self, state: PPOState, obs, key):
-        return jnp.tanh(self._dist(state.params["policy"], self._obs(state, obs)).sample_raw(key))
+        return self._dist(state.params["policy"], self._obs(state, obs)).sample(key)
 
     @jax.named_scope("advantages")
     def advantages(self, params, obs_stats, value_stats, data: Transition):

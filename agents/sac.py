@@ -239,7 +239,7 @@ class SAC:
         return self._dist(state.policy_params, self._obs(state.obs_stats, obs)).mode()
 
     def stochastic_policy(self, state: SACState, obs, key):
-        return jnp.tanh(self._dist(state.policy_params, self._obs(state.obs_stats, obs)).sample_raw(key))
+        return self._dist(state.policy_params, self._obs(state.obs_stats, obs)).sample(key)
 
     def insert(self, replay: Replay, batch: Transition) -> Replay:
         steps = batch.reward.shape[0]
