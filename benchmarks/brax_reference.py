@@ -2,9 +2,10 @@
 
     python benchmarks/brax_reference.py --out results/brax_reference      # on the GPU machine
 
-Both train on `ur5e-reach` (the paper's configuration) with the paper's PPO settings: 8,192 envs,
-batch 512, 64 minibatches, unroll 10, 5 updates per batch, lr 8e-4, discount 0.97, entropy 1e-4,
-3x256 policy and value networks, observation normalisation. Ours adds its documented stability
+Both train on `ur5e-reach` (the paper's configuration) with the preset's PPO settings, which both
+learners get: 8,192 envs, batch 512, 64 minibatches, unroll 10, 5 updates per batch, lr 8e-4, entropy
+1e-4, 3x256 policy and value networks, observation normalisation (the paper's), and the `ur5e-reach-ppo`
+preset's discount 0.99 (the paper's 0.97 until 2026-11-22, in every committed comparison). Ours adds its documented stability
 defaults (learning-rate decay, gradient clipping, value normalisation). Brax runs with its own
 training wrappers, as a Brax user would (its auto-reset restores each env's cached first state).
 
