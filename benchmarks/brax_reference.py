@@ -5,9 +5,10 @@
 Both train on `ur5e-reach` (the paper's configuration) with the preset's PPO settings, which both
 learners get: 8,192 envs, batch 512, 64 minibatches, unroll 10, 5 updates per batch, lr 8e-4, entropy
 1e-4, 3x256 policy and value networks, observation normalisation (the paper's), and the `ur5e-reach-ppo`
-preset's discount 0.99 (the paper's 0.97 until 2026-11-22, in every committed comparison). Ours adds its documented stability
-defaults (learning-rate decay, gradient clipping, value normalisation). Brax runs with its own
-training wrappers, as a Brax user would (its auto-reset restores each env's cached first state).
+preset's discount 0.99 (the paper's 0.97 until 2026-11-22, in every committed comparison). Ours adds
+its documented stability defaults (learning-rate decay, gradient clipping, value normalisation). Brax
+runs with its own training wrappers, as a Brax user would (its auto-reset restores each env's cached
+first state).
 
 Both are scored by the same evaluator (`agents.loop.make_evaluate`): the deterministic policy on the
 same 4,096 freshly sampled episodes, at the same env-step counts. Training speed excludes evaluation:
