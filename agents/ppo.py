@@ -282,8 +282,8 @@ class PPO:
 
     def act(self, state: PPOState, obs, key, par: Parallel):
         dist = self._dist(state.params["policy"], self._obs(state, obs))
-        u = dist.mean + dist.std * env_random(key, par, (self.action_size,))
-        return jnp.tanh(u), {"raw_action": u, "log_prob": dist.log_prob_raw(u)}
+        action, u, log_prob = dist.sample_with_noise(env_random(key, par, (self.action_size,)))
+        return action, {"raw_action": u, "log_prob": log_prob}
 
     def policy(self, state: PPOState, obs):
         return self._dist(state.params["policy"], self._obs(state, obs)).mode()
