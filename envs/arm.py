@@ -243,6 +243,9 @@ class ArmEnv(Env):
         else:
             base = rewards.dense(distance, cfg.w_dist, cfg.alpha)
         penalty = rewards.l2_penalty(data.qvel, cfg.w_joint_vel) + rewards.l2_penalty(data.qacc, cfg.w_joint_acc)
+        if cfg.w_joint_limit > 0:  # static: configs without it compile the same program as before the option
+            penalty = penalty + rewards.joint_limit_proximity(data.qpos, self.robot.joint_low, self.robot.joint_high,
+                                                              cfg.w_joint_limit, cfg.joint_limit_margin)
         return base - penalty
 
     def _observation_sizes(self) -> dict[str, int]:

@@ -73,6 +73,13 @@ class ReachConfig:
     """Penalty weight on the L2 norm of the joint velocities (semi_sparse and dense)."""
     w_joint_acc: float = 0.0
     """Penalty weight on the L2 norm of the joint accelerations (semi_sparse and dense)."""
+    w_joint_limit: float = 0.0
+    """Penalty weight near the joint range limits (semi_sparse and dense; not in the paper, which has 0):
+    w_joint_limit * sum_i max(0, 1 - m_i / joint_limit_margin), m_i the joint's distance (rad) to the
+    nearer end of its range. UR5e policies that miss mostly end with a joint pinned at its +-360 deg
+    limit (benchmarks/failure_report.py); this makes approaching a limit cost something."""
+    joint_limit_margin: float = 0.3
+    """Distance from a joint limit (rad) at which the w_joint_limit penalty starts."""
     collision_penalty: float = 0.0
     """Reward subtracted on the step that collides (the paper uses 0: termination alone)."""
     target_radius: float = 0.01
@@ -124,9 +131,9 @@ class ReachConfig:
                                  f"allowed are {', '.join(self.allowed_observations())}.")
         if len(set(self.observation)) != len(self.observation):
             raise ValueError(f"observation={self.observation!r} is invalid: a part appears twice.")
-        for name in ("action_scale", "alpha", "target_radius"):
+        for name in ("action_scale", "alpha", "target_radius", "joint_limit_margin"):
             _positive(name, getattr(self, name))
-        for name in ("w_reach", "w_dist", "w_joint_vel", "w_joint_acc", "collision_penalty"):
+        for name in ("w_reach", "w_dist", "w_joint_vel", "w_joint_acc", "w_joint_limit", "collision_penalty"):
             _positive(name, getattr(self, name), strict=False)
         if self.d_max is not None:
             _positive("d_max", self.d_max)

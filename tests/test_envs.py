@@ -166,6 +166,11 @@ def test_reward_formulas_hand_computed():
     assert np.isclose(rewards.obstacle_proximity(jnp.array([0.05, 0.2, -0.01]), 0.1, 0.1), 0.16, atol=1e-6)
     # L2 penalty: ||(3, 4)|| = 5.
     assert np.isclose(rewards.l2_penalty(jnp.array([3.0, 4.0]), 0.01), 0.05)
+    # Joint-limit proximity: ranges [-1, 1] and [0, 2], margin 0.4; joints 0.9 (0.1 from the upper end:
+    # 1 - 0.25) and 1.0 (1.0 from both: 0) -> 0.75; at a limit the full weight; weight 2.
+    low, high = jnp.array([-1.0, 0.0]), jnp.array([1.0, 2.0])
+    assert np.isclose(rewards.joint_limit_proximity(jnp.array([0.9, 1.0]), low, high, 2.0, 0.4), 1.5, atol=1e-6)
+    assert np.isclose(rewards.joint_limit_proximity(jnp.array([-1.0, 0.0]), low, high, 2.0, 0.4), 4.0, atol=1e-6)
 
 
 TERMINATE = dict(success="reach_and_terminate", reward="semi_sparse")  # one extra compiled variant
@@ -190,6 +195,15 @@ def test_sparse_and_penalised_rewards():
     env = envs.make("ur5e-reach", w_joint_vel=0.1, w_joint_acc=0.01)
     # exp(-20 * 0.1) - 0.1 * ||0.5 * 1_6|| - 0.01 * ||2 * 1_6|| = 0.135335 - 0.122474 - 0.048990
     np.testing.assert_allclose(env.reward(data, 0.1, 0.0, state.info), 0.1353353 - 0.1224745 - 0.0489898, atol=1e-6)
+    # Joint-limit penalty, UR5e ranges +-2 pi (elbow +-pi), margin 0.3: the shoulder pan 0.1 rad below 2 pi
+    # (1 - 1/3) and the elbow 0.15 above -pi (1 - 1/2), the rest at 0 -> 0.5 * (2/3 + 1/2) = 0.583333.
+    env = envs.make("ur5e-reach", w_joint_limit=0.5, joint_limit_margin=0.3)
+    data = data.replace(qpos=jnp.array([2 * np.pi - 0.1, 0.0, -np.pi + 0.15, 0.0, 0.0, 0.0]))
+    np.testing.assert_allclose(env.reward(data, 0.1, 0.0, state.info), 0.1353353 - 0.5833333, atol=1e-5)
+    with pytest.raises(ValueError, match="w_joint_limit"):
+        envs.make_config("ur5e-reach", w_joint_limit=-1.0)
+    with pytest.raises(ValueError, match="joint_limit_margin"):
+        envs.make_config("ur5e-reach", joint_limit_margin=0.0)
 
 
 def test_reach_avoid_reward_includes_obstacle_penalty(compiled):
