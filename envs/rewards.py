@@ -32,16 +32,17 @@ def l2_penalty(values, weight):
     return weight * jnp.linalg.norm(values, axis=-1)
 
 
+def proximity(distances, weight, threshold):
+    """weight * sum_i max(0, 1 - d_i / threshold): 0 beyond `threshold`, `weight` per item at d_i = 0."""
+    return weight * jnp.sum(jnp.maximum(0.0, 1.0 - distances / threshold), axis=-1)
+
+
 def obstacle_proximity(link_distances, w_obst, tau):
-    """Paper eq. (3): w_obst * sum_i max(0, 1 - d_i / tau), a penalty (subtract it)."""
-    return w_obst * jnp.sum(jnp.maximum(0.0, 1.0 - link_distances / tau), axis=-1)
+    """Paper eq. (3): the proximity penalty of the links' distances to the obstacle (subtract it)."""
+    return proximity(link_distances, w_obst, tau)
 
 
 def joint_limit_proximity(qpos, low, high, weight, margin):
-    """weight * sum_i max(0, 1 - m_i / margin), m_i = the joint's distance to the nearer end of its range.
-
-    Not in the paper: eq. (3)'s form applied to the joint range, a penalty (subtract it) that grows
-    from 0 at `margin` radians from a limit to `weight` per joint at the limit.
-    """
-    to_limit = jnp.minimum(qpos - low, high - qpos)
-    return weight * jnp.sum(jnp.maximum(0.0, 1.0 - to_limit / margin), axis=-1)
+    """Not in the paper: eq. (3)'s penalty over each joint's distance to the nearer end of its range,
+    from 0 at `margin` radians from a limit to `weight` per joint at the limit (subtract it)."""
+    return proximity(jnp.minimum(qpos - low, high - qpos), weight, margin)
