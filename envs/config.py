@@ -77,9 +77,11 @@ class ReachConfig:
     """Penalty weight near the joint range limits (semi_sparse and dense; not in the paper, which has 0):
     w_joint_limit * sum_i max(0, 1 - m_i / joint_limit_margin), m_i the joint's distance (rad) to the
     nearer end of its range. UR5e policies that miss mostly end with a joint pinned at its +-360 deg
-    limit (benchmarks/failure_report.py); this makes approaching a limit cost something."""
-    joint_limit_margin: float = 0.3
-    """Distance from a joint limit (rad) at which the w_joint_limit penalty starts."""
+    limit (benchmarks/failure_report.py); this makes approaching a limit cost something. The UR5e
+    PPO presets set 0.05 (reach) and 1.0 (reach-avoid): results/README.md, "The joint-limit penalty"."""
+    joint_limit_margin: float = 0.5
+    """Distance from a joint limit (rad) at which the w_joint_limit penalty starts (0.5 in every run
+    we made with it)."""
     collision_penalty: float = 0.0
     """Reward subtracted on the step that collides (the paper uses 0: termination alone)."""
     target_radius: float = 0.01
