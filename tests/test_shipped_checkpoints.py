@@ -6,9 +6,10 @@ Every shipped export loads, fits its env and is the checkpoint that its results/
 evaluated (the best seed, for single-seed exports).
 
 The UR5e reach PPO policy (5 seeds, 150M env steps on an H200, action scale 0.3, discount 0.99, joint-limit
-penalty 0.05) reached the 1 cm target in 95.7 % of 4,096 episodes per seed there. Here its first seed runs 16 full-size episodes
-(20 substeps, 125 steps) on the CPU and is compared with the baselines' rates from results/baselines.json
-(5 x 4,096 episodes on the GPU): random and standstill (almost) never reach, the pseudo-IK reaches 41.5 %.
+penalty 0.05) reached the 1 cm target in 95.7 % of 4,096 episodes per seed there. Here its first seed runs
+16 full-size episodes (20 substeps, 125 steps) on the CPU and is compared with the baselines' rates from
+results/baselines.json (5 x 4,096 episodes on the GPU): random and standstill (almost) never reach, the
+pseudo-IK reaches 41.5 %.
 """
 
 import dataclasses
