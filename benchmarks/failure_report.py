@@ -9,7 +9,9 @@ target reached, self collision, obstacle collision, or missed (neither). For col
 geom pair that is closest (most penetrating) at the end of the colliding step, the step, and the
 start pose's clearance (its smallest self-collision distance); for misses the final distance.
 Every episode also lists the joints that end it at a range limit (a UR5e joint that turns 720° can
-pin there: reaching on may need a full turn back the other way).
+pin there: reaching on may need a full turn back the other way) and, with an obstacle, whether the
+straight line from the end effector to the target crosses the obstacle's sphere at the start and,
+for misses, at the end (`obstacle_between`: the obstacle in the end effector's way).
 A CPU handles a few hundred episodes in minutes (UR5e); the Panda is slow on CPUs (README).
 """
 
@@ -37,9 +39,19 @@ def _names(robot, geoms) -> list[str]:
     return [robot.mj_model.geom(int(g)).name for g in geoms]
 
 
-def classify(robot, records: dict) -> list[dict]:
+def segment_clearance(a: np.ndarray, b: np.ndarray, center: np.ndarray, radius: float) -> np.ndarray:
+    """Distance from `center` to the segment from `a` to `b`, minus `radius` (`[..., 3]` arrays): < 0 where
+    the straight line from a to b passes through the sphere."""
+    ab = b - a
+    t = np.clip(np.sum((center - a) * ab, axis=-1) / np.maximum(np.sum(ab * ab, axis=-1), 1e-12), 0.0, 1.0)
+    return np.linalg.norm(center - (a + t[..., None] * ab), axis=-1) - radius
+
+
+def classify(robot, records: dict, obstacle_radius: float | None = None) -> list[dict]:
     """One dict per env: outcome, step (episode length), start clearance and, by outcome, the
-    colliding pair / geom or the final distance. `records` as `evaluation.rollout` returns them."""
+    colliding pair / geom or the final distance. `records` as `evaluation.rollout` returns them;
+    with `obstacle_radius` and an obstacle in them, also whether the obstacle lies between the end
+    effector and the target at the start (and, for misses, at the end)."""
     import jax
     import jax.numpy as jnp
 
@@ -57,6 +69,11 @@ def classify(robot, records: dict) -> list[dict]:
         center = jnp.asarray(np.asarray(records["obstacle_pos"])[0])
         obstacle_end = np.asarray(jax.vmap(lambda c, x, m: robot.obstacle_distances(x, m, c, 0.0))(
             center, kin_end.geom_xpos, kin_end.geom_xmat))
+    between = obstacle_radius is not None and "obstacle_pos" in records
+    if between:
+        center, target = np.asarray(records["obstacle_pos"])[0], np.asarray(records["target_pos"])[0]
+        blocked_start = segment_clearance(np.asarray(kin_start.ee_pos), target, center, obstacle_radius) < 0
+        blocked_end = segment_clearance(np.asarray(kin_end.ee_pos), target, center, obstacle_radius) < 0
     pair_names = [" / ".join(_names(robot, pair)) for pair in robot.self_pairs]
     joint_names = [robot.mj_model.joint(j).name for j in range(robot.nq)]
     at_limit = np.minimum(end_q - robot.joint_low, robot.joint_high - end_q) < LIMIT_MARGIN
@@ -64,6 +81,8 @@ def classify(robot, records: dict) -> list[dict]:
     for i in range(n):
         row = {"env": i, "step": int(length[i]), "start_clearance": float(self_start[i].min()),
                "at_limit": [joint_names[j] for j in np.flatnonzero(at_limit[i])]}
+        if between:
+            row["obstacle_between"] = {"start": bool(blocked_start[i])}
         if metrics["episode/self_collision"][i] > 0:
             row.update(outcome="self collision", what=pair_names[int(np.argmin(self_end[i]))])
         elif metrics.get("episode/obstacle_collision", np.zeros(n))[i] > 0:
@@ -73,6 +92,8 @@ def classify(robot, records: dict) -> list[dict]:
             row.update(outcome="reached")
         else:
             row.update(outcome="missed", final_distance=float(metrics["episode/distance"][i]))
+            if between:
+                row["obstacle_between"]["end"] = bool(blocked_end[i])
         out.append(row)
     return out
 
@@ -105,6 +126,11 @@ def summarize(rows: list[dict]) -> dict:
     if by["missed"]:
         summary["missed_by_joint_at_limit"] = dict(collections.Counter(
             j for r in by["missed"] for j in r["at_limit"]).most_common())
+    if rows and "obstacle_between" in rows[0]:
+        summary["obstacle_between_at_start"] = {k: float(np.mean([r["obstacle_between"]["start"] for r in v]))
+                                                for k, v in sorted(by.items()) if v}
+        if by["missed"]:
+            summary["missed_obstacle_between_at_end"] = float(np.mean([r["obstacle_between"]["end"] for r in by["missed"]]))
     return summary
 
 
@@ -128,6 +154,11 @@ def markdown(summary: dict, title: str) -> str:
     if summary.get("missed_by_joint_at_limit"):
         lines += ["", "joints at a limit at the end of missed episodes: " + ", ".join(
             f"{k}: {v}" for k, v in summary["missed_by_joint_at_limit"].items())]
+    if "obstacle_between_at_start" in summary:
+        lines += ["", "episodes starting with the obstacle on the straight line from the end effector to the target: "
+                  + ", ".join(f"{k} {pct(v)}" for k, v in summary["obstacle_between_at_start"].items())]
+        if "missed_obstacle_between_at_end" in summary:
+            lines[-1] += f"; missed episodes ending with it there: {pct(summary['missed_obstacle_between_at_end'])}"
     return "\n".join(lines) + "\n"
 
 
@@ -153,7 +184,7 @@ def main(argv: list[str] | None = None) -> dict:
     records = evaluation.rollout(policy, env_name, config, num_envs=args.num_envs, eval_seed=args.seed, unit=args.unit)
     import envs
 
-    rows = classify(envs.from_config(env_name, config).robot, records)
+    rows = classify(envs.from_config(env_name, config).robot, records, getattr(config, "obstacle_radius", None))
     summary = summarize(rows)
     print(markdown(summary, f"{args.checkpoint} (seed {policy.units[args.unit]}) on {env_name}, eval seed {args.seed}"))
     if args.json:

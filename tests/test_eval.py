@@ -641,3 +641,44 @@ def test_failure_report_names_the_colliding_pair_and_bins_the_misses():
     assert [r["at_limit"] for r in rows] == [[], [], [shoulder], []]
     assert summary["ending_at_a_joint_limit"] == {"missed": 0.5, "reached": 0.0, "self collision": 0.0}
     assert summary["missed_by_joint_at_limit"] == {shoulder: 1}
+
+
+def test_segment_clearance_on_hand_computed_geometry():
+    from benchmarks import failure_report
+
+    a, b = np.zeros(3), np.array([1.0, 0.0, 0.0])
+    centers = np.array([[0.5, 0.3, 0.0], [0.5, 0.05, 0.0], [1.5, 0.0, 0.0], [-0.3, 0.4, 0.0]])
+    # beside the middle: 0.3 - 0.1; through the line: 0.05 - 0.1; past b: 0.5 - 0.1; behind a: 0.5 - 0.1
+    np.testing.assert_allclose(failure_report.segment_clearance(a, b, centers, 0.1), [0.2, -0.05, 0.4, 0.4], atol=1e-12)
+    np.testing.assert_allclose(failure_report.segment_clearance(a, a, np.array([0.0, 0.0, 0.3]), 0.1), 0.2)  # a point
+
+
+def test_failure_report_tells_when_the_obstacle_is_in_the_way():
+    """The end effector's position comes from CPU MuJoCo; the obstacle sits on the straight line to the
+    target in env 1 (which misses) and beside it in env 0 (which reaches)."""
+    import mujoco
+
+    from benchmarks import failure_report
+
+    robot = envs.make("ur5e-reach-avoid").robot
+    free = np.zeros(robot.nq, np.float32)
+    free[1], free[2] = -1.2, 1.0
+    data = mujoco.MjData(robot.mj_model)
+    data.qpos[:] = free
+    mujoco.mj_kinematics(robot.mj_model, data)
+    ee = data.site_xpos[robot.ee_site].copy()
+    steps, n = 4, 2
+    target = np.tile(ee + [0.4, 0.0, 0.0], (steps + 1, n, 1))
+    obstacle = np.tile(ee + [0.2, 0.0, 0.0], (steps + 1, n, 1))
+    obstacle[:, 0] = ee + [0.2, 0.3, 0.0]  # 0.3 m beside the line: clear of a 0.1 m sphere
+    metrics = {"episode/self_collision": np.zeros(n), "episode/obstacle_collision": np.zeros(n),
+               "episode/target_reached": np.array([1.0, 0.0]), "episode/distance": np.array([0.005, 0.4])}
+    records = {"qpos": np.tile(free, (steps + 1, n, 1)), "target_pos": target, "obstacle_pos": obstacle,
+               "length": np.array([steps, steps]), "metrics": metrics}
+    rows = failure_report.classify(robot, records, obstacle_radius=0.1)
+    assert [r["obstacle_between"] for r in rows] == [{"start": False}, {"start": True, "end": True}]
+    summary = failure_report.summarize(rows)
+    assert summary["obstacle_between_at_start"] == {"missed": 1.0, "reached": 0.0}
+    assert summary["missed_obstacle_between_at_end"] == 1.0
+    assert "missed episodes ending with it there: 100.0 %" in failure_report.markdown(summary, "t")
+    assert "obstacle_between" not in failure_report.classify(robot, records)[0]  # no radius given: not asked
