@@ -11,7 +11,8 @@ start pose's clearance (its smallest self-collision distance); for misses the fi
 Every episode also lists the joints that end it at a range limit (a UR5e joint that turns 720° can
 pin there: reaching on may need a full turn back the other way) and, with an obstacle, whether the
 straight line from the end effector to the target crosses the obstacle's sphere at the start and,
-for misses, at the end (`obstacle_between`: the obstacle in the end effector's way).
+for misses, at the end (`obstacle_between`: the obstacle in the end effector's way), and how close
+the robot's geoms end to the obstacle's surface (`final_obstacle_clearance`).
 A CPU handles a few hundred episodes in minutes (UR5e); the Panda is slow on CPUs (README).
 """
 
@@ -33,6 +34,9 @@ MISS_BINS = (0.02, 0.05, 0.10)
 """Upper edges (m) of the final-distance bins of missed episodes; the last bin is open."""
 LIMIT_MARGIN = 0.05
 """A joint within this many radians of either end of its range counts as at its limit."""
+PROXIMITY = 0.1
+"""Clearance (m) under which the robot counts as near the obstacle: the default `obstacle_tau` of the
+paper's proximity penalty (eq. 3; the env measures it from the link origins, `link_distance`)."""
 
 
 def _names(robot, geoms) -> list[str]:
@@ -71,9 +75,9 @@ def classify(robot, records: dict, obstacle_radius: float | None = None) -> list
             center, kin_end.geom_xpos, kin_end.geom_xmat))
     between = obstacle_radius is not None and "obstacle_pos" in records
     if between:
-        center, target = np.asarray(records["obstacle_pos"])[0], np.asarray(records["target_pos"])[0]
-        blocked_start = segment_clearance(np.asarray(kin_start.ee_pos), target, center, obstacle_radius) < 0
-        blocked_end = segment_clearance(np.asarray(kin_end.ee_pos), target, center, obstacle_radius) < 0
+        obstacle, target = np.asarray(records["obstacle_pos"])[0], np.asarray(records["target_pos"])[0]
+        blocked_start = segment_clearance(np.asarray(kin_start.ee_pos), target, obstacle, obstacle_radius) < 0
+        blocked_end = segment_clearance(np.asarray(kin_end.ee_pos), target, obstacle, obstacle_radius) < 0
     pair_names = [" / ".join(_names(robot, pair)) for pair in robot.self_pairs]
     joint_names = [robot.mj_model.joint(j).name for j in range(robot.nq)]
     at_limit = np.minimum(end_q - robot.joint_low, robot.joint_high - end_q) < LIMIT_MARGIN
@@ -83,6 +87,7 @@ def classify(robot, records: dict, obstacle_radius: float | None = None) -> list
                "at_limit": [joint_names[j] for j in np.flatnonzero(at_limit[i])]}
         if between:
             row["obstacle_between"] = {"start": bool(blocked_start[i])}
+            row["final_obstacle_clearance"] = float(obstacle_end[i].min() - obstacle_radius)
         if metrics["episode/self_collision"][i] > 0:
             row.update(outcome="self collision", what=pair_names[int(np.argmin(self_end[i]))])
         elif metrics.get("episode/obstacle_collision", np.zeros(n))[i] > 0:
@@ -131,6 +136,10 @@ def summarize(rows: list[dict]) -> dict:
                                                 for k, v in sorted(by.items()) if v}
         if by["missed"]:
             summary["missed_obstacle_between_at_end"] = float(np.mean([r["obstacle_between"]["end"] for r in by["missed"]]))
+        summary["final_obstacle_clearance"] = {
+            k: {"median": float(np.median([r["final_obstacle_clearance"] for r in v])),
+                "near": float(np.mean([r["final_obstacle_clearance"] < PROXIMITY for r in v]))}
+            for k, v in sorted(by.items()) if v}
     return summary
 
 
@@ -159,6 +168,8 @@ def markdown(summary: dict, title: str) -> str:
                   + ", ".join(f"{k} {pct(v)}" for k, v in summary["obstacle_between_at_start"].items())]
         if "missed_obstacle_between_at_end" in summary:
             lines[-1] += f"; missed episodes ending with it there: {pct(summary['missed_obstacle_between_at_end'])}"
+        lines += ["", f"robot's clearance from the obstacle at the end (median; share within {PROXIMITY} m): " + ", ".join(
+            f"{k} {v['median'] * 100:.1f} cm, {pct(v['near'])}" for k, v in summary["final_obstacle_clearance"].items())]
     return "\n".join(lines) + "\n"
 
 

@@ -677,8 +677,22 @@ def test_failure_report_tells_when_the_obstacle_is_in_the_way():
                "length": np.array([steps, steps]), "metrics": metrics}
     rows = failure_report.classify(robot, records, obstacle_radius=0.1)
     assert [r["obstacle_between"] for r in rows] == [{"start": False}, {"start": True, "end": True}]
+    # the robot's clearance from the obstacle: CPU MuJoCo's distance between the obstacle sphere and the robot
+    model = contact_model(robot, obstacle_radius=0.1)
+    data = mujoco.MjData(model)
+    for i, row in enumerate(rows):
+        data.qpos[:] = free
+        data.mocap_pos[robot.obstacle_mocap] = obstacle[0, i]
+        mujoco.mj_kinematics(model, data)
+        obstacle_geom = model.geom("obstacle").id
+        expected = min(mujoco.mj_geomDistance(model, data, obstacle_geom, int(g), 1.0, None)
+                       for g in robot.obstacle_geoms)
+        np.testing.assert_allclose(row["final_obstacle_clearance"], expected, atol=1e-4)
+    # env 0's obstacle (0.3 m aside of the line) overlaps a link of this pose; env 1's clears the arm by 6 cm
+    assert rows[0]["final_obstacle_clearance"] < 0 < rows[1]["final_obstacle_clearance"] < 0.1
     summary = failure_report.summarize(rows)
     assert summary["obstacle_between_at_start"] == {"missed": 1.0, "reached": 0.0}
     assert summary["missed_obstacle_between_at_end"] == 1.0
+    assert summary["final_obstacle_clearance"]["missed"]["median"] == rows[1]["final_obstacle_clearance"]
     assert "missed episodes ending with it there: 100.0 %" in failure_report.markdown(summary, "t")
     assert "obstacle_between" not in failure_report.classify(robot, records)[0]  # no radius given: not asked
