@@ -43,14 +43,6 @@ def _names(robot, geoms) -> list[str]:
     return [robot.mj_model.geom(int(g)).name for g in geoms]
 
 
-def segment_clearance(a: np.ndarray, b: np.ndarray, center: np.ndarray, radius: float) -> np.ndarray:
-    """Distance from `center` to the segment from `a` to `b`, minus `radius` (`[..., 3]` arrays): < 0 where
-    the straight line from a to b passes through the sphere."""
-    ab = b - a
-    t = np.clip(np.sum((center - a) * ab, axis=-1) / np.maximum(np.sum(ab * ab, axis=-1), 1e-12), 0.0, 1.0)
-    return np.linalg.norm(center - (a + t[..., None] * ab), axis=-1) - radius
-
-
 def classify(robot, records: dict, obstacle_radius: float | None = None) -> list[dict]:
     """One dict per env: outcome, step (episode length), start clearance and, by outcome, the
     colliding pair / geom or the final distance. `records` as `evaluation.rollout` returns them;
@@ -58,6 +50,8 @@ def classify(robot, records: dict, obstacle_radius: float | None = None) -> list
     effector and the target at the start (and, for misses, at the end)."""
     import jax
     import jax.numpy as jnp
+
+    from envs import collision
 
     metrics = records["metrics"]
     qpos = np.asarray(records["qpos"])
@@ -70,14 +64,16 @@ def classify(robot, records: dict, obstacle_radius: float | None = None) -> list
     if "obstacle_pos" in records:
         # Distances to the obstacle's centre: its radius shifts them all alike, so the geom that
         # collided (the nearest) does not depend on it.
-        center = jnp.asarray(np.asarray(records["obstacle_pos"])[0])
+        obstacle = jnp.asarray(np.asarray(records["obstacle_pos"])[0])
         obstacle_end = np.asarray(jax.vmap(lambda c, x, m: robot.obstacle_distances(x, m, c, 0.0))(
-            center, kin_end.geom_xpos, kin_end.geom_xmat))
+            obstacle, kin_end.geom_xpos, kin_end.geom_xmat))
     between = obstacle_radius is not None and "obstacle_pos" in records
     if between:
-        obstacle, target = np.asarray(records["obstacle_pos"])[0], np.asarray(records["target_pos"])[0]
-        blocked_start = segment_clearance(np.asarray(kin_start.ee_pos), target, obstacle, obstacle_radius) < 0
-        blocked_end = segment_clearance(np.asarray(kin_end.ee_pos), target, obstacle, obstacle_radius) < 0
+        # the obstacle's sphere on the segment from the end effector to the target
+        target = jnp.asarray(np.asarray(records["target_pos"])[0])
+        blocked_start, blocked_end = (
+            np.asarray(collision.point_segment_distance(obstacle, kin.ee_pos, target)) < obstacle_radius
+            for kin in (kin_start, kin_end))
     pair_names = [" / ".join(_names(robot, pair)) for pair in robot.self_pairs]
     joint_names = [robot.mj_model.joint(j).name for j in range(robot.nq)]
     at_limit = np.minimum(end_q - robot.joint_low, robot.joint_high - end_q) < LIMIT_MARGIN

@@ -23,7 +23,7 @@ import eval as eval_cli
 import train as train_cli
 from agents import baselines, driver, evaluation, export
 from agents.loop import episode_metrics
-from mujoco_reference import colliding_configuration, colliding_pairs, contact_model
+from mujoco_reference import colliding_configuration, colliding_pairs, contact_model, ee_position
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 QUIET = dict(tensorboard=False, progress=False)
@@ -643,14 +643,16 @@ def test_failure_report_names_the_colliding_pair_and_bins_the_misses():
     assert summary["missed_by_joint_at_limit"] == {shoulder: 1}
 
 
-def test_segment_clearance_on_hand_computed_geometry():
-    from benchmarks import failure_report
+def test_point_segment_distance_on_hand_computed_geometry():
+    """What failure_report's obstacle_between measures: a sphere's clearance from the end effector's
+    straight line to the target (`envs.collision.point_segment_distance` minus the radius)."""
+    from envs import collision
 
     a, b = np.zeros(3), np.array([1.0, 0.0, 0.0])
     centers = np.array([[0.5, 0.3, 0.0], [0.5, 0.05, 0.0], [1.5, 0.0, 0.0], [-0.3, 0.4, 0.0]])
     # beside the middle: 0.3 - 0.1; through the line: 0.05 - 0.1; past b: 0.5 - 0.1; behind a: 0.5 - 0.1
-    np.testing.assert_allclose(failure_report.segment_clearance(a, b, centers, 0.1), [0.2, -0.05, 0.4, 0.4], atol=1e-12)
-    np.testing.assert_allclose(failure_report.segment_clearance(a, a, np.array([0.0, 0.0, 0.3]), 0.1), 0.2)  # a point
+    np.testing.assert_allclose(collision.point_segment_distance(centers, a, b) - 0.1, [0.2, -0.05, 0.4, 0.4], atol=1e-6)
+    np.testing.assert_allclose(collision.point_segment_distance(np.array([0.0, 0.0, 0.3]), a, a) - 0.1, 0.2, atol=1e-6)
 
 
 def test_failure_report_tells_when_the_obstacle_is_in_the_way():
@@ -663,10 +665,7 @@ def test_failure_report_tells_when_the_obstacle_is_in_the_way():
     robot = envs.make("ur5e-reach-avoid").robot
     free = np.zeros(robot.nq, np.float32)
     free[1], free[2] = -1.2, 1.0
-    data = mujoco.MjData(robot.mj_model)
-    data.qpos[:] = free
-    mujoco.mj_kinematics(robot.mj_model, data)
-    ee = data.site_xpos[robot.ee_site].copy()
+    ee = ee_position(robot.mj_model, free)
     steps, n = 4, 2
     target = np.tile(ee + [0.4, 0.0, 0.0], (steps + 1, n, 1))
     obstacle = np.tile(ee + [0.2, 0.0, 0.0], (steps + 1, n, 1))

@@ -198,8 +198,9 @@ def test_presets_set_their_env_options_and_the_command_line_overrides_them():
         assert train_cli.parse([name]).env.action_scale == 0.2, name
     assert train_cli.parse(["ur5e-reach-ppo", "--env.action-scale", "0.25"]).env.action_scale == 0.25
     # the joint-limit penalty (not in the paper): the two UR5e PPO presets with the paper's observations only
-    limits = {name: (train_cli.parse([name]).env.w_joint_limit, train_cli.parse([name]).env.joint_limit_margin)
-              for name in ("ur5e-reach-ppo", "ur5e-reach-avoid-ppo", "ur5e-reach-ppo-plus", "panda-reach-ppo")}
+    limits = {name: (env.w_joint_limit, env.joint_limit_margin) for name in
+              ("ur5e-reach-ppo", "ur5e-reach-avoid-ppo", "ur5e-reach-ppo-plus", "panda-reach-ppo")
+              for env in [train_cli.parse([name]).env]}
     assert limits == {"ur5e-reach-ppo": (0.05, 0.5), "ur5e-reach-avoid-ppo": (1.0, 0.5),
                       "ur5e-reach-ppo-plus": (0.0, 0.5), "panda-reach-ppo": (0.0, 0.5)}
     assert train_cli.parse(["ur5e-reach-ppo", "--env.w-joint-limit", "0"]).env.w_joint_limit == 0.0
