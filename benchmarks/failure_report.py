@@ -12,7 +12,8 @@ Every episode also lists the joints that end it at a range limit (a UR5e joint t
 pin there: reaching on may need a full turn back the other way) and, with an obstacle, whether the
 straight line from the end effector to the target crosses the obstacle's sphere at the start and,
 for misses, at the end (`obstacle_between`: the obstacle in the end effector's way), and how close
-the robot's geoms end to the obstacle's surface (`final_obstacle_clearance`).
+the robot's geoms end to the obstacle's surface (`final_obstacle_clearance`). Outcomes are also
+binned by the target's height above the robot's mounting plane (`by_target_height`).
 A CPU handles a few hundred episodes in minutes (UR5e); the Panda is slow on CPUs (README).
 """
 
@@ -34,6 +35,9 @@ MISS_BINS = (0.02, 0.05, 0.10)
 """Upper edges (m) of the final-distance bins of missed episodes; the last bin is open."""
 LIMIT_MARGIN = 0.05
 """A joint within this many radians of either end of its range counts as at its limit."""
+HEIGHT_BINS = (0.0, 0.1, 0.3, 0.5)
+"""Edges (m) of the target-height bins (height above the robot's mounting plane z = 0); the outer
+bins are open."""
 PROXIMITY = 0.1
 """Clearance (m) under which the robot counts as near the obstacle: the default `obstacle_tau` of the
 paper's proximity penalty (eq. 3; the env measures it from the link origins, `link_distance`)."""
@@ -74,6 +78,7 @@ def classify(robot, records: dict, obstacle_radius: float | None = None) -> list
         blocked_start, blocked_end = (
             np.asarray(collision.point_segment_distance(obstacle, kin.ee_pos, target)) < obstacle_radius
             for kin in (kin_start, kin_end))
+    target_height = np.asarray(records["target_pos"])[0, :, 2] if "target_pos" in records else None
     pair_names = [" / ".join(_names(robot, pair)) for pair in robot.self_pairs]
     joint_names = [robot.mj_model.joint(j).name for j in range(robot.nq)]
     at_limit = np.minimum(end_q - robot.joint_low, robot.joint_high - end_q) < LIMIT_MARGIN
@@ -81,6 +86,8 @@ def classify(robot, records: dict, obstacle_radius: float | None = None) -> list
     for i in range(n):
         row = {"env": i, "step": int(length[i]), "start_clearance": float(self_start[i].min()),
                "at_limit": [joint_names[j] for j in np.flatnonzero(at_limit[i])]}
+        if target_height is not None:
+            row["target_height"] = float(target_height[i])
         if between:
             row["obstacle_between"] = {"start": bool(blocked_start[i])}
             row["final_obstacle_clearance"] = float(obstacle_end[i].min() - obstacle_radius)
@@ -136,7 +143,29 @@ def summarize(rows: list[dict]) -> dict:
             k: {"median": float(np.median([r["final_obstacle_clearance"] for r in v])),
                 "near": float(np.mean([r["final_obstacle_clearance"] < PROXIMITY for r in v]))}
             for k, v in sorted(by.items()) if v}
+    if rows and "target_height" in rows[0]:
+        summary["by_target_height"] = outcomes_by_height(rows)
     return summary
+
+
+def _bin_labels(edges) -> list[str]:
+    cm = lambda x: f"{x * 100:g}"
+    return ([f"< {cm(edges[0])} cm"] + [f"{cm(a)}-{cm(b)} cm" for a, b in zip(edges, edges[1:])]
+            + [f"> {cm(edges[-1])} cm"])
+
+
+def outcomes_by_height(rows: list[dict], edges=HEIGHT_BINS) -> dict:
+    """Per target-height bin (labels from `edges`, m): its episodes and the share of each outcome."""
+    heights = np.array([r["target_height"] for r in rows])
+    index = np.searchsorted(np.asarray(edges), heights, side="right")  # 0: below edges[0]
+    outcomes = sorted({r["outcome"] for r in rows})
+    out = {}
+    for b, label in enumerate(_bin_labels(edges)):
+        members = [r for r, k in zip(rows, index) if k == b]
+        if members:
+            out[label] = {"episodes": len(members),
+                          **{o: sum(r["outcome"] == o for r in members) / len(members) for o in outcomes}}
+    return out
 
 
 def markdown(summary: dict, title: str) -> str:
@@ -166,6 +195,13 @@ def markdown(summary: dict, title: str) -> str:
             lines[-1] += f"; missed episodes ending with it there: {pct(summary['missed_obstacle_between_at_end'])}"
         lines += ["", f"robot's clearance from the obstacle at the end (median; share within {PROXIMITY} m): " + ", ".join(
             f"{k} {v['median'] * 100:.1f} cm, {pct(v['near'])}" for k, v in summary["final_obstacle_clearance"].items())]
+    if "by_target_height" in summary:
+        bins = summary["by_target_height"]
+        outcomes = [k for k in next(iter(bins.values())) if k != "episodes"]
+        lines += ["", "| target height | episodes | " + " | ".join(outcomes) + " |",
+                  "|---|---:|" + "---:|" * len(outcomes)]
+        lines += [f"| {label} | {b['episodes']} | " + " | ".join(pct(b[o]) for o in outcomes) + " |"
+                  for label, b in bins.items()]
     return "\n".join(lines) + "\n"
 
 

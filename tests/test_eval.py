@@ -695,3 +695,23 @@ def test_failure_report_tells_when_the_obstacle_is_in_the_way():
     assert summary["final_obstacle_clearance"]["missed"]["median"] == rows[1]["final_obstacle_clearance"]
     assert "missed episodes ending with it there: 100.0 %" in failure_report.markdown(summary, "t")
     assert "obstacle_between" not in failure_report.classify(robot, records)[0]  # no radius given: not asked
+    assert [r["target_height"] for r in rows] == list(target[0, :, 2])
+
+
+def test_failure_report_bins_outcomes_by_target_height():
+    """Hand-sorted: heights on a bin edge go to the bin above it; empty bins are left out."""
+    from benchmarks import failure_report
+
+    heights = [-0.05, 0.02, 0.05, 0.1, 0.25, 0.6, 0.7]
+    outcomes = ["missed", "missed", "reached", "reached", "self collision", "reached", "reached"]
+    rows = [{"target_height": h, "outcome": o} for h, o in zip(heights, outcomes)]
+    bins = failure_report.outcomes_by_height(rows)
+    assert bins == {
+        "< 0 cm": {"episodes": 1, "missed": 1.0, "reached": 0.0, "self collision": 0.0},
+        "0-10 cm": {"episodes": 2, "missed": 0.5, "reached": 0.5, "self collision": 0.0},
+        "10-30 cm": {"episodes": 2, "missed": 0.0, "reached": 0.5, "self collision": 0.5},
+        "> 50 cm": {"episodes": 2, "missed": 0.0, "reached": 1.0, "self collision": 0.0},
+    }
+    text = failure_report.markdown({"episodes": 7, "outcomes": {}, "ending_at_a_joint_limit": {},
+                                    "by_target_height": bins}, "t")
+    assert "| 0-10 cm | 2 | 50.0 % | 50.0 % | 0.0 % |" in text
