@@ -13,7 +13,8 @@ pin there: reaching on may need a full turn back the other way) and, with an obs
 straight line from the end effector to the target crosses the obstacle's sphere at the start and,
 for misses, at the end (`obstacle_between`: the obstacle in the end effector's way), and how close
 the robot's geoms end to the obstacle's surface (`final_obstacle_clearance`). Outcomes are also
-binned by the target's height above the robot's mounting plane (`by_target_height`).
+binned by the target's height above the robot's mounting plane (`by_target_height`), and each
+episode records how far its end effector starts from the target (`start_distance`).
 A CPU handles a few hundred episodes in minutes (UR5e); the Panda is slow on CPUs (README).
 """
 
@@ -78,7 +79,11 @@ def classify(robot, records: dict, obstacle_radius: float | None = None) -> list
         blocked_start, blocked_end = (
             np.asarray(collision.point_segment_distance(obstacle, kin.ee_pos, target)) < obstacle_radius
             for kin in (kin_start, kin_end))
-    target_height = np.asarray(records["target_pos"])[0, :, 2] if "target_pos" in records else None
+    target_height = start_distance = None
+    if "target_pos" in records:
+        target0 = np.asarray(records["target_pos"])[0]
+        target_height = target0[:, 2]
+        start_distance = np.linalg.norm(np.asarray(kin_start.ee_pos) - target0, axis=-1)
     pair_names = [" / ".join(_names(robot, pair)) for pair in robot.self_pairs]
     joint_names = [robot.mj_model.joint(j).name for j in range(robot.nq)]
     at_limit = np.minimum(end_q - robot.joint_low, robot.joint_high - end_q) < LIMIT_MARGIN
@@ -88,6 +93,7 @@ def classify(robot, records: dict, obstacle_radius: float | None = None) -> list
                "at_limit": [joint_names[j] for j in np.flatnonzero(at_limit[i])]}
         if target_height is not None:
             row["target_height"] = float(target_height[i])
+            row["start_distance"] = float(start_distance[i])
         if between:
             row["obstacle_between"] = {"start": bool(blocked_start[i])}
             row["final_obstacle_clearance"] = float(obstacle_end[i].min() - obstacle_radius)
@@ -145,6 +151,8 @@ def summarize(rows: list[dict]) -> dict:
             for k, v in sorted(by.items()) if v}
     if rows and "target_height" in rows[0]:
         summary["by_target_height"] = outcomes_by_height(rows)
+        summary["start_distance_median"] = {k: float(np.median([r["start_distance"] for r in v]))
+                                            for k, v in sorted(by.items()) if v}
     return summary
 
 
@@ -195,6 +203,9 @@ def markdown(summary: dict, title: str) -> str:
             lines[-1] += f"; missed episodes ending with it there: {pct(summary['missed_obstacle_between_at_end'])}"
         lines += ["", f"robot's clearance from the obstacle at the end (median; share within {PROXIMITY} m): " + ", ".join(
             f"{k} {v['median'] * 100:.1f} cm, {pct(v['near'])}" for k, v in summary["final_obstacle_clearance"].items())]
+    if "start_distance_median" in summary:
+        lines += ["", "end effector's distance from the target at the start (median): " + ", ".join(
+            f"{k} {v * 100:.1f} cm" for k, v in summary["start_distance_median"].items())]
     if "by_target_height" in summary:
         bins = summary["by_target_height"]
         outcomes = [k for k in next(iter(bins.values())) if k != "episodes"]

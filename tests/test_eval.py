@@ -696,6 +696,8 @@ def test_failure_report_tells_when_the_obstacle_is_in_the_way():
     assert "missed episodes ending with it there: 100.0 %" in failure_report.markdown(summary, "t")
     assert "obstacle_between" not in failure_report.classify(robot, records)[0]  # no radius given: not asked
     assert [r["target_height"] for r in rows] == list(target[0, :, 2])
+    np.testing.assert_allclose([r["start_distance"] for r in rows], [0.4, 0.4], atol=1e-5)  # target 0.4 m along x
+    assert summary["start_distance_median"]["missed"] == rows[1]["start_distance"]
 
 
 def test_failure_report_bins_outcomes_by_target_height():
