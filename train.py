@@ -59,7 +59,7 @@ _UR5E_RELATIVE = dict(action_scale=0.3)
 # Not in the paper: a penalty near the joint range limits (envs.config.ReachConfig.w_joint_limit), where most misses of
 # the UR5e policies ended. At the rows' budgets, 5 seeds each (results/README.md, "The joint-limit penalty"): UR5e reach
 # 93.1 % -> 95.7 % with 0.05 (0.2: also 95.7 %); UR5e reach-avoid 71.1 % -> 73.6 % with 0.1, 81.4 % with 0.3, and
-# 84.8 % (0.6) and 85.7 % (1.0) at 150.7M steps of their 192M schedules, with fewer self collisions.
+# 84.8 % with 0.6 at 150.7M steps of its 192M schedule, 86.8 % with 1.0 at 192M, with fewer self collisions.
 _UR5E_REACH = dict(_UR5E_RELATIVE, w_joint_limit=0.05, joint_limit_margin=0.5)
 _UR5E_REACH_AVOID = dict(_UR5E_RELATIVE, w_joint_limit=1.0, joint_limit_margin=0.5)
 # Not in the paper: sin/cos of the joint angles and the self-collision pair distances next to the
