@@ -14,7 +14,9 @@ straight line from the end effector to the target crosses the obstacle's sphere 
 for misses, at the end (`obstacle_between`: the obstacle in the end effector's way), and how close
 the robot's geoms end to the obstacle's surface (`final_obstacle_clearance`). Outcomes are also
 binned by the target's height above the robot's mounting plane (`by_target_height`), and each
-episode records how far its end effector starts from the target (`start_distance`).
+episode records how far its end effector starts from the target (`start_distance`), how far it moved
+over the episode's last `END_STEPS` steps (`end_motion`: near 0 when the arm has stopped) and the
+smallest distance of any joint to its range limit at the end (`joint_margin`).
 A CPU handles a few hundred episodes in minutes (UR5e); the Panda is slow on CPUs (README).
 """
 
@@ -36,6 +38,11 @@ MISS_BINS = (0.02, 0.05, 0.10)
 """Upper edges (m) of the final-distance bins of missed episodes; the last bin is open."""
 LIMIT_MARGIN = 0.05
 """A joint within this many radians of either end of its range counts as at its limit."""
+END_STEPS = 10
+"""Steps at the end of an episode over which `end_motion` measures the end effector's displacement."""
+NEAR_LIMIT = 0.5
+"""Joint margin (rad) reported as near a limit: the default `joint_limit_margin`, where the env's
+joint-limit penalty (`w_joint_limit`) starts."""
 HEIGHT_BINS = (0.0, 0.1, 0.3, 0.5)
 """Edges (m) of the target-height bins (height above the robot's mounting plane z = 0); the outer
 bins are open."""
@@ -64,6 +71,8 @@ def classify(robot, records: dict, obstacle_radius: float | None = None) -> list
     n = qpos.shape[1]
     end_q = qpos[np.minimum(length, qpos.shape[0] - 1), np.arange(n)]
     kin_start, kin_end = robot.kinematics(jnp.asarray(qpos[0])), robot.kinematics(jnp.asarray(end_q))
+    before_end = robot.kinematics(jnp.asarray(qpos[np.clip(length - END_STEPS, 0, qpos.shape[0] - 1), np.arange(n)]))
+    end_motion = np.linalg.norm(np.asarray(kin_end.ee_pos) - np.asarray(before_end.ee_pos), axis=-1)
     self_start = np.asarray(robot.self_distances(kin_start.geom_xpos, kin_start.geom_xmat))
     self_end = np.asarray(robot.self_distances(kin_end.geom_xpos, kin_end.geom_xmat))
     if "obstacle_pos" in records:
@@ -86,11 +95,13 @@ def classify(robot, records: dict, obstacle_radius: float | None = None) -> list
         start_distance = np.linalg.norm(np.asarray(kin_start.ee_pos) - target0, axis=-1)
     pair_names = [" / ".join(_names(robot, pair)) for pair in robot.self_pairs]
     joint_names = [robot.mj_model.joint(j).name for j in range(robot.nq)]
-    at_limit = np.minimum(end_q - robot.joint_low, robot.joint_high - end_q) < LIMIT_MARGIN
+    margin = np.minimum(end_q - robot.joint_low, robot.joint_high - end_q)
+    at_limit = margin < LIMIT_MARGIN
     out = []
     for i in range(n):
         row = {"env": i, "step": int(length[i]), "start_clearance": float(self_start[i].min()),
-               "at_limit": [joint_names[j] for j in np.flatnonzero(at_limit[i])]}
+               "at_limit": [joint_names[j] for j in np.flatnonzero(at_limit[i])],
+               "joint_margin": float(margin[i].min()), "end_motion": float(end_motion[i])}
         if target_height is not None:
             row["target_height"] = float(target_height[i])
             row["start_distance"] = float(start_distance[i])
@@ -137,6 +148,10 @@ def summarize(rows: list[dict]) -> dict:
                                             for lab, a, b in zip(labels, edges, edges[1:])}
     summary["ending_at_a_joint_limit"] = {k: float(np.mean([bool(r["at_limit"]) for r in v]))
                                           for k, v in sorted(by.items()) if v}
+    summary["end"] = {k: {"end_motion_median": float(np.median([r["end_motion"] for r in v])),
+                          "joint_margin_median": float(np.median([r["joint_margin"] for r in v])),
+                          "near_limit": float(np.mean([r["joint_margin"] < NEAR_LIMIT for r in v]))}
+                      for k, v in sorted(by.items()) if v}
     if by["missed"]:
         summary["missed_by_joint_at_limit"] = dict(collections.Counter(
             j for r in by["missed"] for j in r["at_limit"]).most_common())
@@ -193,6 +208,11 @@ def markdown(summary: dict, title: str) -> str:
             f"{k}: {v}" for k, v in summary["missed_final_distance"].items())]
     lines += ["", f"episodes ending with a joint within {LIMIT_MARGIN} rad of its range limit: " + ", ".join(
         f"{k} {pct(v)}" for k, v in summary["ending_at_a_joint_limit"].items())]
+    if "end" in summary:
+        lines += ["", f"at the end (medians): end effector's motion over the last {END_STEPS} steps, smallest joint "
+                  f"margin, share with a joint within {NEAR_LIMIT} rad of a limit: " + "; ".join(
+                      f"{k} {v['end_motion_median'] * 100:.1f} cm, {v['joint_margin_median']:.2f} rad, {pct(v['near_limit'])}"
+                      for k, v in summary["end"].items())]
     if summary.get("missed_by_joint_at_limit"):
         lines += ["", "joints at a limit at the end of missed episodes: " + ", ".join(
             f"{k}: {v}" for k, v in summary["missed_by_joint_at_limit"].items())]

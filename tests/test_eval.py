@@ -610,8 +610,10 @@ def test_sac_export_acts_as_the_learner(tmp_path):
 # benchmarks/failure_report.py: episode outcomes from recorded poses (CPU MuJoCo as the reference)
 
 
-def test_failure_report_names_the_colliding_pair_and_bins_the_misses():
+def test_failure_report_names_the_colliding_pair_and_bins_the_misses(monkeypatch):
     from benchmarks import failure_report
+
+    monkeypatch.setattr(failure_report, "END_STEPS", 2)  # end_motion from 2 steps before each episode's end
 
     robot = envs.make("ur5e-reach").robot
     model = contact_model(robot)
@@ -641,6 +643,13 @@ def test_failure_report_names_the_colliding_pair_and_bins_the_misses():
     assert [r["at_limit"] for r in rows] == [[], [], [shoulder], []]
     assert summary["ending_at_a_joint_limit"] == {"missed": 0.5, "reached": 0.0, "self collision": 0.0}
     assert summary["missed_by_joint_at_limit"] == {shoulder: 1}
+    # margins: 0.01 and 0.2 rad as set; the end effector (CPU MuJoCo) moved from the free pose to the collision
+    # in env 1's last 2 steps (steps 1-3) and stood still in env 2's (steps 4-6)
+    np.testing.assert_allclose([rows[2]["joint_margin"], rows[3]["joint_margin"]], [0.01, 0.2], atol=1e-5)
+    assert rows[0]["joint_margin"] > failure_report.NEAR_LIMIT
+    moved = np.linalg.norm(ee_position(robot.mj_model, hit) - ee_position(robot.mj_model, free))
+    np.testing.assert_allclose([rows[1]["end_motion"], rows[2]["end_motion"]], [moved, 0.0], atol=1e-5)
+    assert summary["end"]["missed"]["near_limit"] == 1.0 and summary["end"]["reached"]["near_limit"] == 0.0
 
 
 def test_point_segment_distance_on_hand_computed_geometry():
