@@ -123,6 +123,10 @@ def classify(robot, records: dict, obstacle_radius: float | None = None) -> list
     return out
 
 
+def _median_by_outcome(by: dict, field: str) -> dict:
+    return {k: float(np.median([r[field] for r in v])) for k, v in sorted(by.items()) if v}
+
+
 def summarize(rows: list[dict]) -> dict:
     """Counts and rates of outcomes, collisions by pair/geom, steps and clearances, miss distances."""
     n = len(rows)
@@ -148,8 +152,8 @@ def summarize(rows: list[dict]) -> dict:
                                             for lab, a, b in zip(labels, edges, edges[1:])}
     summary["ending_at_a_joint_limit"] = {k: float(np.mean([bool(r["at_limit"]) for r in v]))
                                           for k, v in sorted(by.items()) if v}
-    summary["end"] = {k: {"end_motion_median": float(np.median([r["end_motion"] for r in v])),
-                          "joint_margin_median": float(np.median([r["joint_margin"] for r in v])),
+    motion, margin = _median_by_outcome(by, "end_motion"), _median_by_outcome(by, "joint_margin")
+    summary["end"] = {k: {"end_motion_median": motion[k], "joint_margin_median": margin[k],
                           "near_limit": float(np.mean([r["joint_margin"] < NEAR_LIMIT for r in v]))}
                       for k, v in sorted(by.items()) if v}
     if by["missed"]:
@@ -166,8 +170,7 @@ def summarize(rows: list[dict]) -> dict:
             for k, v in sorted(by.items()) if v}
     if rows and "target_height" in rows[0]:
         summary["by_target_height"] = outcomes_by_height(rows)
-        summary["start_distance_median"] = {k: float(np.median([r["start_distance"] for r in v]))
-                                            for k, v in sorted(by.items()) if v}
+        summary["start_distance_median"] = _median_by_outcome(by, "start_distance")
     return summary
 
 
