@@ -41,8 +41,9 @@ LIMIT_MARGIN = 0.05
 END_STEPS = 10
 """Steps at the end of an episode over which `end_motion` measures the end effector's displacement."""
 NEAR_LIMIT = 0.5
-"""Joint margin (rad) reported as near a limit: the default `joint_limit_margin`, where the env's
-joint-limit penalty (`w_joint_limit`) starts."""
+"""Joint margin (rad) reported as near a limit when the env's config has none: the default
+`joint_limit_margin`, where the env's joint-limit penalty (`w_joint_limit`) starts; `main` passes the
+evaluated config's own."""
 HEIGHT_BINS = (0.0, 0.1, 0.3, 0.5)
 """Edges (m) of the target-height bins (height above the robot's mounting plane z = 0); the outer
 bins are open."""
@@ -127,8 +128,18 @@ def _median_by_outcome(by: dict, field: str) -> dict:
     return {k: float(np.median([r[field] for r in v])) for k, v in sorted(by.items()) if v}
 
 
-def summarize(rows: list[dict]) -> dict:
-    """Counts and rates of outcomes, collisions by pair/geom, steps and clearances, miss distances."""
+def _bins(values, edges) -> tuple[np.ndarray, list[str]]:
+    """Each value's bin index into the labels of `edges` (m; bin k holds edges[k-1] <= v < edges[k], the
+    outer bins open) and those labels in cm."""
+    cm = lambda x: f"{x * 100:g}"
+    labels = ([f"< {cm(edges[0])} cm"] + [f"{cm(a)}-{cm(b)} cm" for a, b in zip(edges, edges[1:])]
+              + [f"> {cm(edges[-1])} cm"])
+    return np.searchsorted(np.asarray(edges), np.asarray(values), side="right"), labels
+
+
+def summarize(rows: list[dict], near_limit: float = NEAR_LIMIT) -> dict:
+    """Counts and rates of outcomes, collisions by pair/geom, steps and clearances, miss distances;
+    `near_limit` (rad) is the joint margin counted as near a limit."""
     n = len(rows)
     by = collections.defaultdict(list)
     for r in rows:
@@ -144,17 +155,15 @@ def summarize(rows: list[dict]) -> dict:
             "start_clearance_median": float(np.median([r["start_clearance"] for r in collided])),
         }
     summary["start_clearance_median_all"] = float(np.median([r["start_clearance"] for r in rows]))
-    misses = np.array([r["final_distance"] for r in by["missed"]])
-    if misses.size:
-        edges = (0.0,) + MISS_BINS + (np.inf,)
-        labels = [f"{a * 100:g}-{b * 100:g} cm" if np.isfinite(b) else f"> {a * 100:g} cm" for a, b in zip(edges, edges[1:])]
-        summary["missed_final_distance"] = {lab: int(np.sum((misses >= a) & (misses < b)))
-                                            for lab, a, b in zip(labels, edges, edges[1:])}
+    if by["missed"]:
+        index, labels = _bins([r["final_distance"] for r in by["missed"]], (0.0,) + MISS_BINS)
+        summary["missed_final_distance"] = {lab: int(np.sum(index == k)) for k, lab in enumerate(labels) if k}
     summary["ending_at_a_joint_limit"] = {k: float(np.mean([bool(r["at_limit"]) for r in v]))
                                           for k, v in sorted(by.items()) if v}
     motion, margin = _median_by_outcome(by, "end_motion"), _median_by_outcome(by, "joint_margin")
+    summary["near_limit_margin"] = near_limit
     summary["end"] = {k: {"end_motion_median": motion[k], "joint_margin_median": margin[k],
-                          "near_limit": float(np.mean([r["joint_margin"] < NEAR_LIMIT for r in v]))}
+                          "near_limit": float(np.mean([r["joint_margin"] < near_limit for r in v]))}
                       for k, v in sorted(by.items()) if v}
     if by["missed"]:
         summary["missed_by_joint_at_limit"] = dict(collections.Counter(
@@ -164,9 +173,9 @@ def summarize(rows: list[dict]) -> dict:
                                                 for k, v in sorted(by.items()) if v}
         if by["missed"]:
             summary["missed_obstacle_between_at_end"] = float(np.mean([r["obstacle_between"]["end"] for r in by["missed"]]))
+        clearance = _median_by_outcome(by, "final_obstacle_clearance")
         summary["final_obstacle_clearance"] = {
-            k: {"median": float(np.median([r["final_obstacle_clearance"] for r in v])),
-                "near": float(np.mean([r["final_obstacle_clearance"] < PROXIMITY for r in v]))}
+            k: {"median": clearance[k], "near": float(np.mean([r["final_obstacle_clearance"] < PROXIMITY for r in v]))}
             for k, v in sorted(by.items()) if v}
     if rows and "target_height" in rows[0]:
         summary["by_target_height"] = outcomes_by_height(rows)
@@ -174,19 +183,12 @@ def summarize(rows: list[dict]) -> dict:
     return summary
 
 
-def _bin_labels(edges) -> list[str]:
-    cm = lambda x: f"{x * 100:g}"
-    return ([f"< {cm(edges[0])} cm"] + [f"{cm(a)}-{cm(b)} cm" for a, b in zip(edges, edges[1:])]
-            + [f"> {cm(edges[-1])} cm"])
-
-
 def outcomes_by_height(rows: list[dict], edges=HEIGHT_BINS) -> dict:
     """Per target-height bin (labels from `edges`, m): its episodes and the share of each outcome."""
-    heights = np.array([r["target_height"] for r in rows])
-    index = np.searchsorted(np.asarray(edges), heights, side="right")  # 0: below edges[0]
+    index, labels = _bins([r["target_height"] for r in rows], edges)
     outcomes = sorted({r["outcome"] for r in rows})
     out = {}
-    for b, label in enumerate(_bin_labels(edges)):
+    for b, label in enumerate(labels):
         members = [r for r, k in zip(rows, index) if k == b]
         if members:
             out[label] = {"episodes": len(members),
@@ -213,7 +215,7 @@ def markdown(summary: dict, title: str) -> str:
         f"{k} {pct(v)}" for k, v in summary["ending_at_a_joint_limit"].items())]
     if "end" in summary:
         lines += ["", f"at the end (medians): end effector's motion over the last {END_STEPS} steps, smallest joint "
-                  f"margin, share with a joint within {NEAR_LIMIT} rad of a limit: " + "; ".join(
+                  f"margin, share with a joint within {summary['near_limit_margin']} rad of a limit: " + "; ".join(
                       f"{k} {v['end_motion_median'] * 100:.1f} cm, {v['joint_margin_median']:.2f} rad, {pct(v['near_limit'])}"
                       for k, v in summary["end"].items())]
     if summary.get("missed_by_joint_at_limit"):
@@ -262,7 +264,7 @@ def main(argv: list[str] | None = None) -> dict:
     import envs
 
     rows = classify(envs.from_config(env_name, config).robot, records, getattr(config, "obstacle_radius", None))
-    summary = summarize(rows)
+    summary = summarize(rows, getattr(config, "joint_limit_margin", NEAR_LIMIT))
     print(markdown(summary, f"{args.checkpoint} (seed {policy.units[args.unit]}) on {env_name}, eval seed {args.seed}"))
     if args.json:
         with open(args.json, "w") as f:

@@ -650,6 +650,7 @@ def test_failure_report_names_the_colliding_pair_and_bins_the_misses(monkeypatch
     moved = np.linalg.norm(ee_position(robot.mj_model, hit) - ee_position(robot.mj_model, free))
     np.testing.assert_allclose([rows[1]["end_motion"], rows[2]["end_motion"]], [moved, 0.0], atol=1e-5)
     assert summary["end"]["missed"]["near_limit"] == 1.0 and summary["end"]["reached"]["near_limit"] == 0.0
+    assert failure_report.summarize(rows, near_limit=0.1)["end"]["missed"]["near_limit"] == 0.5  # 0.01 only
 
 
 def test_point_segment_distance_on_hand_computed_geometry():
