@@ -61,14 +61,19 @@ def op_names(hlo_text: str) -> dict[str, str]:
     return out
 
 
-def scope_of(event: dict, scopes, names: dict[str, str]) -> str:
-    """The first scope of `scopes` in the event's name stack (or, without one, its name and
-    arguments), else "other"."""
+def name_stack(event: dict, names: dict[str, str]) -> str:
+    """The JAX name stack of the HLO op that launched a kernel (from the compiled HLO's metadata),
+    or, without one, the event's name and arguments."""
     args = event.get("args", {})
     # A kernel inside a CUDA graph names the graph ("command_buffer_12") as its hlo_op, but its
     # own name is its fusion's; ops outside graphs carry the name stack in args["name"].
-    text = (names.get(_key(event["name"])) or names.get(_key(args.get("hlo_op", "")))
+    return (names.get(_key(event["name"])) or names.get(_key(args.get("hlo_op", "")))
             or event["name"] + " " + " ".join(str(v) for v in args.values()))
+
+
+def scope_of(event: dict, scopes, names: dict[str, str]) -> str:
+    """The first scope of `scopes` in the event's name stack, else "other"."""
+    text = name_stack(event, names)
     for scope in scopes:
         if re.search(r"(^|[/ (])" + re.escape(scope) + r"($|[/ )])", text):
             return scope
@@ -81,10 +86,12 @@ def kernel_family(name: str) -> str:
 
 
 def summarize(events: list[dict], process_names: dict[int, str], scopes=DEFAULT_SCOPES, top: int = 15,
-              hlo_names: dict[str, str] | None = None, process: str = "GPU|TPU") -> dict:
+              hlo_names: dict[str, str] | None = None, process: str = "GPU|TPU", detail: int = 0) -> dict:
     """Per device (processes whose name matches the regex `process`): span, busy time and kernel
-    count (microseconds), time per scope and the top kernel families. On a CPU trace pass
-    `process="host:CPU"`: only events naming an HLO op count there."""
+    count (microseconds), time per scope and the top kernel families. With `detail` > 0 also, per
+    scope, its `detail` most expensive kernel families, each with the name stack of its most
+    expensive op (where in the program it comes from). On a CPU trace pass `process="host:CPU"`:
+    only events naming an HLO op count there."""
     out, names = {}, hlo_names or {}
     for pid, pname in sorted(process_names.items()):
         if not re.search(process, pname):
@@ -99,6 +106,7 @@ def summarize(events: list[dict], process_names: dict[int, str], scopes=DEFAULT_
         count_scope = collections.Counter()
         families = collections.Counter()
         family_count = collections.Counter()
+        in_scope, in_scope_count, op_time = collections.Counter(), collections.Counter(), collections.Counter()
         for e in kernels:
             s = scope_of(e, scopes, names)
             per_scope[s] += e["dur"]
@@ -106,6 +114,10 @@ def summarize(events: list[dict], process_names: dict[int, str], scopes=DEFAULT_
             f = kernel_family(e["name"])
             families[f] += e["dur"]
             family_count[f] += 1
+            if detail:
+                in_scope[s, f] += e["dur"]
+                in_scope_count[s, f] += 1
+                op_time[s, f, name_stack(e, names)] += e["dur"]
         out[pname] = {
             "span_us": end - start,
             "busy_us": busy_time([(e["ts"], e["ts"] + e["dur"]) for e in kernels]),
@@ -113,6 +125,15 @@ def summarize(events: list[dict], process_names: dict[int, str], scopes=DEFAULT_
             "scopes": {s: {"us": per_scope[s], "kernels": count_scope[s]} for s, _ in per_scope.most_common()},
             "top_kernels": [{"name": f, "us": t, "count": family_count[f]} for f, t in families.most_common(top)],
         }
+        if detail:
+            where = {}
+            for (s, f, stack), t in op_time.most_common():
+                where.setdefault((s, f), stack)
+            out[pname]["scope_kernels"] = {
+                s: [{"name": f, "us": t, "count": in_scope_count[s, f], "where": where[s, f]}
+                    for (s2, f), t in in_scope.most_common() if s2 == s][:detail]
+                for s in per_scope
+            }
     return out
 
 
@@ -146,6 +167,11 @@ def format_summary(summary: dict, host: list[dict] | None = None) -> str:
         lines += ["", "| kernel family | device ms | count |", "|---|---:|---:|"]
         lines += [f"| {k['name'][:70]} | {k['us'] / 1e3:.1f} | {k['count']:,} |" for k in d["top_kernels"]]
         lines.append("")
+        for scope, rows in d.get("scope_kernels", {}).items():
+            lines += [f"### {scope}: top kernel families", "", "| kernel family | device ms | count | from (name stack) |",
+                      "|---|---:|---:|---|"]
+            lines += [f"| {k['name'][:60]} | {k['us'] / 1e3:.1f} | {k['count']:,} | {k['where'][-110:]} |" for k in rows]
+            lines.append("")
     return "\n".join(lines)
 
 
@@ -156,6 +182,8 @@ def main():
     parser.add_argument("--top", type=int, default=15, help="kernel families listed per device")
     parser.add_argument("--hlo", help="compiled HLO text of the traced program (default: *.hlo.txt beside the trace)")
     parser.add_argument("--process", default="GPU|TPU", help="regex of the trace processes to summarise (CPU: host:CPU)")
+    parser.add_argument("--detail", type=int, default=0, metavar="N",
+                        help="also list each scope's N most expensive kernel families and where they come from")
     parser.add_argument("--json", help="also write the summary as JSON here")
     args = parser.parse_args()
     trace = Path(args.trace)
@@ -164,7 +192,7 @@ def main():
     hlo_names = {}
     for path in hlo:
         hlo_names.update(op_names(path.read_text()))
-    summary = summarize(events, names, args.scopes, args.top, hlo_names, args.process)
+    summary = summarize(events, names, args.scopes, args.top, hlo_names, args.process, args.detail)
     if not summary:
         raise ValueError(f"trace={args.trace!r} has no device events (a CPU-only trace has none).")
     host = host_summary(events, names)

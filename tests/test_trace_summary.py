@@ -57,3 +57,18 @@ def test_summary_of_a_known_trace(tmp_path):
     assert host == [{"name": "cuGraphLaunch", "us": 30.0, "count": 10}]  # python frames and one-offs left out
     text = ts.format_summary(summary, host)
     assert "kernels busy 0.0 ms (52%)" in text and "| env_step | 0.0 | 3 |" in text
+
+
+def test_per_scope_detail_names_where_kernels_come_from(tmp_path):
+    _trace(tmp_path)
+    events, names = ts.load_events(tmp_path)
+    hlo_names = ts.op_names((tmp_path / "chunk.hlo.txt").read_text())
+    d = ts.summarize(events, names, ts.DEFAULT_SCOPES, top=10, hlo_names=hlo_names, detail=5)["/device:GPU:0"]
+    env = d["scope_kernels"]["env_step"]
+    # by time within the scope: the two add kernels (20 us), then the library Cholesky (4 us)
+    assert [(k["name"], k["us"], k["count"]) for k in env] == [("loop_add_fusion", 20.0, 2), ("potrf_kernel", 4.0, 1)]
+    assert env[0]["where"] == "jit(chunk)/while/body/env_step/vmap()/add"
+    assert d["scope_kernels"]["other"] == [{"name": "memcpy32_post", "us": 2.0, "count": 1,
+                                            "where": "memcpy32_post command_buffer_9"}]
+    assert "### sgd_step: top kernel families" in ts.format_summary({"/device:GPU:0": d})
+    assert "scope_kernels" not in ts.summarize(events, names, hlo_names=hlo_names)["/device:GPU:0"]
