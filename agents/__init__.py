@@ -9,14 +9,18 @@
 `train.py` at the repository root wraps this with named presets and a generated command line.
 """
 
-from agents.checkpoint import Checkpointer
-from agents.distributions import TanhNormal
-from agents.driver import NonFiniteLossError, TrainConfig, TrainResult, config_from_json, evaluate, train, validate
-from agents.loop import Learner, Parallel, Programs, TrainState, Transition, episode_metrics, make_chunk, make_evaluate
-from agents.networks import MLP, TwinQ
-from agents.normalizer import RunningStats
-from agents.ppo import PPO, PPOConfig, gae, ppo_loss_terms
-from agents.sac import SAC, SACConfig, critic_target, temperature_loss
+from agents import xla_flags
+
+xla_flags.apply()  # before anything starts a JAX backend: see agents/xla_flags.py
+
+from agents.checkpoint import Checkpointer  # noqa: E402
+from agents.distributions import TanhNormal  # noqa: E402
+from agents.driver import NonFiniteLossError, TrainConfig, TrainResult, config_from_json, evaluate, train, validate  # noqa: E402
+from agents.loop import Learner, Parallel, Programs, TrainState, Transition, episode_metrics, make_chunk, make_evaluate  # noqa: E402
+from agents.networks import MLP, TwinQ  # noqa: E402
+from agents.normalizer import RunningStats  # noqa: E402
+from agents.ppo import PPO, PPOConfig, gae, ppo_loss_terms  # noqa: E402
+from agents.sac import SAC, SACConfig, critic_target, temperature_loss  # noqa: E402
 
 __all__ = [
     "Checkpointer", "TanhNormal", "NonFiniteLossError", "TrainConfig", "TrainResult", "config_from_json", "evaluate",
