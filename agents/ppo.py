@@ -31,7 +31,6 @@ import jax
 import jax.numpy as jnp
 import optax
 from flax import struct
-from jax.flatten_util import ravel_pytree
 
 from agents import networks, normalizer
 from agents.distributions import TanhNormal
@@ -88,7 +87,8 @@ class PPOConfig:
     """KL guard: skip the rest of an update's gradient steps once the approximate KL to the
     behaviour policy exceeds 1.5 * target_kl (0 disables)."""
     recompute_advantages: bool = True
-    """Recompute advantages with the current value function at the start of every epoch."""
+    """Recompute advantages with the current value function at the start of every epoch after the
+    first (whose parameters give the update's initial advantages)."""
     min_std: float = 1e-3
     """Lower bound of the policy's pre-squash standard deviation."""
     policy_hidden_sizes: tuple[int, ...] = (256, 256, 256)
@@ -210,6 +210,16 @@ def learning_rate(config: PPOConfig, progress: jax.Array) -> jax.Array:
     return config.learning_rate * frac
 
 
+def normalize_per_minibatch(advantages, pmean=lambda x: x):
+    """Advantages standardised within each minibatch (leading axis), with statistics averaged over
+    devices by `pmean`: what each gradient step would compute for its own minibatch, done for all
+    of an epoch's minibatches at once (a gradient step then starts with its forward pass)."""
+    axes = tuple(range(1, advantages.ndim))
+    mean = pmean(jnp.mean(advantages, axis=axes, keepdims=True))
+    var = pmean(jnp.mean(jnp.square(advantages - mean), axis=axes, keepdims=True))
+    return (advantages - mean) / (jnp.sqrt(var) + 1e-8)
+
+
 def popart_preserve(value_params, old: normalizer.RunningStats, new: normalizer.RunningStats):
     """Rescales the value head so its de-normalised outputs are unchanged by a statistics update
     (van Hasselt et al. 2016, "Learning values across many orders of magnitude", eq. 6)."""
@@ -249,9 +259,10 @@ class PPO:
         self.policy_net = networks.policy_network(action_size, c.policy_hidden_sizes, c.activation, c.kernel_init, c.layer_norm)
         self.value_net = networks.value_network(c.value_hidden_sizes, c.activation, c.kernel_init, c.layer_norm)
         clip = [optax.clip_by_global_norm(c.max_grad_norm)] if c.max_grad_norm > 0 else []
-        # On one flat vector of all parameters: a few large GPU kernels per gradient step instead of
-        # several per parameter array (the 320 steps of an update are launch-bound otherwise).
-        self.optimizer = optax.flatten(optax.chain(*clip, optax.scale_by_adam()))
+        # Adam on one flat vector of all parameters: a few large GPU kernels per gradient step instead
+        # of several per parameter array (the 320 steps of an update are launch-bound otherwise). The
+        # clipping norm is summed per array, so each part can start as soon as its gradient exists.
+        self.optimizer = optax.chain(*clip, optax.flatten(optax.scale_by_adam()))
 
     # -- pieces ---------------------------------------------------------------------------------
 
@@ -292,12 +303,12 @@ class PPO:
         return self._dist(state.params["policy"], self._obs(state, obs)).sample(key)
 
     @jax.named_scope("advantages")
-    def advantages(self, params, obs_stats, value_stats, data: Transition):
-        """GAE per unroll; `data` leaves are (envs, unrolls, unroll_length, ...)."""
+    def advantages(self, params, value_stats, obs, next_obs, data: Transition):
+        """GAE per unroll; `data` leaves are (envs, unrolls, unroll_length, ...), `obs` and `next_obs`
+        its observations already normalised."""
         c = self.config
-        norm = lambda o: self._obs(PPOState(None, None, obs_stats, None, None), o)
-        values = self._value(params["value"], value_stats, norm(data.obs))
-        next_values = self._value(params["value"], value_stats, norm(data.next_obs))
+        values = self._value(params["value"], value_stats, obs)
+        next_values = self._value(params["value"], value_stats, next_obs)
         time_first = lambda x: jnp.moveaxis(x, 2, 0)
         adv, targets = gae(time_first(data.reward), time_first(values), time_first(next_values),
                            time_first(data.termination), time_first(data.done), c.discount, c.gae_lambda)
@@ -333,14 +344,17 @@ class PPO:
         lr = learning_rate(c, state.updates.astype(jnp.float32) / self.total_updates)
 
         params, value_stats = state.params, state.value_stats
-        adv0, targets0 = self.advantages(params, state.obs_stats, value_stats, data)
+        # The observation statistics stay fixed during an update (they take this batch after it):
+        # normalise the batch's observations once for every epoch and gradient step.
+        obs, next_obs = self._obs(state, data.obs), self._obs(state, data.next_obs)
+        adv0, targets0 = self.advantages(params, value_stats, obs, next_obs, data)
         if c.normalize_value_targets:
             new_stats = normalizer.update(value_stats, targets0, par.axis_name, decay=c.value_norm_decay)
             params = {**params, "value": popart_preserve(params["value"], value_stats, new_stats)}
             value_stats = new_stats
 
         def loss_fn(p, mb):
-            x = self._obs(state, mb["obs"])
+            x = mb["obs"]
             dist = self._dist(p["policy"], x)
             v = self.value_net.apply(p["value"], x)[..., 0]
             targets = mb["targets"]
@@ -354,11 +368,6 @@ class PPO:
         @jax.named_scope("sgd_step")
         def sgd_step(carry, mb):
             p, opt_state, stopped = carry
-            adv = mb["advantages"]
-            if c.normalize_advantages:
-                mean = par.pmean(jnp.mean(adv))
-                var = par.pmean(jnp.mean(jnp.square(adv - mean)))
-                mb = {**mb, "advantages": (adv - mean) / (jnp.sqrt(var) + 1e-8)}
             (loss, terms), grads = jax.value_and_grad(loss_fn, has_aux=True)(p, mb)
             # Device-local loss and gradient; the global-batch ones are their means over devices.
             grads, loss, terms = par.mean_gradients(grads), par.pmean(loss), par.pmean(terms)
@@ -370,28 +379,32 @@ class PPO:
                 keep = lambda new, old: jax.tree.map(lambda a, b: jnp.where(stopped, b, a), new, old)
                 new_p, new_opt_state = keep(new_p, p), keep(new_opt_state, opt_state)
             p, opt_state = new_p, new_opt_state
-            terms = {**terms, "total_loss": loss, "grad_norm": jnp.linalg.norm(ravel_pytree(grads)[0]),
+            terms = {**terms, "total_loss": loss, "grad_norm": optax.tree.norm(grads),  # as the clipping computes it: XLA does it once
                      "skipped": stopped.astype(jnp.float32)}
             return (p, opt_state, stopped), terms
 
-        def epoch(carry, k):
-            p, opt_state, stopped = carry
-            if c.recompute_advantages:
-                adv, targets = self.advantages(p, state.obs_stats, value_stats, data)
-            else:
-                adv, targets = adv0, targets0
-            tree = {"obs": data.obs, "raw_action": data.extras["raw_action"], "log_prob": data.extras["log_prob"],
+        def epoch(carry, k, adv, targets):
+            tree = {"obs": obs, "raw_action": data.extras["raw_action"], "log_prob": data.extras["log_prob"],
                     "advantages": adv, "targets": targets}
             k_mb, k_ent = jax.random.split(k)
             # Noise of the one-sample entropy estimate, keyed by global env index (device-invariant).
             tree["noise"] = env_random(k_ent, par, data.extras["raw_action"].shape[1:])
             with jax.named_scope("minibatches"):
                 mbs = self.minibatches(tree, k_mb, par)
-            return jax.lax.scan(sgd_step, (p, opt_state, stopped), mbs)
+                if c.normalize_advantages:
+                    mbs["advantages"] = normalize_per_minibatch(mbs["advantages"], par.pmean)
+            return jax.lax.scan(sgd_step, carry, mbs)
 
-        (params, opt_state, _), terms = jax.lax.scan(
-            epoch, (params, state.opt_state, jnp.zeros((), bool)), jax.random.split(key, c.updates_per_batch)
-        )
+        def later_epoch(carry, k):
+            if not c.recompute_advantages:
+                return epoch(carry, k, adv0, targets0)
+            return epoch(carry, k, *self.advantages(carry[0], value_stats, obs, next_obs, data))
+
+        # The first epoch takes adv0: its parameters give the same values (PopArt preserves them).
+        keys = jax.random.split(key, c.updates_per_batch)
+        carry, first_terms = epoch((params, state.opt_state, jnp.zeros((), bool)), keys[0], adv0, targets0)
+        (params, opt_state, _), terms = jax.lax.scan(later_epoch, carry, keys[1:])
+        terms = jax.tree.map(lambda a, b: jnp.concatenate([a[None], b]), first_terms, terms)
         obs_stats = state.obs_stats
         if c.normalize_observations:
             obs_stats = normalizer.update(obs_stats, batch.obs, par.axis_name)

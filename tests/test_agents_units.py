@@ -13,7 +13,8 @@ from agents import normalizer
 from agents.distributions import TanhNormal
 from agents.loop import Parallel
 from agents.networks import MLP, TwinQ
-from agents.ppo import PPO, PPOConfig, gae, learning_rate, popart_preserve, ppo_loss_terms, ppo_total_loss
+from agents.ppo import (PPO, PPOConfig, gae, learning_rate, normalize_per_minibatch, popart_preserve, ppo_loss_terms,
+                        ppo_total_loss)
 from agents.sac import SAC, SACConfig, actor_loss, critic_loss, critic_target, polyak, temperature_loss
 
 
@@ -172,6 +173,16 @@ def test_popart_preserves_value_outputs():
     before = normalizer.denormalize(old, net.apply(params, x))
     after = normalizer.denormalize(new, net.apply(popart_preserve(params, old, new), x))
     np.testing.assert_allclose(np.asarray(after), np.asarray(before), rtol=1e-5, atol=1e-5)
+
+
+def test_advantages_are_standardised_per_minibatch_and_over_devices():
+    adv = jnp.array([[1.0, 3.0], [2.0, 2.0], [0.0, 4.0]])  # 3 minibatches of 2: means 2, stds 1, 0, 2
+    out = np.asarray(normalize_per_minibatch(adv))
+    np.testing.assert_allclose(out, [[-1.0, 1.0], [0.0, 0.0], [-1.0, 1.0]], atol=1e-6)
+    # Each minibatch split over two devices (one element each): the statistics are the whole minibatch's.
+    split = jnp.stack([adv[:, :1], adv[:, 1:]])
+    per_device = jax.vmap(lambda a: normalize_per_minibatch(a, lambda x: jax.lax.pmean(x, "d")), axis_name="d")(split)
+    np.testing.assert_allclose(np.concatenate(np.asarray(per_device), axis=1), out, atol=1e-6)
 
 
 def test_ppo_minibatches_are_a_stratified_permutation():
