@@ -379,7 +379,8 @@ class PPO:
                 keep = lambda new, old: jax.tree.map(lambda a, b: jnp.where(stopped, b, a), new, old)
                 new_p, new_opt_state = keep(new_p, p), keep(new_opt_state, opt_state)
             p, opt_state = new_p, new_opt_state
-            terms = {**terms, "total_loss": loss, "grad_norm": optax.tree.norm(grads),  # as the clipping computes it: XLA does it once
+            # grad_norm: the norm the clipping computes (the same expression, so XLA can merge the two).
+            terms = {**terms, "total_loss": loss, "grad_norm": optax.tree.norm(grads),
                      "skipped": stopped.astype(jnp.float32)}
             return (p, opt_state, stopped), terms
 
