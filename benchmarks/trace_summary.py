@@ -106,7 +106,7 @@ def summarize(events: list[dict], process_names: dict[int, str], scopes=DEFAULT_
         count_scope = collections.Counter()
         families = collections.Counter()
         family_count = collections.Counter()
-        in_scope, in_scope_count, op_time = collections.Counter(), collections.Counter(), collections.Counter()
+        op_time, op_count = collections.Counter(), collections.Counter()
         for e in kernels:
             s = scope_of(e, scopes, names)
             per_scope[s] += e["dur"]
@@ -115,9 +115,8 @@ def summarize(events: list[dict], process_names: dict[int, str], scopes=DEFAULT_
             families[f] += e["dur"]
             family_count[f] += 1
             if detail:
-                in_scope[s, f] += e["dur"]
-                in_scope_count[s, f] += 1
                 op_time[s, f, name_stack(e, names)] += e["dur"]
+                op_count[s, f] += 1
         out[pname] = {
             "span_us": end - start,
             "busy_us": busy_time([(e["ts"], e["ts"] + e["dur"]) for e in kernels]),
@@ -126,14 +125,22 @@ def summarize(events: list[dict], process_names: dict[int, str], scopes=DEFAULT_
             "top_kernels": [{"name": f, "us": t, "count": family_count[f]} for f, t in families.most_common(top)],
         }
         if detail:
-            where = {}
-            for (s, f, stack), t in op_time.most_common():
-                where.setdefault((s, f), stack)
-            out[pname]["scope_kernels"] = {
-                s: [{"name": f, "us": t, "count": in_scope_count[s, f], "where": where[s, f]}
-                    for (s2, f), t in in_scope.most_common() if s2 == s][:detail]
-                for s in per_scope
-            }
+            rows = scope_kernels(op_time, op_count, detail)
+            out[pname]["scope_kernels"] = {s: rows[s] for s in per_scope}
+    return out
+
+
+def scope_kernels(op_time: collections.Counter, op_count: collections.Counter, n: int) -> dict[str, list[dict]]:
+    """Per scope, its `n` most expensive kernel families from device time per (scope, family, name
+    stack) and kernel counts per (scope, family); each names the stack of its most expensive op."""
+    family_time, where = collections.Counter(), {}
+    for (s, f, stack), t in op_time.most_common():
+        family_time[s, f] += t
+        where.setdefault((s, f), stack)
+    out = collections.defaultdict(list)
+    for (s, f), t in family_time.most_common():
+        if len(out[s]) < n:
+            out[s].append({"name": f, "us": t, "count": op_count[s, f], "where": where[s, f]})
     return out
 
 
