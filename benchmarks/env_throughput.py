@@ -46,8 +46,14 @@ def time_calls(fn, args, repeats):
     return statistics.median(times)
 
 
-def env_rate(name, num_envs, steps, repeats, substeps=None, auto_reset=True):
-    env = envs.make(name) if substeps is None else envs.make(name, substeps=substeps)
+def env_rollout(name, num_envs, steps, substeps=None, auto_reset=True, config=None):
+    """`(fn, args)`: a jitted `lax.scan` of `steps` env steps with uniform random actions, and its
+    arguments. The env is `envs.from_config(name, config)` when `config` is given (a training preset's
+    env, say), else the registry's default for `name` with `substeps` overridden."""
+    if config is not None:
+        env = envs.from_config(name, config)
+    else:
+        env = envs.make(name) if substeps is None else envs.make(name, substeps=substeps)
     batched = envs.wrap(env) if auto_reset else envs.wrappers.VmapWrapper(env)
     state = jax.jit(batched.reset)(jax.random.split(jax.random.PRNGKey(0), num_envs))
 
@@ -60,8 +66,13 @@ def env_rate(name, num_envs, steps, repeats, substeps=None, auto_reset=True):
         state, _ = jax.lax.scan(body, state, jax.random.split(key, steps))
         return state
 
-    seconds = time_calls(rollout, (state, jax.random.PRNGKey(1)), repeats)
-    return num_envs * steps / seconds
+    return rollout, (state, jax.random.PRNGKey(1))
+
+
+def env_rate(name, num_envs, steps, repeats, substeps=None, auto_reset=True, config=None):
+    """Env steps/s of `env_rollout(...)`: median of `repeats` timed calls after a warm-up."""
+    fn, args = env_rollout(name, num_envs, steps, substeps, auto_reset, config)
+    return num_envs * steps / time_calls(fn, args, repeats)
 
 
 def ceiling_rate(robot_name, num_envs, steps, repeats, substeps, fast=None):

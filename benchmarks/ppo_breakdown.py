@@ -81,7 +81,7 @@ def main():
     # One device, whatever the machine has (the default, devices=0, would split the envs over all).
     base = train_cli.make_config(args.preset, eval_envs=0, progress=False, tensorboard=False, num_timesteps=10**9,
                                  devices=1)
-    algo, env = base.algo, base.env
+    algo = base.algo
     with_algo = lambda **kw: dataclasses.replace(base, algo=dataclasses.replace(algo, **kw))
     variants = {
         "full update": (base, None),
@@ -110,7 +110,7 @@ def main():
         out.with_suffix(".json").write_text(json.dumps({"meta": meta, "rows": rows}, indent=2))
 
     if args.env_only:
-        rate = env_rate(base.env_name, algo.num_envs, spu // algo.num_envs, 3, getattr(env, "substeps", None))
+        rate = env_rate(base.env_name, algo.num_envs, spu // algo.num_envs, 3, config=base.env)  # the trained env
         record("env only (random actions, no training loop)", spu / rate)
     for name in chosen:
         config, wrapper = variants[name]

@@ -7,11 +7,16 @@ of the same environment in the same run, and on 1..N local GPUs at the same per-
     python benchmarks/train_throughput.py --trace traces/  # + profile: benchmarks/trace_summary.py traces/1dev
 
 Training rate: the compiled chunk of `--updates` PPO updates (rollouts, GAE, 5 epochs x 64
-minibatches of gradient steps) timed after a one-update warm-up that compiles it; env steps per
-second = updates x env steps per update x seeds / seconds. Env-only rate: the wrapped env stepped
-with random actions (`benchmarks/env_throughput.py`), same number of envs. With several device
-counts, each run keeps the per-device `num_envs` and `batch_size` of the preset, so the global
-batch grows with the devices (weak scaling).
+minibatches of gradient steps), timed after a one-update warm-up that compiles it; env steps per
+second = updates x env steps per update x seeds / seconds. Env-only rate: the preset's own env
+config (same substeps, action scale, reward terms), wrapped as in training (episode limit, fresh
+auto-reset, vmap) and stepped with uniform random actions (`benchmarks/env_throughput.py`), same
+number of envs. Everything is compiled first; then `--rounds` rounds each time the env alone
+(median of three calls) and every setting once, so that a drift of the GPU's speed during the
+process (a few per cent were seen) falls on both sides of each round's ratio. Reported: per-round
+figures, their medians, and the fraction of env-only = the median of the rounds' ratios. With
+several device counts, each run keeps the per-device `num_envs` and `batch_size` of the preset, so
+the global batch grows with the devices (weak scaling).
 """
 
 from __future__ import annotations
@@ -20,6 +25,7 @@ import argparse
 import dataclasses
 import datetime
 import json
+import statistics
 import sys
 import time
 from pathlib import Path
@@ -34,38 +40,46 @@ import jax.numpy as jnp  # noqa: E402
 import train as train_cli  # noqa: E402
 from agents import driver  # noqa: E402
 from agents.loop import MULTI_DEVICE_MODES  # noqa: E402
-from env_throughput import env_rate  # noqa: E402
+from env_throughput import env_rollout, time_calls  # noqa: E402
 
 
-def training_rate(config, updates: int, trace_dir: str | None = None) -> tuple[float, float]:
-    """(env steps/s, compile seconds) of `updates` updates of the config's compiled chunk. With
-    `trace_dir`, one more update runs under the JAX profiler afterwards (TensorBoard / Perfetto trace
-    of where an update's time goes; not part of the timing)."""
-    programs = driver.programs_for(config)
-    state = programs.init(driver.seed_keys(config))
-    start = time.perf_counter()
-    state, metrics = programs.chunk(state, jnp.int32(1))
-    jax.block_until_ready(metrics)
-    compile_seconds = time.perf_counter() - start
-    start = time.perf_counter()
-    state, metrics = programs.chunk(state, jnp.int32(updates))
-    jax.block_until_ready(metrics)
-    seconds = time.perf_counter() - start
-    if trace_dir:
-        # The compiled program's HLO maps kernel names to JAX name scopes (benchmarks/trace_summary.py).
+class Training:
+    """One setting's compiled chunk and its state; `time(updates)` runs `updates` updates and
+    returns env steps/s."""
+
+    def __init__(self, config):
+        self.config = config
+        self.programs = driver.programs_for(config)
+        self.state = self.programs.init(driver.seed_keys(config))
+        start = time.perf_counter()
+        self.state, metrics = self.programs.chunk(self.state, jnp.int32(1))  # compiles
+        jax.block_until_ready(metrics)
+        self.compile_seconds = time.perf_counter() - start
+
+    def time(self, updates: int) -> float:
+        start = time.perf_counter()
+        self.state, metrics = self.programs.chunk(self.state, jnp.int32(updates))
+        jax.block_until_ready(metrics)
+        seconds = time.perf_counter() - start
+        return updates * driver.env_steps_per_update(self.config) * self.config.seeds / seconds
+
+    def trace(self, trace_dir: str) -> None:
+        """One more update under the JAX profiler (TensorBoard / Perfetto trace of where an update's
+        time goes; not part of the timing), with the compiled program's HLO beside it, which maps
+        kernel names to JAX name scopes (benchmarks/trace_summary.py)."""
         Path(trace_dir).mkdir(parents=True, exist_ok=True)
-        hlo = programs.chunk.lower(state, jnp.int32(1)).compile().as_text()
+        hlo = self.programs.chunk.lower(self.state, jnp.int32(1)).compile().as_text()
         (Path(trace_dir) / "chunk.hlo.txt").write_text(hlo)
         with jax.profiler.trace(trace_dir, create_perfetto_trace=True):
-            state, metrics = programs.chunk(state, jnp.int32(1))
+            self.state, metrics = self.programs.chunk(self.state, jnp.int32(1))
             jax.block_until_ready(metrics)
-    return updates * driver.env_steps_per_update(config) * config.seeds / seconds, compile_seconds
 
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--preset", default="ur5e-reach-ppo")
     parser.add_argument("--updates", type=int, default=10, help="timed updates per measurement")
+    parser.add_argument("--rounds", type=int, default=3, help="rounds of (env only, every setting) timings")
     parser.add_argument("--seeds", type=int, default=1)
     parser.add_argument("--devices", type=int, nargs="+", default=[1], help="device counts to measure")
     parser.add_argument("--env-steps", type=int, default=100, help="env steps per timed call of the env-only rate")
@@ -75,52 +89,79 @@ def main():
     parser.add_argument("--trace", metavar="DIR", help="also write a profiler trace of one update per setting to DIR/<setting>")
     parser.add_argument("--out", default="results/train_throughput")
     args = parser.parse_args()
+    if args.updates < 1 or args.rounds < 1 or args.env_steps < 1:
+        parser.error(f"--updates, --rounds and --env-steps must be >= 1, got {args.updates}, {args.rounds}, {args.env_steps}")
 
     base = train_cli.make_config(args.preset, seeds=args.seeds, eval_envs=0, progress=False, tensorboard=False)
-    rows = []
+    # Several devices: each --multi-device mode; one device: no mode (None runs the default program).
+    settings = {}
+    for devices in args.devices:
+        for mode in (args.multi_device if devices > 1 else [None]):
+            algo = base.algo
+            if devices > 1:  # keep the per-device batch: weak scaling
+                algo = dataclasses.replace(algo, num_envs=algo.num_envs * devices, batch_size=algo.batch_size * devices)
+            config = dataclasses.replace(base, algo=algo, devices=devices, multi_device=mode or base.multi_device,
+                                         num_timesteps=(args.rounds * args.updates + 2) * algo.env_steps_per_update)
+            driver.validate(config)  # every setting before the first compile
+            settings[f"{devices}dev" + (f"-{mode}" if mode else "")] = (devices, mode, config)
+
     env_only = None
     if not args.skip_env_only:
-        env_only = env_rate(base.env_name, base.algo.num_envs, args.env_steps, 3, base.env.substeps)
-        print(f"env only, {base.algo.num_envs} envs, 1 device: {env_only:,.0f} env steps/s", flush=True)
-    # Several devices: each --multi-device mode; one device: no mode (None runs the default program).
-    settings = [(d, m) for d in args.devices for m in (args.multi_device if d > 1 else [None])]
-    for devices, mode in settings:
-        label = f"{devices}dev" + (f"-{mode}" if mode else "")
-        algo = base.algo
-        if devices > 1:  # keep the per-device batch: weak scaling
-            algo = dataclasses.replace(algo, num_envs=algo.num_envs * devices, batch_size=algo.batch_size * devices)
-        config = dataclasses.replace(base, algo=algo, devices=devices, multi_device=mode or base.multi_device,
-                                     num_timesteps=(args.updates + 1) * algo.env_steps_per_update)
-        driver.validate(config)
-        rate, compile_s = training_rate(config, args.updates, str(Path(args.trace) / label) if args.trace else None)
+        env_fn, env_args = env_rollout(base.env_name, base.algo.num_envs, args.env_steps, config=base.env)
+        env_time = lambda: base.algo.num_envs * args.env_steps / time_calls(env_fn, env_args, 3)
+        jax.block_until_ready(env_fn(*env_args))  # compiles
+        env_only = []
+    runs = {}
+    for label, (_, _, config) in settings.items():
+        runs[label] = Training(config)
+        print(f"{label}: compile + first update {runs[label].compile_seconds:.0f} s", flush=True)
+    rates = {label: [] for label in settings}
+    for r in range(args.rounds):
+        line = []
+        if env_only is not None:
+            env_only.append(env_time())
+            line.append(f"env only {env_only[-1]:,.0f}")
+        for label, run in runs.items():
+            rates[label].append(run.time(args.updates))
+            line.append(f"{label} {rates[label][-1]:,.0f}")
+        print(f"round {r + 1}: " + ", ".join(line) + " env steps/s", flush=True)
+    if args.trace:
+        for label, run in runs.items():
+            run.trace(str(Path(args.trace) / label))
+
+    rows = []
+    for label, (devices, mode, config) in settings.items():
+        algo = config.algo
         row = {"devices": devices, "multi_device": mode, "num_envs": algo.num_envs,
                "batch_size": algo.batch_size, "seeds": args.seeds, "env_steps_per_update": algo.env_steps_per_update,
-               "train_steps_per_s": rate, "compile_and_first_update_s": compile_s}
+               "train_steps_per_s": statistics.median(rates[label]), "train_steps_per_s_rounds": rates[label],
+               "compile_and_first_update_s": runs[label].compile_seconds}
         if devices == 1 and env_only:
-            row["env_only_steps_per_s"] = env_only
-            row["fraction_of_env_only"] = rate / env_only
+            ratios = [t / e for t, e in zip(rates[label], env_only)]
+            row.update(env_only_steps_per_s=statistics.median(env_only), env_only_steps_per_s_rounds=env_only,
+                       fraction_of_env_only=statistics.median(ratios), fraction_of_env_only_rounds=ratios)
         rows.append(row)
-        print(f"{label}, {algo.num_envs} envs, batch {algo.batch_size}: "
-              f"{rate:,.0f} env steps/s (compile + first update {compile_s:.0f} s)", flush=True)
     for row in rows:
         row["speedup_vs_1_device"] = row["train_steps_per_s"] / rows[0]["train_steps_per_s"] if rows[0]["devices"] == 1 else None
 
     device = jax.devices()[0]
     meta = {"device": device.device_kind, "local_devices": jax.local_device_count(), "jax": jax.__version__,
             "date": datetime.date.today().isoformat(), "command": " ".join(["python"] + sys.argv),
-            "preset": args.preset, "algo": dataclasses.asdict(base.algo), "env_name": base.env_name,
+            "preset": args.preset, "updates": args.updates, "rounds": args.rounds, "env_steps": args.env_steps,
+            "algo": dataclasses.asdict(base.algo), "env_name": base.env_name, "env": dataclasses.asdict(base.env),
             "matmul_precision": base.matmul_precision}
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.with_suffix(".json").write_text(json.dumps({"meta": meta, "rows": rows}, indent=2))
     lines = [f"# Training throughput: {args.preset} ({meta['device']} x{meta['local_devices']}, {meta['date']})", "",
-             f"Command: `{meta['command']}`, jax {meta['jax']}, {args.seeds} seed(s), {args.updates} timed updates.", "",
+             f"Command: `{meta['command']}`, jax {meta['jax']}, {args.seeds} seed(s), {args.rounds} rounds of "
+             f"{args.updates} timed updates; medians over the rounds (fraction: median of the rounds' ratios).", "",
              "| devices | multi-device | envs | batch | env steps/update | training env steps/s | env-only env steps/s | fraction | speed-up |",
              "|---:|---|---:|---:|---:|---:|---:|---:|---:|"]
     for r in rows:
         lines.append(f"| {r['devices']} | {r['multi_device'] or ''} | {r['num_envs']:,} | {r['batch_size']} | {r['env_steps_per_update']:,} | "
                      f"{r['train_steps_per_s']:,.0f} | {r.get('env_only_steps_per_s', float('nan')):,.0f} | "
-                     f"{r.get('fraction_of_env_only', float('nan')):.0%} | {r['speedup_vs_1_device'] or float('nan'):.2f} |")
+                     f"{r.get('fraction_of_env_only', float('nan')):.1%} | {r['speedup_vs_1_device'] or float('nan'):.2f} |")
     out.with_suffix(".md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
 
