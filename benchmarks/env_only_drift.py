@@ -9,7 +9,8 @@ with fresh copies of its input buffers, after the training state was freed, afte
 allocations and after 8 s of other GPU work. The compiled programs stay the same throughout; the
 GPU's clocks can be watched beside it (`nvidia-smi --query-gpu=clocks.sm,clocks_event_reasons.active
 -lms 250`). On an H200 the rate moved between three levels, 1.06M, 1.12M and 1.14M env steps/s
-(results/speed_history/README.md, "13"), which is why train_throughput.py alternates its timings.
+(results/speed_history/README.md, "13"), with XLA's memory pool on or off, which is why
+train_throughput.py alternates its timings.
 """
 import dataclasses, gc, sys, time, datetime
 from pathlib import Path
