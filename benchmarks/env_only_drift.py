@@ -12,51 +12,72 @@ GPU's clocks can be watched beside it (`nvidia-smi --query-gpu=clocks.sm,clocks_
 (results/speed_history/README.md, "13"), with XLA's memory pool on or off, which is why
 train_throughput.py alternates its timings.
 """
-import dataclasses, gc, sys, time, datetime
+
+from __future__ import annotations
+
+import dataclasses
+import datetime
+import gc
+import sys
+import time
 from pathlib import Path
+
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT)); sys.path.insert(0, str(ROOT / "benchmarks"))
-import agents  # noqa
-import jax, jax.numpy as jnp
-import train as train_cli
-from agents import driver
-from env_throughput import env_rollout, time_calls
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
 
-base = train_cli.make_config("ur5e-reach-ppo", seeds=1, eval_envs=0, progress=False, tensorboard=False)
-N, S = base.algo.num_envs, 100
-fn, args = env_rollout(base.env_name, N, S, config=base.env)
+import agents  # noqa: E402,F401  (first: the project's XLA settings, as in training)
+import jax  # noqa: E402
+import jax.numpy as jnp  # noqa: E402
 
-def env(label, a=None):
-    t0 = time.time()
-    r = N * S / time_calls(fn, a or args, 3)
-    print(f"{datetime.datetime.now().strftime('%H:%M:%S.%f')[:-3]} {label:45s} {r:12,.0f}  ({time.time()-t0:.1f}s)", flush=True)
+import train as train_cli  # noqa: E402
+from env_throughput import env_rollout, time_calls  # noqa: E402
+from train_throughput import Training  # noqa: E402
 
-env("A fresh (compiles)")
-env("A2 fresh again")
-env("A3 fresh again")
-cfg = dataclasses.replace(base, num_timesteps=200 * base.algo.env_steps_per_update)
-programs = driver.programs_for(cfg)
-state = programs.init(driver.seed_keys(cfg))
-state, m = programs.chunk(state, jnp.int32(1)); jax.block_until_ready(m)
-env("B after compile + 1 update")
-t0 = time.time(); state, m = programs.chunk(state, jnp.int32(10)); jax.block_until_ready(m)
-print(f"train 10 updates {10*base.algo.env_steps_per_update/(time.time()-t0):,.0f}", flush=True)
-env("C after 10 updates")
-env("C2 again")
-time.sleep(10)
-env("D after 10 s idle")
-t0 = time.time(); state, m = programs.chunk(state, jnp.int32(10)); jax.block_until_ready(m)
-print(f"train 10 updates {10*base.algo.env_steps_per_update/(time.time()-t0):,.0f}", flush=True)
-env("E after 10 more updates")
-fresh = jax.tree.map(jnp.copy, args); jax.block_until_ready(fresh)
-env("F fresh copies of the env state", fresh)
-env("F2 original buffers again")
-del state, m; gc.collect()
-env("G after the training state was freed")
-for k in range(3):
-    t0 = time.time(); x = jnp.ones((1 << 28,)) * 2; jax.block_until_ready(x); del x
-    env(f"H{k} after a 1 GiB temp alloc")
-t0 = time.time()
-while time.time() - t0 < 8:
-    y = jnp.sum(jnp.sin(jnp.ones((1 << 26,)))); jax.block_until_ready(y)
-env("I after 8 s of other GPU work")
+STEPS = 100
+"""Env steps per timed call of the env-only rollout."""
+
+
+def main():
+    base = train_cli.make_config("ur5e-reach-ppo", seeds=1, eval_envs=0, progress=False, tensorboard=False)
+    num_envs = base.algo.num_envs
+    fn, args = env_rollout(base.env_name, num_envs, STEPS, config=base.env)
+
+    def env_only(label, call_args=args):
+        start = time.time()
+        rate = num_envs * STEPS / time_calls(fn, call_args, 3)
+        now = datetime.datetime.now().strftime("%H:%M:%S.%f")[:-3]
+        print(f"{now} {label:45s} {rate:12,.0f}  ({time.time() - start:.1f}s)", flush=True)
+
+    def train(run, updates=10):
+        print(f"train {updates} updates {run.time(updates):,.0f}", flush=True)
+
+    env_only("A fresh (compiles)")
+    env_only("A2 fresh again")
+    env_only("A3 fresh again")
+    run = Training(dataclasses.replace(base, num_timesteps=200 * base.algo.env_steps_per_update))  # compiles, 1 update
+    env_only("B after compile + 1 update")
+    train(run)
+    env_only("C after 10 updates")
+    env_only("C2 again")
+    time.sleep(10)
+    env_only("D after 10 s idle")
+    train(run)
+    env_only("E after 10 more updates")
+    fresh = jax.block_until_ready(jax.tree.map(jnp.copy, args))
+    env_only("F fresh copies of the env state", fresh)
+    env_only("F2 original buffers again")
+    del run
+    gc.collect()
+    env_only("G after the training state was freed")
+    for k in range(3):
+        jax.block_until_ready(jnp.ones((1 << 28,)) * 2)  # 1 GiB of float32, freed at once
+        env_only(f"H{k} after a 1 GiB temp alloc")
+    start = time.time()
+    while time.time() - start < 8:
+        jax.block_until_ready(jnp.sum(jnp.sin(jnp.ones((1 << 26,)))))
+    env_only("I after 8 s of other GPU work")
+
+
+if __name__ == "__main__":
+    main()
