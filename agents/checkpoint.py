@@ -10,56 +10,12 @@ chunk donates its input state, so the arrays must be written before the next chu
 
 from __future__ import annotations
 
-import dataclasses
-import json
 import os
 import re
-import types
-import typing
-from typing import Any
 
 import jax
 import jax.numpy as jnp
 import orbax.checkpoint as ocp
-
-
-def config_to_dict(config) -> dict:
-    """A JSON-ready dict of a (nested) frozen-dataclass config."""
-    return json.loads(json.dumps(dataclasses.asdict(config)))
-
-
-def dataclass_from_dict(cls, data: dict):
-    """Inverse of `config_to_dict` for one dataclass type: nested dataclasses and tuples are rebuilt
-    from the field annotations; unknown keys raise a ValueError naming them."""
-    hints = typing.get_type_hints(cls)
-    names = {f.name for f in dataclasses.fields(cls)}
-    unknown = sorted(set(data) - names)
-    if unknown:
-        raise ValueError(f"config field {unknown[0]!r} does not exist in {cls.__name__}: allowed are {', '.join(sorted(names))}.")
-    kwargs = {}
-    for name, value in data.items():
-        kwargs[name] = _coerce(hints.get(name, Any), value)
-    return cls(**kwargs)
-
-
-def _coerce(tp, value):
-    origin = typing.get_origin(tp)
-    if dataclasses.is_dataclass(tp) and isinstance(value, dict):
-        return dataclass_from_dict(tp, value)
-    if origin is tuple and isinstance(value, list):
-        args = typing.get_args(tp)
-        inner = args[0] if args else Any
-        return tuple(_coerce(inner, v) for v in value)
-    if origin in (typing.Union, types.UnionType):
-        for arg in typing.get_args(tp):
-            if arg is type(None) and value is None:
-                return None
-        for arg in typing.get_args(tp):
-            if arg is not type(None):
-                return _coerce(arg, value)
-    if tp is float and isinstance(value, int):
-        return float(value)
-    return value
 
 
 def _nonempty_leaves(tree) -> dict:

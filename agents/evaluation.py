@@ -30,7 +30,7 @@ import jax
 import numpy as np
 
 import envs
-from agents import baselines, export
+from agents import baselines, driver, export, registry
 from agents.loop import make_evaluate
 from envs.robots import ROBOTS
 
@@ -130,7 +130,7 @@ def checkpoint_policy(path: str) -> Policy:
     except export.MissingExport as missing:
         print(f"note: {missing.step_dir} has no policy export; writing one from the full checkpoint.", file=sys.stderr)
         try:
-            export.export_checkpoint(missing.step_dir)
+            driver.export_checkpoint(missing.step_dir)
         except Exception as error:  # orbax / tensorstore raise many types on a broken checkpoint
             raise ValueError(f"checkpoint {missing.step_dir!r} is corrupt or unreadable: {type(error).__name__}: "
                              f"{str(error).splitlines()[0] if str(error) else ''}") from None
@@ -181,9 +181,7 @@ def _evaluator(env_name: str, env_config, algo_config, obs_size: int, act_size: 
         fn = make_evaluate(env, None, num_envs, length, last_steps, act=baselines.make_act(env), per_env=True,
                            record=_record)
         return env, jax.jit(fn)
-    from agents.driver import make_learner
-
-    learner = make_learner(algo_config, obs_size, act_size, 1)
+    learner = registry.make_learner(algo_config, obs_size, act_size)
     act = (lambda ls, state, start, key: learner.stochastic_policy(ls, state.obs, key)) if stochastic else None
     fn = make_evaluate(env, learner, num_envs, length, last_steps, act=act, per_env=True, record=_record)
     return env, jax.jit(jax.vmap(fn, in_axes=(0, None)))

@@ -5,15 +5,15 @@ for SAC, a replay buffer of ~570 MB per seed at paper size. Evaluating needs onl
 training driver therefore writes, next to each checkpoint, `<step dir>/policy/`:
 
 - `policy.json`: format version, env steps, algorithm, observation and action sizes, seeds, and
-  the run's full config JSON (the one `agents.driver.config_from_json` reads);
+  the run's full config JSON (the one `agents.config.config_from_json` reads);
 - `policy.npz`: the policy network's parameters and the observation normaliser's statistics, each
   with the run's leading seed axis (`policy/params/hidden_0/kernel`, ..., `obs_stats/mean`, ...).
 
 `select` copies an export keeping only some trained seeds (`benchmarks/ship_checkpoint.py` makes
 the checkpoints under `results/checkpoints/` with it).
 
-`load` rebuilds the learner's own deterministic policy from it (`PPO.policy` / `SAC.policy` on a
-state holding only these arrays), so the export acts exactly as the trained learner does, without
+`load` rebuilds the learner's own deterministic policy from it (the registered learner's `policy`
+on the state its `policy_state` builds from these arrays), so the export acts exactly as the trained learner does, without
 building or compiling the training programs. An export directory can be copied anywhere (e.g.
 `results/checkpoints/<name>/`) and loaded from there.
 """
@@ -28,23 +28,12 @@ import zipfile
 import jax
 import numpy as np
 
-from agents import normalizer
+from agents import normalizer, registry
+from agents.config import config_from_json
 
 DIRNAME = "policy"
 """Name of the export directory inside a checkpoint's step directory."""
 FORMAT = 1
-
-
-def policy_arrays(learner_state) -> dict:
-    """{"policy": params, "obs_stats": RunningStats} of a PPO or SAC learner state."""
-    from agents.ppo import PPOState
-    from agents.sac import SACState
-
-    if isinstance(learner_state, PPOState):
-        return {"policy": learner_state.params["policy"], "obs_stats": learner_state.obs_stats}
-    if isinstance(learner_state, SACState):
-        return {"policy": learner_state.policy_params, "obs_stats": learner_state.obs_stats}
-    raise ValueError(f"cannot export a policy from {type(learner_state).__name__}: allowed are PPOState, SACState.")
 
 
 def _flatten(tree, prefix="") -> dict:
@@ -69,11 +58,10 @@ def _unflatten(flat: dict) -> dict:
     return tree
 
 
-def save(directory: str, learner_state, config_json: dict, env_steps: int) -> str:
-    """Writes the export of a seed-batched learner state to `directory`; returns it."""
-    arrays = jax.device_get(policy_arrays(learner_state))
-    stats = arrays["obs_stats"]
-    flat = _flatten({"policy": arrays["policy"]})
+def save(directory: str, learner, learner_state, config_json: dict, env_steps: int) -> str:
+    """Writes the export of `learner`'s seed-batched state to `directory`; returns it."""
+    params, stats = jax.device_get(learner.export_policy(learner_state))
+    flat = _flatten({"policy": params})
     flat.update({"obs_stats/count": np.asarray(stats.count), "obs_stats/mean": np.asarray(stats.mean),
                  "obs_stats/var": np.asarray(stats.var)})
     seeds = int(flat["obs_stats/mean"].shape[0])
@@ -104,11 +92,11 @@ class PolicyExport:
     meta: dict
     """policy.json (format, env_steps, algo_name, env_name, seeds, sizes, config)."""
     config: object
-    """The run's `agents.driver.TrainConfig`."""
+    """The run's `agents.config.TrainConfig`."""
     learner: object
-    """A PPO / SAC object built from the config (no compilation); `policy(state, obs)` acts."""
+    """The registered learner built from the config (no compilation); `policy(state, obs)` acts."""
     state: object
-    """A PPOState / SACState holding only the policy parameters and observation statistics, each
+    """The learner's state holding only the policy parameters and observation statistics, each
     with the leading seed axis (vmap `learner.policy` over it)."""
 
     @property
@@ -168,8 +156,6 @@ class MissingExport(ValueError):
 
 def load(path: str) -> PolicyExport:
     """Loads the export that `path` names (see `find`). ValueError if it is missing or corrupt."""
-    from agents import driver
-
     directory = find(path)
     try:
         with open(os.path.join(directory, "policy.json")) as f:
@@ -178,58 +164,26 @@ def load(path: str) -> PolicyExport:
             flat = {k: np.asarray(data[k]) for k in data.files}
         if meta.get("format") != FORMAT:
             raise ValueError(f"format {meta.get('format')!r} is unsupported (allowed: {FORMAT})")
-        config = driver.config_from_json(meta["config"])
+        config = config_from_json(meta["config"])
         tree = _unflatten(flat)
         stats = normalizer.RunningStats(tree["obs_stats"]["count"], tree["obs_stats"]["mean"], tree["obs_stats"]["var"])
         params = tree["policy"]
     except (OSError, KeyError, TypeError, ValueError, json.JSONDecodeError, zipfile.BadZipFile, EOFError) as error:
         raise ValueError(f"policy export {directory!r} is corrupt or unreadable: {type(error).__name__}: {error}") from None
-    learner = driver.make_learner(config.algo, int(meta["observation_size"]), int(meta["action_size"]), 1)
+    learner = registry.make_learner(config.algo, int(meta["observation_size"]), int(meta["action_size"]))
     _check_shapes(directory, learner, params, stats, meta)
-    return PolicyExport(directory, meta, config, learner, _learner_state(learner, params, stats))
+    return PolicyExport(directory, meta, config, learner, learner.policy_state(params, stats))
 
 
 def _check_shapes(directory, learner, params, stats, meta) -> None:
     """The arrays must be what the config's network expects (else a clear error, not one from jit)."""
-    import jax.numpy as jnp
-
-    dummy = jax.ShapeDtypeStruct((1, int(meta["observation_size"])), jnp.float32)
-    expected = jax.eval_shape(lambda x: learner.policy_net.init(jax.random.PRNGKey(0), x), dummy)
+    expected, _ = jax.eval_shape(lambda: learner.export_policy(learner.init(jax.random.PRNGKey(0))))
     exp_flat = {k: v.shape for k, v in _flatten(jax.tree.map(lambda s: np.zeros(s.shape), expected)).items()}
     got_flat = {k: v.shape[1:] for k, v in _flatten(params).items()}
     seeds = {v.shape[0] for v in _flatten(params).values()} | {stats.mean.shape[0]}
     if exp_flat != got_flat or len(seeds) != 1 or stats.mean.shape[1:] != (int(meta["observation_size"]),):
         raise ValueError(f"policy export {directory!r} is corrupt: its arrays {got_flat} do not match the network of "
                          f"its config {exp_flat}.")
-
-
-def _learner_state(learner, params, stats):
-    from agents.ppo import PPO, PPOState
-    from agents.sac import SACState
-
-    if isinstance(learner, PPO):
-        return PPOState(params={"policy": params}, opt_state=None, obs_stats=stats, value_stats=None, updates=None)
-    return SACState(policy_params=params, q_params=None, target_q_params=None, log_alpha=None, policy_opt=None,
-                    q_opt=None, alpha_opt=None, obs_stats=stats, replay=None)
-
-
-def export_checkpoint(step_dir: str) -> str:
-    """Writes the policy export of an existing checkpoint (restoring its whole training state once:
-    slow for SAC's replay buffer); returns the export directory."""
-    from agents import driver
-    from agents.checkpoint import Checkpointer
-
-    step_dir = os.path.abspath(step_dir)
-    step = int(os.path.basename(step_dir))
-    ckpt = Checkpointer(os.path.dirname(step_dir))
-    try:
-        config_json = ckpt.restore_config(step)
-        config = driver.config_from_json(config_json)
-        programs = driver.programs_for(config)
-        state, _ = ckpt.restore(step, programs.abstract_state)
-    finally:
-        ckpt.close()
-    return save(os.path.join(step_dir, DIRNAME), state.learner, config_json, step)
 
 
 def select(path: str, directory: str, seeds: list[int] | None = None) -> str:

@@ -8,15 +8,16 @@ program). Each update
    `lax.scan`), asking `learner.act` for actions and recording `Transition`s, and
 2. hands the `(steps_per_update, local_envs)` transitions to `learner.update`.
 
-A learner is any object with this interface (see `Learner`): `init`, `act`, `update`, `policy`,
-`steps_per_update` and `env_axes`. Everything a learner needs about devices comes in `Parallel`.
+A learner is any object with the interface `Learner` (`init`, `act`, `update`, `policy`,
+`steps_per_update`, `env_axes`, and for checkpoints and exports `export_policy`, `policy_state`),
+registered with its config class in `agents.registry`. Everything a learner needs about devices comes in `Parallel`.
 
 Data parallelism: the environments are split evenly over the devices of a 1-D mesh named "dev";
 parameters are replicated. Two ways, same results up to float summation order: `multi_device=
 "gspmd"` (the default) runs the one-device program under `jit` with the state's env axes sharded
 and lets XLA's partitioner insert the collectives; `"shard_map"` runs the chunk per device and the
 learners average gradients and normaliser moments with `Parallel.pmean` / `psum` (XLA's GPU
-compiler in jax 0.11.2 crashed on that program for the MJX arms). Random numbers are drawn per
+compiler has crashed on that program for the MJX arms). Random numbers are drawn per
 *global* environment index, so a run on two devices reproduces the one-device run. With one device
 no sharding is built and every collective is a no-op.
 
@@ -143,7 +144,16 @@ class Learner(Protocol):
         """Deterministic actions for evaluation."""
 
     def stochastic_policy(self, state: Any, obs: jax.Array, key: jax.Array) -> jax.Array:
-        """Actions drawn from the policy's distribution (`eval.py --stochastic`). Optional."""
+        """Actions drawn from the policy's distribution (`eval.py --stochastic`)."""
+
+    def export_policy(self, state: Any) -> tuple[Any, Any]:
+        """(policy parameters, observation statistics): what `policy` reads (`agents.export` saves it)."""
+
+    def policy_state(self, policy_params: Any, obs_stats: Any) -> Any:
+        """A learner state holding only what `policy` reads; the inverse of `export_policy`."""
+
+    def progress_note(self, updates_done: int) -> str | None:
+        """A remark for a run stopped after `updates_done` updates (e.g. a schedule not at its end), or None."""
 
 
 @struct.dataclass
@@ -333,8 +343,7 @@ def make_evaluate(env, learner: Learner, num_envs: int, episode_length: int, las
 def over_seeds(fn, num_seeds: int):
     """`fn(state, x)` applied to every seed of a seed-batched `state` (`x` shared): `jax.vmap` over
     the leading axis, or with one seed `fn` itself on the squeezed state. Same numbers up to float
-    rounding; XLA compiles a size-1 batch axis into a different program, and one seed trained PPO
-    7 % faster without it on an H200 (results/README.md, "Training throughput")."""
+    rounding; XLA compiles a size-1 batch axis into a different, slower program (results: throughput study)."""
     if num_seeds > 1:
         return jax.vmap(fn, in_axes=(0, None))
     squeeze = lambda tree: jax.tree.map(lambda a: a[0], tree)

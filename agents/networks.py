@@ -6,11 +6,14 @@ swish activations, LeCun-uniform kernels and zero biases; those are our defaults
 
 from __future__ import annotations
 
+import numbers
 from typing import Callable, Sequence
 
 import flax.linen as nn
 import jax
 import jax.numpy as jnp
+
+from envs import validation
 
 ACTIVATIONS: dict[str, Callable[[jax.Array], jax.Array]] = {
     "swish": nn.swish,
@@ -89,9 +92,7 @@ def q_network(hidden_sizes, activation="swish", init="lecun_uniform", layer_norm
 
 def validate_network_fields(hidden_field: str, hidden_sizes, activation: str, init: str, prefix: str = "algo.") -> None:
     """ValueErrors naming the offending config field (`hidden_field` names the layer-size field)."""
-    if len(hidden_sizes) == 0 or any(int(h) < 1 for h in hidden_sizes):
+    if len(hidden_sizes) == 0 or any(not isinstance(h, numbers.Integral) or h < 1 for h in hidden_sizes):
         raise ValueError(f"{prefix}{hidden_field}={tuple(hidden_sizes)!r} is invalid: allowed is a non-empty tuple of integers >= 1.")
-    if activation not in ACTIVATIONS:
-        raise ValueError(f"{prefix}activation={activation!r} is unknown: allowed are {', '.join(ACTIVATIONS)}.")
-    if init not in KERNEL_INITS:
-        raise ValueError(f"{prefix}kernel_init={init!r} is unknown: allowed are {', '.join(KERNEL_INITS)}.")
+    validation.choice(prefix + "activation", activation, tuple(ACTIVATIONS))
+    validation.choice(prefix + "kernel_init", init, KERNEL_INITS)

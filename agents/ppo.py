@@ -33,6 +33,7 @@ import optax
 from flax import struct
 
 from agents import networks, normalizer
+from envs import validation
 from agents.distributions import TanhNormal
 from agents.loop import Parallel, Transition, env_random, per_env_keys
 
@@ -106,11 +107,15 @@ class PPOConfig:
     def env_steps_per_update(self) -> int:
         return self.batch_size * self.num_minibatches * self.unroll_length
 
+    @property
+    def schedule_spans_run(self) -> bool:
+        """The learning rate decays over num_timesteps, so a run's length changes its schedule."""
+        return self.lr_schedule != "constant"
+
     def validate(self, num_devices: int = 1) -> None:
         """ValueError naming the field, its value and what is allowed."""
         for name in ("num_envs", "batch_size", "num_minibatches", "unroll_length", "updates_per_batch"):
-            if int(getattr(self, name)) < 1:
-                raise ValueError(f"algo.{name}={getattr(self, name)!r} is invalid: allowed is an integer >= 1.")
+            validation.integer("algo." + name, getattr(self, name), 1)
         unrolls = self.batch_size * self.num_minibatches
         if unrolls % self.num_envs:
             raise ValueError(
@@ -121,30 +126,18 @@ class PPOConfig:
             raise ValueError(f"algo.num_envs={self.num_envs} is invalid: it must be divisible by the {num_devices} devices.")
         if self.batch_size % num_devices:
             raise ValueError(f"algo.batch_size={self.batch_size} is invalid: it must be divisible by the {num_devices} devices.")
-        _check_positive("algo.learning_rate", self.learning_rate)
-        _check_range("algo.discount", self.discount, 0.0, 1.0)
-        _check_range("algo.gae_lambda", self.gae_lambda, 0.0, 1.0)
-        _check_range("algo.lr_end_fraction", self.lr_end_fraction, 0.0, 1.0)
-        _check_range("algo.value_norm_decay", self.value_norm_decay, 0.0, 1.0)
-        _check_positive("algo.clip_epsilon", self.clip_epsilon)
-        _check_positive("algo.min_std", self.min_std)
+        validation.positive("algo.learning_rate", self.learning_rate)
+        validation.in_range("algo.discount", self.discount, 0.0, 1.0)
+        validation.in_range("algo.gae_lambda", self.gae_lambda, 0.0, 1.0)
+        validation.in_range("algo.lr_end_fraction", self.lr_end_fraction, 0.0, 1.0)
+        validation.in_range("algo.value_norm_decay", self.value_norm_decay, 0.0, 1.0)
+        validation.positive("algo.clip_epsilon", self.clip_epsilon)
+        validation.positive("algo.min_std", self.min_std)
         for name in ("entropy_coef", "value_loss_coef", "max_grad_norm", "target_kl", "obs_clip"):
-            if not float(getattr(self, name)) >= 0:
-                raise ValueError(f"algo.{name}={getattr(self, name)!r} is invalid: allowed is a number >= 0.")
-        if self.lr_schedule not in LR_SCHEDULES:
-            raise ValueError(f"algo.lr_schedule={self.lr_schedule!r} is unknown: allowed are {', '.join(LR_SCHEDULES)}.")
+            validation.positive("algo." + name, getattr(self, name), strict=False)
+        validation.choice("algo.lr_schedule", self.lr_schedule, LR_SCHEDULES)
         networks.validate_network_fields("policy_hidden_sizes", self.policy_hidden_sizes, self.activation, self.kernel_init)
         networks.validate_network_fields("value_hidden_sizes", self.value_hidden_sizes, self.activation, self.kernel_init)
-
-
-def _check_positive(name, value):
-    if not float(value) > 0:
-        raise ValueError(f"{name}={value!r} is invalid: allowed is a number > 0.")
-
-
-def _check_range(name, value, lo, hi):
-    if not lo <= float(value) <= hi:
-        raise ValueError(f"{name}={value!r} is invalid: allowed is a number in [{lo}, {hi}].")
 
 
 def _divisors_near(n: int, x: int) -> str:
@@ -191,10 +184,6 @@ def ppo_loss_terms(log_prob, old_log_prob, advantages, values, value_targets, en
         "approx_kl": jnp.mean((ratio - 1.0) - log_ratio),
         "clip_fraction": jnp.mean((jnp.abs(ratio - 1.0) > clip_epsilon).astype(jnp.float32)),
     }
-
-
-def ppo_total_loss(terms: dict, value_loss_coef: float, entropy_coef: float):
-    return terms["policy_loss"] + value_loss_coef * terms["value_loss"] - entropy_coef * terms["entropy"]
 
 
 def learning_rate(config: PPOConfig, progress: jax.Array) -> jax.Array:
@@ -245,7 +234,8 @@ class PPOState:
 
 
 class PPO:
-    """PPO as a `agents.loop.Learner`."""
+    """PPO as a `agents.loop.Learner`. The objective is `loss`; `advantages` and `minibatches` are
+    the other methods a variant typically overrides (notebooks/02_edit_an_algorithm.ipynb)."""
 
     transient_fields = ()  # every field of the learner state is checkpointed
 
@@ -302,6 +292,26 @@ class PPO:
     def stochastic_policy(self, state: PPOState, obs, key):
         return self._dist(state.params["policy"], self._obs(state, obs)).sample(key)
 
+    def export_policy(self, state: PPOState):
+        """(policy parameters, observation statistics): what `policy` reads, for `agents.export`."""
+        return state.params["policy"], state.obs_stats
+
+    def policy_state(self, policy_params, obs_stats) -> PPOState:
+        """A state holding only what `policy` reads (the inverse of `export_policy`)."""
+        return PPOState(params={"policy": policy_params}, opt_state=None, obs_stats=obs_stats, value_stats=None,
+                        updates=None)
+
+    def progress_note(self, updates_done: int) -> str | None:
+        """For a run stopped before its decaying learning-rate schedule ends: where the rate stands (a
+        policy evaluated there has not had the schedule's low-rate end). None otherwise."""
+        c = self.config
+        if not c.schedule_spans_run or updates_done >= self.total_updates:
+            return None
+        fraction = float(learning_rate(c, jnp.float32(updates_done / self.total_updates))) / c.learning_rate
+        return (f"the learning rate is at {fraction:.0%} of its start: its {c.lr_schedule} schedule runs "
+                f"{self.total_updates:,} updates ({updates_done:,} done). --resume continues it; for a shorter run, "
+                "set --num-timesteps to the steps it will really train.")
+
     @jax.named_scope("advantages")
     def advantages(self, params, value_stats, obs, next_obs, data: Transition):
         """GAE per unroll; `data` leaves are (envs, unrolls, unroll_length, ...), `obs` and `next_obs`
@@ -334,7 +344,55 @@ class PPO:
 
         return jax.tree.map(arrange, tree)
 
+    def loss(self, params, mb: dict, value_stats: normalizer.RunningStats):
+        """The PPO objective on one minibatch (Schulman et al. 2017, eq. 9): clipped surrogate, value
+        error and entropy bonus. `mb`: normalised "obs", the behaviour's "raw_action" and "log_prob",
+        (standardised) "advantages", de-normalised value "targets" and the entropy estimate's "noise".
+        Returns (loss, metrics); every metric is averaged over the update and logged under its key."""
+        c = self.config
+        dist = self._dist(params["policy"], mb["obs"])
+        values = self.value_net.apply(params["value"], mb["obs"])[..., 0]
+        targets = normalizer.normalize(value_stats, mb["targets"]) if c.normalize_value_targets else mb["targets"]
+        terms = ppo_loss_terms(dist.log_prob_raw(mb["raw_action"]), mb["log_prob"], mb["advantages"], values, targets,
+                               dist.entropy_from_noise(mb["noise"]), c.clip_epsilon)
+        loss = terms["policy_loss"] + c.value_loss_coef * terms["value_loss"] - c.entropy_coef * terms["entropy"]
+        return loss, {"loss/total": loss, "loss/policy": terms["policy_loss"], "loss/value": terms["value_loss"],
+                      "policy/entropy": terms["entropy"], "policy/approx_kl": terms["approx_kl"],
+                      "policy/clip_fraction": terms["clip_fraction"], "policy/std": jnp.mean(dist.std)}
+
+    @jax.named_scope("sgd_step")
+    def sgd_step(self, carry, mb: dict, value_stats, lr, par: Parallel):
+        """One gradient step of `loss` on a minibatch; carry = (params, opt_state, KL-guard stopped)."""
+        c = self.config
+        params, opt_state, stopped = carry
+        (_, metrics), grads = jax.value_and_grad(self.loss, has_aux=True)(params, mb, value_stats)
+        # Device-local loss and gradient; the global-batch ones are their means over devices.
+        grads, metrics = par.mean_gradients(grads), par.pmean(metrics)
+        if c.target_kl > 0:
+            stopped = stopped | (metrics["policy/approx_kl"] > 1.5 * c.target_kl)
+        updates, new_opt_state = self.optimizer.update(grads, opt_state, params)
+        new_params = jax.tree.map(lambda w, u: w - lr * u, params, updates)
+        if c.target_kl > 0:  # once stopped, the rest of the update's steps leave everything as is
+            keep = lambda new, old: jax.tree.map(lambda a, b: jnp.where(stopped, b, a), new, old)
+            new_params, new_opt_state = keep(new_params, params), keep(new_opt_state, opt_state)
+        # grad_norm: the norm the clipping computes (the same expression, so XLA can merge the two).
+        metrics = {**metrics, "optim/grad_norm": optax.tree.norm(grads), "optim/kl_skipped": stopped.astype(jnp.float32)}
+        return (new_params, new_opt_state, stopped), metrics
+
+    def epoch(self, carry, key, data: dict, value_stats, lr, par: Parallel):
+        """One sweep over the batch in `num_minibatches` gradient steps. `data` leaves are
+        (envs, unrolls, unroll_length, ...); returns (carry, per-step metrics)."""
+        k_mb, k_ent = jax.random.split(key)
+        # Noise of the one-sample entropy estimate, keyed by global env index (device-invariant).
+        data = {**data, "noise": env_random(k_ent, par, data["raw_action"].shape[1:])}
+        with jax.named_scope("minibatches"):
+            mbs = self.minibatches(data, k_mb, par)
+            if self.config.normalize_advantages:
+                mbs["advantages"] = normalize_per_minibatch(mbs["advantages"], par.pmean)
+        return jax.lax.scan(lambda cr, mb: self.sgd_step(cr, mb, value_stats, lr, par), carry, mbs)
+
     def update(self, state: PPOState, batch: Transition, key, par: Parallel):
+        """`updates_per_batch` epochs on one batch of `(steps_per_update, local_envs)` transitions."""
         c = self.config
         n_seq, length = self.unrolls_per_env, c.unroll_length
         # (T, envs, ...) -> (envs, unrolls, unroll_length, ...): unroll j of env e covers steps
@@ -352,70 +410,23 @@ class PPO:
             new_stats = normalizer.update(value_stats, targets0, par.axis_name, decay=c.value_norm_decay)
             params = {**params, "value": popart_preserve(params["value"], value_stats, new_stats)}
             value_stats = new_stats
-
-        def loss_fn(p, mb):
-            x = mb["obs"]
-            dist = self._dist(p["policy"], x)
-            v = self.value_net.apply(p["value"], x)[..., 0]
-            targets = mb["targets"]
-            if c.normalize_value_targets:
-                targets = normalizer.normalize(value_stats, targets)
-            terms = ppo_loss_terms(dist.log_prob_raw(mb["raw_action"]), mb["log_prob"], mb["advantages"], v,
-                                   targets, dist.entropy_from_noise(mb["noise"]), c.clip_epsilon)
-            terms["std"] = jnp.mean(dist.std)
-            return ppo_total_loss(terms, c.value_loss_coef, c.entropy_coef), terms
-
-        @jax.named_scope("sgd_step")
-        def sgd_step(carry, mb):
-            p, opt_state, stopped = carry
-            (loss, terms), grads = jax.value_and_grad(loss_fn, has_aux=True)(p, mb)
-            # Device-local loss and gradient; the global-batch ones are their means over devices.
-            grads, loss, terms = par.mean_gradients(grads), par.pmean(loss), par.pmean(terms)
-            if c.target_kl > 0:
-                stopped = stopped | (terms["approx_kl"] > 1.5 * c.target_kl)
-            updates, new_opt_state = self.optimizer.update(grads, opt_state, p)
-            new_p = jax.tree.map(lambda w, u: w - lr * u, p, updates)
-            if c.target_kl > 0:  # once stopped, the rest of the update's steps leave everything as is
-                keep = lambda new, old: jax.tree.map(lambda a, b: jnp.where(stopped, b, a), new, old)
-                new_p, new_opt_state = keep(new_p, p), keep(new_opt_state, opt_state)
-            p, opt_state = new_p, new_opt_state
-            # grad_norm: the norm the clipping computes (the same expression, so XLA can merge the two).
-            terms = {**terms, "total_loss": loss, "grad_norm": optax.tree.norm(grads),
-                     "skipped": stopped.astype(jnp.float32)}
-            return (p, opt_state, stopped), terms
-
-        def epoch(carry, k, adv, targets):
-            tree = {"obs": obs, "raw_action": data.extras["raw_action"], "log_prob": data.extras["log_prob"],
-                    "advantages": adv, "targets": targets}
-            k_mb, k_ent = jax.random.split(k)
-            # Noise of the one-sample entropy estimate, keyed by global env index (device-invariant).
-            tree["noise"] = env_random(k_ent, par, data.extras["raw_action"].shape[1:])
-            with jax.named_scope("minibatches"):
-                mbs = self.minibatches(tree, k_mb, par)
-                if c.normalize_advantages:
-                    mbs["advantages"] = normalize_per_minibatch(mbs["advantages"], par.pmean)
-            return jax.lax.scan(sgd_step, carry, mbs)
+        fixed = {"obs": obs, "raw_action": data.extras["raw_action"], "log_prob": data.extras["log_prob"]}
 
         def later_epoch(carry, k):
-            if not c.recompute_advantages:
-                return epoch(carry, k, adv0, targets0)
-            return epoch(carry, k, *self.advantages(carry[0], value_stats, obs, next_obs, data))
+            adv, targets = adv0, targets0
+            if c.recompute_advantages:
+                adv, targets = self.advantages(carry[0], value_stats, obs, next_obs, data)
+            return self.epoch(carry, k, {**fixed, "advantages": adv, "targets": targets}, value_stats, lr, par)
 
         # The first epoch takes adv0: its parameters give the same values (PopArt preserves them).
         keys = jax.random.split(key, c.updates_per_batch)
-        carry, first_terms = epoch((params, state.opt_state, jnp.zeros((), bool)), keys[0], adv0, targets0)
-        (params, opt_state, _), terms = jax.lax.scan(later_epoch, carry, keys[1:])
-        terms = jax.tree.map(lambda a, b: jnp.concatenate([a[None], b]), first_terms, terms)
+        first = {**fixed, "advantages": adv0, "targets": targets0}
+        carry, first_metrics = self.epoch((params, state.opt_state, jnp.zeros((), bool)), keys[0], first, value_stats,
+                                          lr, par)
+        (params, opt_state, _), metrics = jax.lax.scan(later_epoch, carry, keys[1:])
+        metrics = jax.tree.map(lambda a, b: jnp.mean(jnp.concatenate([a[None], b])), first_metrics, metrics)
         obs_stats = state.obs_stats
         if c.normalize_observations:
             obs_stats = normalizer.update(obs_stats, batch.obs, par.axis_name)
-        terms = jax.tree.map(jnp.mean, terms)
-        metrics = {
-            "loss/total": terms["total_loss"], "loss/policy": terms["policy_loss"], "loss/value": terms["value_loss"],
-            "policy/entropy": terms["entropy"], "policy/approx_kl": terms["approx_kl"],
-            "policy/clip_fraction": terms["clip_fraction"], "policy/std": terms["std"],
-            "optim/grad_norm": terms["grad_norm"], "optim/learning_rate": lr, "optim/kl_skipped": terms["skipped"],
-            "value/target_mean": par.pmean(jnp.mean(targets0)),
-        }
-        new_state = PPOState(params, opt_state, obs_stats, value_stats, state.updates + 1)
-        return new_state, metrics
+        metrics = {**metrics, "optim/learning_rate": lr, "value/target_mean": par.pmean(jnp.mean(targets0))}
+        return PPOState(params, opt_state, obs_stats, value_stats, state.updates + 1), metrics

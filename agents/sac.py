@@ -29,7 +29,7 @@ from flax import struct
 from agents import networks, normalizer
 from agents.distributions import TanhNormal
 from agents.loop import Parallel, Transition, env_random, per_env_keys
-from agents.ppo import _check_positive, _check_range
+from envs import validation
 
 
 @dataclasses.dataclass(frozen=True)
@@ -53,14 +53,13 @@ class SACConfig:
     max_replay_size: int = 2_048_000
     """Replay capacity in transitions (a multiple of num_envs); oldest are overwritten."""
     grad_updates_per_step: int = 1
-    """Gradient steps per environment step of all envs (Brax's default 1; not stated in the paper; the train.py
-    SAC presets use 8, which learned far faster on the UR5e per env step and per second, results/README.md)."""
+    """Gradient steps per environment step of all envs (Brax's default 1; not stated in the paper; the paper's
+    SAC presets use 8, which learned fastest on the UR5e: results, SAC study)."""
     init_alpha: float = 1.0
     """Initial temperature."""
     target_entropy: float | None = None
     """Entropy target of the temperature update; None means -action_size (Haarnoja et al.). Brax's SAC, which the
-    paper trained with, uses -0.5 * action_size: on UR5e reach that learned more slowly at every step count we
-    evaluated (results/README.md, "SAC: the entropy target")."""
+    paper trained with, uses -0.5 * action_size, which learned more slowly on UR5e reach (results, SAC study)."""
     normalize_observations: bool = True
     """Normalise observations with running statistics (updated from every inserted step)."""
     obs_clip: float = 10.0
@@ -84,11 +83,15 @@ class SACConfig:
     def env_steps_per_update(self) -> int:
         return self.num_envs
 
+    @property
+    def schedule_spans_run(self) -> bool:
+        """No hyperparameter depends on the run's length."""
+        return False
+
     def validate(self, num_devices: int = 1) -> None:
         """ValueError naming the field, its value and what is allowed."""
         for name in ("num_envs", "batch_size", "max_replay_size", "grad_updates_per_step"):
-            if int(getattr(self, name)) < 1:
-                raise ValueError(f"algo.{name}={getattr(self, name)!r} is invalid: allowed is an integer >= 1.")
+            validation.integer("algo." + name, getattr(self, name), 1)
         if self.batch_size % self.num_envs and self.num_envs % self.batch_size:
             raise ValueError(
                 f"algo.batch_size={self.batch_size} is invalid with algo.num_envs={self.num_envs}: allowed are "
@@ -106,15 +109,14 @@ class SACConfig:
             raise ValueError(
                 f"algo.min_replay_size={self.min_replay_size} is invalid: allowed is 0 ... algo.max_replay_size={self.max_replay_size}."
             )
-        _check_positive("algo.learning_rate", self.learning_rate)
-        _check_positive("algo.reward_scaling", self.reward_scaling)
-        _check_positive("algo.init_alpha", self.init_alpha)
-        _check_positive("algo.min_std", self.min_std)
-        _check_range("algo.discount", self.discount, 0.0, 1.0)
-        _check_range("algo.tau", self.tau, 0.0, 1.0)
+        validation.positive("algo.learning_rate", self.learning_rate)
+        validation.positive("algo.reward_scaling", self.reward_scaling)
+        validation.positive("algo.init_alpha", self.init_alpha)
+        validation.positive("algo.min_std", self.min_std)
+        validation.in_range("algo.discount", self.discount, 0.0, 1.0)
+        validation.in_range("algo.tau", self.tau, 0.0, 1.0)
         for name in ("max_grad_norm", "obs_clip"):
-            if not float(getattr(self, name)) >= 0:
-                raise ValueError(f"algo.{name}={getattr(self, name)!r} is invalid: allowed is a number >= 0.")
+            validation.positive("algo." + name, getattr(self, name), strict=False)
         networks.validate_network_fields("policy_hidden_sizes", self.policy_hidden_sizes, self.activation, self.kernel_init)
         networks.validate_network_fields("q_hidden_sizes", self.q_hidden_sizes, self.activation, self.kernel_init)
 
@@ -177,14 +179,15 @@ class SACState:
 
 
 class SAC:
-    """SAC as a `agents.loop.Learner`."""
+    """SAC as a `agents.loop.Learner`. The objectives are the methods `critic_target`, `critic_loss`,
+    `actor_loss` and `temperature_loss`; a variant overrides the one it changes."""
 
     steps_per_update = 1
     transient_fields = ("replay",)
     """Learner-only checkpoints leave the buffer out (5 seeds x 2,048,000 UR5e transitions are
     ~1.2 GB); a run resumed from one refills it with min_replay_size uniform-random steps first."""
 
-    def __init__(self, config: SACConfig, observation_size: int, action_size: int):
+    def __init__(self, config: SACConfig, observation_size: int, action_size: int, total_updates: int = 1):
         c = self.config = config
         self.observation_size, self.action_size = observation_size, action_size
         self.rows = c.max_replay_size // c.num_envs
@@ -241,6 +244,19 @@ class SAC:
     def stochastic_policy(self, state: SACState, obs, key):
         return self._dist(state.policy_params, self._obs(state.obs_stats, obs)).sample(key)
 
+    def export_policy(self, state: SACState):
+        """(policy parameters, observation statistics): what `policy` reads, for `agents.export`."""
+        return state.policy_params, state.obs_stats
+
+    def policy_state(self, policy_params, obs_stats) -> SACState:
+        """A state holding only what `policy` reads (the inverse of `export_policy`)."""
+        return SACState(policy_params=policy_params, q_params=None, target_q_params=None, log_alpha=None,
+                        policy_opt=None, q_opt=None, alpha_opt=None, obs_stats=obs_stats, replay=None)
+
+    def progress_note(self, updates_done: int) -> str | None:
+        """Nothing in SAC depends on how far the run got."""
+        return None
+
     def insert(self, replay: Replay, batch: Transition) -> Replay:
         steps = batch.reward.shape[0]
         rows = (replay.position + jnp.arange(steps)) % self.rows
@@ -268,7 +284,70 @@ class SAC:
         rows = jax.vmap(lambda k: jax.random.randint(k, (), 0, replay.rows))(per_env_keys(k_row, sample_ids))
         return jax.tree.map(lambda x: x[rows, local_env], replay.data), sample_ids
 
+    # -- the objectives (each one overridable) --------------------------------------------------
+
+    def critic_target(self, s: SACState, mb: dict, next_obs, noise, alpha):
+        """The soft Bellman target of the sampled transitions (eq. 3 with the clipped double-Q minimum)."""
+        c = self.config
+        next_action, _, next_log_prob = self._dist(s.policy_params, next_obs).sample_with_noise(noise)
+        next_q = self.q_net.apply(s.target_q_params, next_obs, next_action)
+        return critic_target(mb["reward"], mb["termination"], next_q, next_log_prob, alpha, c.discount, c.reward_scaling)
+
+    def critic_loss(self, q_params, obs, action, target):
+        """Both critics' error against the target (eq. 5); returns (loss, mean Q)."""
+        q = self.q_net.apply(q_params, obs, action)
+        return critic_loss(q, target), jnp.mean(q)
+
+    def actor_loss(self, policy_params, q_params, obs, noise, alpha):
+        """E[alpha log pi(a|s) - min Q(s, a)] with reparameterised actions (eq. 7); returns (loss, log-probs)."""
+        action, _, log_prob = self._dist(policy_params, obs).sample_with_noise(noise)
+        return actor_loss(log_prob, self.q_net.apply(q_params, obs, action), alpha), log_prob
+
+    def temperature_loss(self, log_alpha, log_prob):
+        """Automatic temperature (eq. 18) towards the entropy target."""
+        return temperature_loss(log_alpha, log_prob, self.target_entropy)
+
+    # -- the update ------------------------------------------------------------------------------
+
+    def _noise(self, key, ids):
+        return jax.vmap(lambda k: jax.random.normal(k, (self.action_size,)))(per_env_keys(key, ids))
+
+    def sgd_step(self, s: SACState, key, par: Parallel):
+        """One gradient step of the critics, then the actor, then the temperature, on one sampled batch."""
+        c = self.config
+        k_sample, k_next, k_pi = jax.random.split(key, 3)
+        mb, ids = self.sample(s.replay, k_sample, par)
+        # Device-local losses and gradients; the global-batch ones are their means over devices.
+        obs, next_obs = self._obs(s.obs_stats, mb["obs"]), self._obs(s.obs_stats, mb["next_obs"])
+        alpha = jnp.exp(s.log_alpha)
+        target = self.critic_target(s, mb, next_obs, self._noise(k_next, ids), alpha)
+
+        (q_loss, q_mean), q_grads = jax.value_and_grad(self.critic_loss, has_aux=True)(s.q_params, obs, mb["action"], target)
+        q_grads, q_loss, q_mean = par.mean_gradients(q_grads), par.pmean(q_loss), par.pmean(q_mean)
+        q_updates, q_opt = self.optimizer.update(q_grads, s.q_opt, s.q_params)
+        q_params = optax.apply_updates(s.q_params, q_updates)
+
+        (pi_loss, log_prob), pi_grads = jax.value_and_grad(self.actor_loss, has_aux=True)(
+            s.policy_params, q_params, obs, self._noise(k_pi, ids), alpha)
+        pi_grads, pi_loss = par.mean_gradients(pi_grads), par.pmean(pi_loss)
+        pi_updates, policy_opt = self.optimizer.update(pi_grads, s.policy_opt, s.policy_params)
+        policy_params = optax.apply_updates(s.policy_params, pi_updates)
+
+        a_loss, a_grad = jax.value_and_grad(self.temperature_loss)(s.log_alpha, log_prob)
+        a_grad, a_loss = par.mean_gradients(a_grad), par.pmean(a_loss)
+        a_updates, alpha_opt = self.optimizer.update(a_grad, s.alpha_opt, s.log_alpha)
+        log_alpha = optax.apply_updates(s.log_alpha, a_updates)
+
+        s = s.replace(policy_params=policy_params, q_params=q_params, log_alpha=log_alpha,
+                      target_q_params=polyak(s.target_q_params, q_params, c.tau),
+                      policy_opt=policy_opt, q_opt=q_opt, alpha_opt=alpha_opt)
+        metrics = {"loss/critic": q_loss, "loss/actor": pi_loss, "loss/temperature": a_loss,
+                   "sac/alpha": alpha, "sac/entropy": par.pmean(-jnp.mean(log_prob)), "sac/q_mean": q_mean}
+        return s, metrics
+
     def update(self, state: SACState, batch: Transition, key, par: Parallel):
+        """Inserts the step into the buffer, then `grad_updates_per_step` gradient steps (none while
+        the buffer holds fewer than `min_replay_size` transitions)."""
         c = self.config
         replay = self.insert(state.replay, batch)
         obs_stats = state.obs_stats
@@ -276,55 +355,9 @@ class SAC:
             obs_stats = normalizer.update(obs_stats, batch.obs, par.axis_name)
         state = state.replace(replay=replay, obs_stats=obs_stats)
 
-        def noise_for(k, ids):
-            return jax.vmap(lambda kk: jax.random.normal(kk, (self.action_size,)))(per_env_keys(k, ids))
-
-        def sgd_step(s: SACState, k):
-            k_sample, k_next, k_pi = jax.random.split(k, 3)
-            mb, ids = self.sample(s.replay, k_sample, par)
-            # Device-local losses and gradients; the global-batch ones are their means over devices.
-            obs, next_obs = self._obs(s.obs_stats, mb["obs"]), self._obs(s.obs_stats, mb["next_obs"])
-            alpha = jnp.exp(s.log_alpha)
-
-            next_action, _, next_log_prob = self._dist(s.policy_params, next_obs).sample_with_noise(noise_for(k_next, ids))
-            next_q = self.q_net.apply(s.target_q_params, next_obs, next_action)
-            target = critic_target(mb["reward"], mb["termination"], next_q, next_log_prob, alpha, c.discount, c.reward_scaling)
-
-            def q_loss_fn(qp):
-                q = self.q_net.apply(qp, obs, mb["action"])
-                return critic_loss(q, target), jnp.mean(q)
-
-            (q_loss, q_mean), q_grads = jax.value_and_grad(q_loss_fn, has_aux=True)(s.q_params)
-            q_grads, q_loss, q_mean = par.mean_gradients(q_grads), par.pmean(q_loss), par.pmean(q_mean)
-            q_updates, q_opt = self.optimizer.update(q_grads, s.q_opt, s.q_params)
-            q_params = optax.apply_updates(s.q_params, q_updates)
-
-            pi_noise = noise_for(k_pi, ids)
-
-            def pi_loss_fn(pp):
-                action, _, log_prob = self._dist(pp, obs).sample_with_noise(pi_noise)
-                return actor_loss(log_prob, self.q_net.apply(q_params, obs, action), alpha), log_prob
-
-            (pi_loss, log_prob), pi_grads = jax.value_and_grad(pi_loss_fn, has_aux=True)(s.policy_params)
-            pi_grads, pi_loss = par.mean_gradients(pi_grads), par.pmean(pi_loss)
-            pi_updates, policy_opt = self.optimizer.update(pi_grads, s.policy_opt, s.policy_params)
-            policy_params = optax.apply_updates(s.policy_params, pi_updates)
-
-            a_loss, a_grad = jax.value_and_grad(lambda la: temperature_loss(la, log_prob, self.target_entropy))(s.log_alpha)
-            a_grad, a_loss = par.mean_gradients(a_grad), par.pmean(a_loss)
-            entropy = par.pmean(-jnp.mean(log_prob))
-            a_updates, alpha_opt = self.optimizer.update(a_grad, s.alpha_opt, s.log_alpha)
-            log_alpha = optax.apply_updates(s.log_alpha, a_updates)
-
-            s = s.replace(policy_params=policy_params, q_params=q_params, log_alpha=log_alpha,
-                          target_q_params=polyak(s.target_q_params, q_params, c.tau),
-                          policy_opt=policy_opt, q_opt=q_opt, alpha_opt=alpha_opt)
-            metrics = {"loss/critic": q_loss, "loss/actor": pi_loss, "loss/temperature": a_loss,
-                       "sac/alpha": alpha, "sac/entropy": entropy, "sac/q_mean": q_mean}
-            return s, metrics
-
         def train(s):
-            s, metrics = jax.lax.scan(sgd_step, s, jax.random.split(key, c.grad_updates_per_step))
+            s, metrics = jax.lax.scan(lambda s_, k: self.sgd_step(s_, k, par), s,
+                                      jax.random.split(key, c.grad_updates_per_step))
             return s, jax.tree.map(jnp.mean, metrics)
 
         def skip(s):  # still filling the buffer: no gradient step, losses reported as 0

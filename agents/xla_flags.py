@@ -4,10 +4,9 @@ XLA records each run of fused kernels as a CUDA graph ("command buffer"). Its de
 mode inside a graph (LHS) chains the kernels one after another in program order; the CONCURRENT
 mode gives the graph the program's real data dependencies, so independent kernels run side by side:
 the policy and the value network's forward and backward passes in PPO's gradient steps, the twin
-critics in SAC's, independent pieces of a physics substep. With it, `ur5e-reach-ppo` trained at
-about 890k instead of 668k env steps/s on an H200 (env only: 1.16M instead of 988k; results/README.md,
-"Training throughput"). The kernels and their numbers are the same; only their order changes (three PPO
-updates gave bitwise-equal parameters with and without it). A program may need more GPU memory with it.
+critics in SAC's, independent pieces of a physics substep; PPO trains about a third faster with it
+(results: throughput study). The kernels and their numbers are the same; only their order changes.
+A program may need more GPU memory with it.
 
 `apply()` adds the flag to `XLA_FLAGS` when
 

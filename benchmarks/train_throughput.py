@@ -38,7 +38,7 @@ import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 
 import train as train_cli  # noqa: E402
-from agents import driver  # noqa: E402
+from agents import config as config_lib, driver  # noqa: E402
 from agents.loop import MULTI_DEVICE_MODES  # noqa: E402
 from env_throughput import env_rollout, time_calls  # noqa: E402
 
@@ -61,7 +61,7 @@ class Training:
         self.state, metrics = self.programs.chunk(self.state, jnp.int32(updates))
         jax.block_until_ready(metrics)
         seconds = time.perf_counter() - start
-        return updates * driver.env_steps_per_update(self.config) * self.config.seeds / seconds
+        return updates * config_lib.env_steps_per_update(self.config) * self.config.seeds / seconds
 
     def trace(self, trace_dir: str) -> None:
         """One more update under the JAX profiler (TensorBoard / Perfetto trace of where an update's
@@ -102,7 +102,7 @@ def main():
                 algo = dataclasses.replace(algo, num_envs=algo.num_envs * devices, batch_size=algo.batch_size * devices)
             config = dataclasses.replace(base, algo=algo, devices=devices, multi_device=mode or base.multi_device,
                                          num_timesteps=(args.rounds * args.updates + 2) * algo.env_steps_per_update)
-            driver.validate(config)  # every setting before the first compile
+            config_lib.validate(config)  # every setting before the first compile
             settings[f"{devices}dev" + (f"-{mode}" if mode else "")] = (devices, mode, config)
 
     env_only = None

@@ -7,13 +7,24 @@
     batched = envs.wrap(env)                     # episode limit, fresh auto-reset, vmap
 """
 
-from envs.base import Env, State
-from envs.registry import EnvSpec, default_config, from_config, make, make_config, names, register
-from envs.wrappers import wrap
-from envs.config import ReachAvoidConfig, ReachConfig
-from envs.point_mass import PointMass, PointMassConfig
-from envs.robots import ROBOTS
-from envs.tasks import Reach, ReachAvoid
+import contextlib as _contextlib
+import io as _io
+
+# mujoco.mjx probes for the optional Warp backend on import and prints when it is missing; we do
+# not use Warp, so that probe's output is dropped (anything else it prints is passed on).
+with _contextlib.redirect_stdout(_io.StringIO()) as _probe:
+    from mujoco import mjx as _mjx  # noqa: F401
+for _line in _probe.getvalue().splitlines():
+    if not _line.startswith(("Failed to import warp", "Failed to import mujoco_warp")):
+        print(_line)
+
+from envs.base import Env, State  # noqa: E402
+from envs.registry import EnvSpec, default_config, from_config, make, make_config, names, register  # noqa: E402
+from envs.wrappers import wrap  # noqa: E402
+from envs.config import ReachAvoidConfig, ReachConfig  # noqa: E402
+from envs.point_mass import PointMass, PointMassConfig  # noqa: E402
+from envs.robots import ROBOTS  # noqa: E402
+from envs.tasks import Reach, ReachAvoid  # noqa: E402
 
 
 def _arm_spec(robot: str, task: str) -> EnvSpec:

@@ -8,8 +8,9 @@ the field, the value and what is allowed.
 from __future__ import annotations
 
 import dataclasses
-import math
 from typing import Literal, Optional
+
+from envs.validation import choice, integer, positive
 
 ACTIONS = ("relative", "absolute")
 REWARDS = ("sparse", "semi_sparse", "dense")
@@ -25,22 +26,6 @@ REACH_OBSERVATIONS = (
 OBSTACLE_OBSERVATIONS = ("obstacle_pos", "obstacle_size", "link_obstacle_dist")
 
 
-def _choice(name, value, allowed):
-    if value not in allowed:
-        raise ValueError(f"{name}={value!r} is invalid: allowed are {', '.join(map(repr, allowed))}.")
-
-
-def _positive(name, value, strict=True):
-    ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
-    if not ok or (value <= 0 if strict else value < 0):
-        raise ValueError(f"{name}={value!r} is invalid: allowed is a finite number {'>' if strict else '>='} 0.")
-
-
-def _integer(name, value, minimum):
-    if not isinstance(value, int) or isinstance(value, bool) or value < minimum:
-        raise ValueError(f"{name}={value!r} is invalid: allowed is an integer >= {minimum}.")
-
-
 @dataclasses.dataclass(frozen=True)
 class ReachConfig:
     """Reach task: move the end effector to a sampled target and stay there."""
@@ -50,9 +35,8 @@ class ReachConfig:
     positions; `absolute` maps [-1, 1] onto the joint range. Targets are clipped to the range."""
     action_scale: float = 0.2
     """Radians per step commanded by a relative action of magnitude 1 (ignored for absolute). The
-    paper does not state it; 0.2 trained the UR5e reach ~4x faster than 0.1 (results/README.md,
-    "What limits learning"), and the UR5e PPO presets in train.py use 0.3, better again on that arm.
-    The joints' damping keeps them within their velocity limits either way."""
+    paper does not state it; 0.2 trained the UR5e reach much faster than 0.1 and the UR5e presets
+    use 0.3 (results: action-scale study). The joints' damping keeps them within their velocity limits."""
     observation: tuple[str, ...] = ("joint_pos", "ee_pos", "target_pos", "ee_to_target")
     """Observation parts, concatenated in this order. Reach: joint_pos, joint_vel, joint_acc,
     ee_pos, ee_vel, target_pos, ee_to_target, prev_action, and two not in the paper: joint_sin_cos
@@ -77,8 +61,7 @@ class ReachConfig:
     """Penalty weight near the joint range limits (semi_sparse and dense; not in the paper, which has 0):
     w_joint_limit * sum_i max(0, 1 - m_i / joint_limit_margin), m_i the joint's distance (rad) to the
     nearer end of its range. UR5e policies that miss mostly end with a joint pinned at its +-360 deg
-    limit (benchmarks/failure_report.py); this makes approaching a limit cost something. The UR5e
-    PPO presets set 0.05 (reach) and 1.0 (reach-avoid): results/README.md, "The joint-limit penalty"."""
+    limit; this makes approaching a limit cost something (results: joint-limit study)."""
     joint_limit_margin: float = 0.5
     """Distance from a joint limit (rad) at which the w_joint_limit penalty starts (0.5 in every run
     we made with it)."""
@@ -117,12 +100,12 @@ class ReachConfig:
 
     def validate(self) -> None:
         """Raises `ValueError` on an impossible or unknown value."""
-        _choice("action", self.action, ACTIONS)
-        _choice("reward", self.reward, REWARDS)
-        _choice("success", self.success, SUCCESS_MODES)
-        _choice("workspace", self.workspace, WORKSPACES)
-        _choice("target_sampling", self.target_sampling, TARGET_SAMPLINGS)
-        _choice("init_range", self.init_range, INIT_RANGES)
+        choice("action", self.action, ACTIONS)
+        choice("reward", self.reward, REWARDS)
+        choice("success", self.success, SUCCESS_MODES)
+        choice("workspace", self.workspace, WORKSPACES)
+        choice("target_sampling", self.target_sampling, TARGET_SAMPLINGS)
+        choice("init_range", self.init_range, INIT_RANGES)
         if isinstance(self.observation, str) or not isinstance(self.observation, (tuple, list)) or not self.observation:
             raise ValueError(f"observation={self.observation!r} is invalid: allowed is a non-empty tuple of "
                              f"{', '.join(self.allowed_observations())}.")
@@ -134,14 +117,14 @@ class ReachConfig:
         if len(set(self.observation)) != len(self.observation):
             raise ValueError(f"observation={self.observation!r} is invalid: a part appears twice.")
         for name in ("action_scale", "alpha", "target_radius", "joint_limit_margin"):
-            _positive(name, getattr(self, name))
+            positive(name, getattr(self, name))
         for name in ("w_reach", "w_dist", "w_joint_vel", "w_joint_acc", "w_joint_limit", "collision_penalty"):
-            _positive(name, getattr(self, name), strict=False)
+            positive(name, getattr(self, name), strict=False)
         if self.d_max is not None:
-            _positive("d_max", self.d_max)
-        _integer("episode_length", self.episode_length, 1)
-        _integer("substeps", self.substeps, 1)
-        _integer("sampling_candidates", self.sampling_candidates, 1)
+            positive("d_max", self.d_max)
+        integer("episode_length", self.episode_length, 1)
+        integer("substeps", self.substeps, 1)
+        integer("sampling_candidates", self.sampling_candidates, 1)
         if not isinstance(self.gravity_compensation, bool):
             raise ValueError(f"gravity_compensation={self.gravity_compensation!r} is invalid: allowed are True, False.")
 
@@ -180,8 +163,8 @@ class ReachAvoidConfig(ReachConfig):
 
     def validate(self) -> None:
         super().validate()
-        _positive("obstacle_radius", self.obstacle_radius)
-        _positive("obstacle_region", self.obstacle_region)
-        _positive("w_obst", self.w_obst, strict=False)
-        _positive("obstacle_tau", self.obstacle_tau)
-        _choice("link_distance", self.link_distance, LINK_DISTANCES)
+        positive("obstacle_radius", self.obstacle_radius)
+        positive("obstacle_region", self.obstacle_region)
+        positive("w_obst", self.w_obst, strict=False)
+        positive("obstacle_tau", self.obstacle_tau)
+        choice("link_distance", self.link_distance, LINK_DISTANCES)

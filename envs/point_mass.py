@@ -13,6 +13,7 @@ import dataclasses
 import jax
 import jax.numpy as jnp
 
+from envs import validation
 from envs.base import Env, State
 
 
@@ -37,11 +38,9 @@ class PointMassConfig:
 
     def validate(self) -> None:
         for name in ("dim", "episode_length"):
-            if int(getattr(self, name)) < 1:
-                raise ValueError(f"{name}={getattr(self, name)!r} is invalid: allowed is an integer >= 1.")
+            validation.integer(name, getattr(self, name), 1)
         for name in ("dt", "max_speed", "goal_radius", "arena", "alpha"):
-            if not float(getattr(self, name)) > 0:
-                raise ValueError(f"{name}={getattr(self, name)!r} is invalid: allowed is a number > 0.")
+            validation.positive(name, getattr(self, name))
 
 
 class PointMass(Env):

@@ -9,8 +9,7 @@ import numpy as np
 import pytest
 
 import envs
-import train as train_cli
-from agents import driver
+from agents import driver, presets
 from agents.loop import Programs, Transition
 
 SHORT = 30_720  # 6 PPO updates of the probe preset; shared with tests/test_loop_train.py (same compiled program)
@@ -46,7 +45,7 @@ def random_baseline():
 
 def _solve(preset, tmp_path):
     t0 = time.perf_counter()
-    result = driver.train(train_cli.make_config(preset, logdir=str(tmp_path / preset), tensorboard=False, progress=False))
+    result = driver.train(presets.make_config(preset, logdir=str(tmp_path / preset), tensorboard=False, progress=False))
     seconds = time.perf_counter() - t0
     ev = {k: float(np.mean(v)) for k, v in result.eval_metrics.items()}
     print(f"{preset}: {seconds:.1f}s, eval {ev}")
@@ -118,8 +117,8 @@ def test_vmapped_seeds_are_independent_and_match_single_seed_runs(tmp_path):
     precision = "highest" if jax.default_backend() == "gpu" else "default"
     base = dict(num_timesteps=SHORT, stop_after_steps=10_240, eval_envs=0, tensorboard=False, progress=False,
                 matmul_precision=precision)
-    both = driver.train(train_cli.make_config("point-mass-ppo", seeds=2, logdir=str(tmp_path / "both"), **base))
-    singles = [driver.train(train_cli.make_config("point-mass-ppo", seed=s, logdir=str(tmp_path / f"s{s}"), **base))
+    both = driver.train(presets.make_config("point-mass-ppo", seeds=2, logdir=str(tmp_path / "both"), **base))
+    singles = [driver.train(presets.make_config("point-mass-ppo", seed=s, logdir=str(tmp_path / f"s{s}"), **base))
                for s in (0, 1)]
     p_both = [jax.tree.map(lambda x, i=i: np.asarray(x[i]), jax.device_get(both.state.learner.params)) for i in (0, 1)]
     p_single = [jax.tree.map(lambda x: np.asarray(x[0]), jax.device_get(r.state.learner.params)) for r in singles]

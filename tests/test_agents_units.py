@@ -13,8 +13,7 @@ from agents import normalizer
 from agents.distributions import TanhNormal
 from agents.loop import Parallel
 from agents.networks import MLP, TwinQ
-from agents.ppo import (PPO, PPOConfig, gae, learning_rate, normalize_per_minibatch, popart_preserve, ppo_loss_terms,
-                        ppo_total_loss)
+from agents.ppo import PPO, PPOConfig, gae, learning_rate, normalize_per_minibatch, popart_preserve, ppo_loss_terms
 from agents.sac import SAC, SACConfig, actor_loss, critic_loss, critic_target, polyak, temperature_loss
 
 
@@ -138,8 +137,32 @@ def test_ppo_loss_on_hand_computed_numbers():
     assert float(terms["clip_fraction"]) == pytest.approx(0.75)
     kl = np.mean([(r - 1) - math.log(r) for r in (1.5, 0.5, 1.1, 0.7)])
     assert float(terms["approx_kl"]) == pytest.approx(kl, rel=1e-5)
-    total = ppo_total_loss(terms, 0.25, 0.01)
-    assert float(total) == pytest.approx(0.525 + 0.25 * 1.25 - 0.01 * 0.5, rel=1e-6)
+
+
+def test_ppo_loss_method_weights_the_terms_and_names_its_metrics():
+    """PPO.loss = policy loss + value_loss_coef * value loss - entropy_coef * entropy, on the
+    networks' outputs, with the value targets normalised by the value statistics."""
+    config = PPOConfig(num_envs=4, batch_size=4, num_minibatches=1, policy_hidden_sizes=(8,), value_hidden_sizes=(8,),
+                       value_loss_coef=0.25, entropy_coef=0.01, clip_epsilon=0.2)
+    ppo = PPO(config, 3, 2, 10)
+    state = ppo.init(jax.random.PRNGKey(0))
+    stats = normalizer.RunningStats(jnp.array(10.0), jnp.array(2.0), jnp.array(4.0))  # mean 2, std 2
+    rng = np.random.default_rng(0)
+    mb = {"obs": jnp.asarray(rng.normal(size=(4, 3)), jnp.float32),
+          "raw_action": jnp.asarray(rng.normal(size=(4, 2)), jnp.float32),
+          "log_prob": jnp.asarray(rng.normal(size=4), jnp.float32),
+          "advantages": jnp.array([1.0, -1.0, 0.5, 2.0]), "targets": jnp.array([2.0, 4.0, 0.0, 6.0]),
+          "noise": jnp.asarray(rng.normal(size=(4, 2)), jnp.float32)}
+    loss, metrics = ppo.loss(state.params, mb, stats)
+    dist = TanhNormal.from_network_output(ppo.policy_net.apply(state.params["policy"], mb["obs"]), config.min_std)
+    values = ppo.value_net.apply(state.params["value"], mb["obs"])[..., 0]
+    terms = ppo_loss_terms(dist.log_prob_raw(mb["raw_action"]), mb["log_prob"], mb["advantages"], values,
+                           jnp.array([0.0, 1.0, -1.0, 2.0]), dist.entropy_from_noise(mb["noise"]), 0.2)
+    expected = terms["policy_loss"] + 0.25 * terms["value_loss"] - 0.01 * terms["entropy"]
+    assert float(loss) == pytest.approx(float(expected), rel=1e-5)
+    assert float(metrics["loss/value"]) == pytest.approx(float(terms["value_loss"]), rel=1e-5)
+    assert float(metrics["policy/entropy"]) == pytest.approx(float(terms["entropy"]), rel=1e-5)
+    assert float(metrics["loss/total"]) == float(loss)
 
 
 def test_learning_rate_schedules():
@@ -149,19 +172,17 @@ def test_learning_rate_schedules():
     assert float(learning_rate(cfg.__class__(learning_rate=2.0, lr_schedule="constant"), jnp.array(0.9))) == 2.0
 
 
-def test_learning_rate_note_for_runs_stopped_before_their_schedule_ends():
-    """train.py's closing line for a PPO run cut short: 160 of 916 updates of 327,680 steps done under a
-    linear schedule to 10 % -> 1 - 0.9 * 160 / 916 = 84.3 % of the start rate."""
-    from agents.driver import TrainConfig, learning_rate_note
-    from agents.sac import SACConfig
+def test_progress_note_for_runs_stopped_before_their_schedule_ends():
+    """train.py's closing line for a PPO run cut short: 160 of 916 updates done under a linear
+    schedule to 10 % -> 1 - 0.9 * 160 / 916 = 84.3 % of the start rate."""
+    from agents.sac import SAC, SACConfig
 
-    config = TrainConfig(env=None, algo=PPOConfig(), env_name="panda-reach", num_timesteps=300_000_000)
-    note = learning_rate_note(config, 160 * 327_680)
-    assert note.startswith("the learning rate is at 84% of its start") and "--num-timesteps 300,000,000" in note
-    assert learning_rate_note(config, 916 * 327_680) is None  # the schedule's last update is done
-    constant = dataclasses.replace(config, algo=PPOConfig(lr_schedule="constant"))
-    assert learning_rate_note(constant, 327_680) is None
-    assert learning_rate_note(dataclasses.replace(config, algo=SACConfig()), 1_000) is None
+    ppo = PPO(PPOConfig(), 7, 3, 916)
+    note = ppo.progress_note(160)
+    assert note.startswith("the learning rate is at 84% of its start") and "916 updates (160 done)" in note
+    assert ppo.progress_note(916) is None  # the schedule's last update is done
+    assert PPO(PPOConfig(lr_schedule="constant"), 7, 3, 916).progress_note(160) is None
+    assert SAC(SACConfig(), 7, 3).progress_note(10) is None
 
 
 def test_popart_preserves_value_outputs():

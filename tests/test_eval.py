@@ -21,7 +21,8 @@ import pytest
 import envs
 import eval as eval_cli
 import train as train_cli
-from agents import baselines, driver, evaluation, export
+from agents import baselines, driver, evaluation, export, presets, registry
+from agents.config import config_json
 from agents.loop import episode_metrics
 from mujoco_reference import colliding_configuration, colliding_pairs, contact_model, ee_position
 
@@ -129,7 +130,7 @@ def test_episode_metrics_on_env_states():
 def point_run(tmp_path_factory):
     """A 2-seed point-mass PPO run with checkpoints at 5120 and 10240 env steps."""
     logdir = tmp_path_factory.mktemp("point") / "run"
-    config = train_cli.make_config("point-mass-ppo", num_timesteps=10240, checkpoint_every=5120, seeds=2,
+    config = presets.make_config("point-mass-ppo", num_timesteps=10240, checkpoint_every=5120, seeds=2,
                                    eval_envs=64, logdir=str(logdir), **QUIET)
     driver.train(config)
     return logdir
@@ -321,12 +322,12 @@ ARM_ENV = dict(substeps=2, episode_length=20)
 
 def _untrained_export(directory, env_name="ur5e-reach", **env_options):
     """A policy export as the driver writes it, of an untrained PPO policy (no compilation)."""
-    config = train_cli.make_config("ur5e-reach-ppo-cpu", env_name=env_name, env=envs.make_config(env_name, **env_options))
+    config = presets.make_config("ur5e-reach-ppo-cpu", env_name=env_name, env=envs.make_config(env_name, **env_options))
     env = envs.make(env_name, **env_options)
-    learner = driver.make_learner(config.algo, env.observation_size, env.action_size, 1)
+    learner = registry.make_learner(config.algo, env.observation_size, env.action_size, 1)
     state = jax.vmap(learner.init)(jax.random.split(jax.random.PRNGKey(0), 1))
     step_dir = directory / "run" / "checkpoints" / "1280"
-    export.save(str(step_dir / "policy"), state, driver.config_json(config), 1280)
+    export.save(str(step_dir / "policy"), learner, state, config_json(config), 1280)
     return step_dir.parent.parent  # the logdir
 
 
@@ -582,15 +583,15 @@ def test_paper_tables_evaluate_each_pair_on_the_right_env_config(arm_export, tmp
 
 def test_sac_export_acts_as_the_learner(tmp_path):
     """A SAC state's export (policy params + observation statistics) gives the learner's actions."""
-    config = train_cli.make_config("point-mass-sac", seeds=2)
-    config = driver.dataclasses.replace(config, algo=driver.dataclasses.replace(config.algo, max_replay_size=1024,
+    config = presets.make_config("point-mass-sac", seeds=2)
+    config = dataclasses.replace(config, algo=dataclasses.replace(config.algo, max_replay_size=1024,
                                                                                 min_replay_size=256))
     env = envs.make("point-mass")
-    learner = driver.make_learner(config.algo, env.observation_size, env.action_size, 1)
+    learner = registry.make_learner(config.algo, env.observation_size, env.action_size, 1)
     state = jax.jit(jax.vmap(learner.init))(jax.random.split(jax.random.PRNGKey(0), 2))
     stats = state.obs_stats.replace(mean=state.obs_stats.mean + 0.3, var=state.obs_stats.var * 2.0)  # non-trivial
     state = state.replace(obs_stats=stats)
-    export.save(str(tmp_path / "policy"), state, driver.config_json(config), 640)
+    export.save(str(tmp_path / "policy"), learner, state, config_json(config), 640)
     loaded = export.load(str(tmp_path))
     assert loaded.config.algo_name == "sac" and loaded.seeds == [0, 1] and loaded.env_steps == 640
     assert sum(f.stat().st_size for f in (tmp_path / "policy").iterdir()) < 100_000  # no replay buffer

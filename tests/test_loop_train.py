@@ -1,6 +1,7 @@
 """train.py end to end: checkpoints that load back, exact resume, NaN stop, input validation, and
 the two-device data-parallel path."""
 
+import dataclasses
 import json
 import os
 import subprocess
@@ -14,7 +15,8 @@ import pytest
 
 import envs
 import train as train_cli
-from agents import driver
+from agents import driver, presets
+from agents.config import config_from_json, total_updates, validate
 from agents.checkpoint import Checkpointer
 from agents.ppo import PPO, PPOConfig
 from agents.sac import SACConfig
@@ -38,8 +40,8 @@ def test_train_cli_writes_checkpoints_logs_and_eval_that_load_back(tmp_path):
     assert "done after 10240 env steps" in proc.stdout
 
     saved = json.loads((logdir / "config.json").read_text())
-    config = driver.config_from_json(saved)
-    assert config == train_cli.make_config("point-mass-ppo", num_timesteps=10240, checkpoint_every=5120, eval_envs=32,
+    config = config_from_json(saved)
+    assert config == presets.make_config("point-mass-ppo", num_timesteps=10240, checkpoint_every=5120, eval_envs=32,
                                            logdir=str(logdir), progress=False,
                                            env=config.env.__class__(goal_radius=0.15))
     ckpt = Checkpointer(str(logdir / "checkpoints"))
@@ -69,7 +71,7 @@ def test_train_cli_on_the_arm_writes_a_checkpoint_that_loads_back(tmp_path):
            "--logdir", str(logdir), "--no-progress", "--env.substeps", "2", "--env.sampling-candidates", "4"]
     proc = subprocess.run(cmd, cwd=ROOT, env=_subprocess_env(), capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr[-3000:]
-    config = driver.config_from_json(json.loads((logdir / "config.json").read_text()))
+    config = config_from_json(json.loads((logdir / "config.json").read_text()))
     assert config.env_name == "ur5e-reach" and config.env.substeps == 2
     ckpt = Checkpointer(str(logdir / "checkpoints"))
     state, _ = ckpt.restore(1280, driver.programs_for(config).abstract_state)
@@ -86,10 +88,10 @@ def _full_state(result):
 
 def test_resume_reproduces_an_unbroken_run_bit_for_bit(tmp_path):
     base = dict(num_timesteps=SHORT, eval_envs=0, log_every=5120, **QUIET)
-    unbroken = driver.train(train_cli.make_config("point-mass-ppo", logdir=str(tmp_path / "a"), **base))
-    first = driver.train(train_cli.make_config("point-mass-ppo", logdir=str(tmp_path / "b"), stop_after_steps=15_360, **base))
+    unbroken = driver.train(presets.make_config("point-mass-ppo", logdir=str(tmp_path / "a"), **base))
+    first = driver.train(presets.make_config("point-mass-ppo", logdir=str(tmp_path / "b"), stop_after_steps=15_360, **base))
     assert first.status == "stopped" and first.env_steps == 15_360
-    resumed = driver.train(train_cli.make_config("point-mass-ppo", logdir=str(tmp_path / "b"), resume=True, **base))
+    resumed = driver.train(presets.make_config("point-mass-ppo", logdir=str(tmp_path / "b"), resume=True, **base))
     assert resumed.status == "done" and resumed.env_steps == SHORT
     for a, b in zip(_full_state(unbroken), _full_state(resumed)):
         np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
@@ -99,8 +101,8 @@ def test_resume_reproduces_an_unbroken_run_bit_for_bit(tmp_path):
                            np.asarray(jax.tree.leaves(unbroken.state.learner.params)[0]))
     # A differing algorithm setting is refused on resume.
     with pytest.raises(ValueError, match="algo.learning_rate"):
-        changed = train_cli.make_config("point-mass-ppo", logdir=str(tmp_path / "b"), resume=True, **base)
-        driver.train(driver.dataclasses.replace(changed, algo=driver.dataclasses.replace(changed.algo, learning_rate=1.0)))
+        changed = presets.make_config("point-mass-ppo", logdir=str(tmp_path / "b"), resume=True, **base)
+        driver.train(dataclasses.replace(changed, algo=dataclasses.replace(changed.algo, learning_rate=1.0)))
 
 
 def _stored_leaf_names(step_dir: str) -> list[str]:
@@ -112,7 +114,7 @@ def _stored_leaf_names(step_dir: str) -> list[str]:
 def test_checkpoint_without_envs_resumes_the_learner_with_fresh_episodes(tmp_path):
     base = dict(num_timesteps=SHORT, eval_envs=0, log_every=5120, checkpoint_envs=False, **QUIET)
     logdir = str(tmp_path / "small")
-    first = driver.train(train_cli.make_config("point-mass-ppo", logdir=logdir, stop_after_steps=15_360, **base))
+    first = driver.train(presets.make_config("point-mass-ppo", logdir=logdir, stop_after_steps=15_360, **base))
     assert first.status == "stopped"
     ckpt = Checkpointer(os.path.join(logdir, "checkpoints"))
     stored = _stored_leaf_names(ckpt.step_dir(15_360))
@@ -128,14 +130,14 @@ def test_checkpoint_without_envs_resumes_the_learner_with_fresh_episodes(tmp_pat
     np.testing.assert_array_equal(np.asarray(saved.key), np.asarray(first.state.key))
     np.testing.assert_array_equal(np.asarray(saved.episode_length), 0)  # ...with fresh episodes
     assert not np.allclose(np.asarray(saved.env_state.obs), np.asarray(first.state.env_state.obs))
-    resumed = driver.train(train_cli.make_config("point-mass-ppo", logdir=logdir, resume=True, **base))
+    resumed = driver.train(presets.make_config("point-mass-ppo", logdir=logdir, resume=True, **base))
     assert resumed.status == "done" and resumed.env_steps == SHORT
 
 
 def test_learner_only_checkpoint_of_sac_leaves_out_the_replay_buffer_and_refills_it(tmp_path):
     base = dict(num_timesteps=3_200, eval_envs=0, log_every=1_600, checkpoint_envs=False, **QUIET)
     logdir = str(tmp_path / "sac")
-    first = driver.train(train_cli.make_config("point-mass-sac", logdir=logdir, stop_after_steps=1_600, **base))
+    first = driver.train(presets.make_config("point-mass-sac", logdir=logdir, stop_after_steps=1_600, **base))
     assert first.status == "stopped"
     assert int(first.state.learner.replay.rows[0]) == 100  # 1,600 steps of 16 envs were in the buffer
     ckpt = Checkpointer(os.path.join(logdir, "checkpoints"))
@@ -150,7 +152,7 @@ def test_learner_only_checkpoint_of_sac_leaves_out_the_replay_buffer_and_refills
         for a, b in zip(jax.tree.leaves(jax.device_get(getattr(first.state.learner, name))),
                         jax.tree.leaves(jax.device_get(getattr(saved.learner, name)))):
             np.testing.assert_array_equal(np.asarray(a), np.asarray(b))  # everything else comes back exactly
-    resumed = driver.train(train_cli.make_config("point-mass-sac", logdir=logdir, resume=True, **base))
+    resumed = driver.train(presets.make_config("point-mass-sac", logdir=logdir, resume=True, **base))
     assert resumed.status == "done" and resumed.env_steps == 3_200
     assert int(resumed.state.learner.replay.rows[0]) == 100  # refilled after the resume only
     assert np.any(np.asarray(resumed.state.learner.replay.data["obs"][0, :100]) != 0)
@@ -169,7 +171,7 @@ class _PoisonedPPO(PPO):
 
 
 def test_nan_loss_stops_the_run_and_keeps_the_last_good_checkpoint(tmp_path):
-    config = train_cli.make_config("point-mass-ppo", num_timesteps=6 * 5120, checkpoint_every=2 * 5120,
+    config = presets.make_config("point-mass-ppo", num_timesteps=6 * 5120, checkpoint_every=2 * 5120,
                                    log_every=5120, eval_envs=0, logdir=str(tmp_path / "nan"), **QUIET)
     with pytest.raises(driver.NonFiniteLossError, match=r"loss/total .*env step 20480.*last good checkpoint \(10240\)"):
         driver.train(config, learner_cls=_PoisonedPPO)  # the user's learner class (notebooks/02)
@@ -217,7 +219,7 @@ def test_learner_cls_is_part_of_the_program_cache_key():
     """`driver.train(config, learner_cls=...)` builds its programs around that class; a redefined
     class compiles anew, the default class (given or not) reuses the default programs. Builds the
     programs only (nothing is compiled); the NaN test above trains with a replaced class."""
-    config = train_cli.make_config("point-mass-ppo", num_timesteps=SHORT, eval_envs=0, **QUIET)
+    config = presets.make_config("point-mass-ppo", num_timesteps=SHORT, eval_envs=0, **QUIET)
     default = driver.programs_for(config)
     assert type(default.learner) is PPO and driver.programs_for(config, PPO) is default
     first, second = _ppo_subclass(), _ppo_subclass()
@@ -225,13 +227,13 @@ def test_learner_cls_is_part_of_the_program_cache_key():
     assert type(programs.learner) is first and programs is not default
     assert driver.programs_for(config, first) is programs
     assert type(driver.programs_for(config, second).learner) is second
-    assert programs.learner.total_updates == driver.total_updates(config)  # PPO's constructor arguments
-    sac = train_cli.make_config("point-mass-sac")
+    assert programs.learner.total_updates == total_updates(config)  # PPO's constructor arguments
+    sac = presets.make_config("point-mass-sac")
     assert type(driver.programs_for(sac).learner).__name__ == "SAC"
 
 
 BAD_INPUTS = [
-    (lambda: train_cli.make_config("ur5-reach-ppo"), r"preset='ur5-reach-ppo' is unknown: allowed are .*ur5e-reach-ppo"),
+    (lambda: presets.make_config("ur5-reach-ppo"), r"preset='ur5-reach-ppo' is unknown: allowed are .*ur5e-reach-ppo"),
     (lambda: train_cli.parse(["no-such-preset"]), r"preset='no-such-preset' is unknown"),
     (lambda: train_cli.parse(["point-mass-ppo", "--algo.num-envs", "48"]),
      r"algo.num_envs=48 is invalid: it must divide algo.batch_size \* algo.num_minibatches = 512"),
@@ -251,7 +253,7 @@ BAD_INPUTS = [
     (lambda: train_cli.parse(["point-mass-ppo", "--num-timesteps", "ten"]), None),  # tyro: not an integer
     (lambda: train_cli.parse(["point-mass-ppo", "--seeds", "0"]), r"seeds=0 is invalid: allowed is an integer >= 1"),
     (lambda: train_cli.parse(["point-mass-ppo", "--env.goal-radius", "-1"]), r"goal_radius=-1.0 is invalid"),
-    (lambda: train_cli.make_config("point-mass-ppo", env=None), r"env=NoneType does not fit env_name='point-mass'"),
+    (lambda: presets.make_config("point-mass-ppo", env=None), r"env=NoneType does not fit env_name='point-mass'"),
     (lambda: train_cli.parse(["point-mass-sac", "--algo.batch-size", "24"]),
      r"algo.batch_size=24 is invalid with algo.num_envs=16: allowed are multiples or divisors"),
     (lambda: train_cli.parse(["point-mass-sac", "--algo.max-replay-size", "1000"]),
@@ -259,7 +261,7 @@ BAD_INPUTS = [
     (lambda: train_cli.parse(["point-mass-sac", "--algo.min-replay-size", "64000"]), r"algo.min_replay_size=64000 is invalid"),
     (lambda: train_cli.parse(["point-mass-ppo", "--resume"]), r"logdir='' is invalid with resume=True"),
     (lambda: train_cli.parse(["point-mass-ppo", "--multi-device", "pmap"]), None),  # tyro: not a Literal choice
-    (lambda: driver.validate(train_cli.make_config("point-mass-ppo", multi_device="pmap")),
+    (lambda: validate(presets.make_config("point-mass-ppo", multi_device="pmap")),
      r"multi_device='pmap' is unknown: allowed are shard_map, gspmd"),
 ]
 
@@ -280,7 +282,7 @@ def test_bad_input_fails_before_compiling(make, message, monkeypatch, tmp_path):
 
 
 def test_resume_without_checkpoint_is_refused(tmp_path):
-    config = train_cli.make_config("point-mass-ppo", logdir=str(tmp_path / "empty"), resume=True, **QUIET)
+    config = presets.make_config("point-mass-ppo", logdir=str(tmp_path / "empty"), resume=True, **QUIET)
     with pytest.raises(ValueError, match="holds no checkpoint"):
         driver.train(config)
 
@@ -298,7 +300,7 @@ TWO_DEVICES = textwrap.dedent("""
         for devices, mode in ((1, "shard_map"), (2, "shard_map"), (2, "gspmd")):
             cfg = T.make_config(preset, num_timesteps=steps, devices=devices, multi_device=mode, seeds=2, eval_envs=0,
                                 logdir=f"{TMP}/{preset}-{devices}-{mode}", tensorboard=False, progress=False)
-            cfg = driver.dataclasses.replace(cfg, algo=driver.dataclasses.replace(cfg.algo, **algo))
+            cfg = dataclasses.replace(cfg, algo=dataclasses.replace(cfg.algo, **algo))
             r = driver.train(cfg)
             runs.append(r)
         one = jax.tree.leaves(jax.device_get(runs[0].state.learner))
@@ -314,7 +316,7 @@ TWO_DEVICES = textwrap.dedent("""
     for mode in ("shard_map", "gspmd"):
         cfg = T.make_config("ur5e-reach-ppo-cpu", num_timesteps=1280, devices=2, multi_device=mode, eval_envs=0,
                             logdir=f"{TMP}/arm-{mode}", tensorboard=False, progress=False)
-        cfg = driver.dataclasses.replace(cfg, env=driver.dataclasses.replace(cfg.env, substeps=2, sampling_candidates=4))
+        cfg = dataclasses.replace(cfg, env=dataclasses.replace(cfg.env, substeps=2, sampling_candidates=4))
         r = driver.train(cfg)
         out[f"arm {mode}"] = {"env_shards": len(r.state.env_state.obs.sharding.device_set),
                               "losses_finite": bool(all(np.isfinite(v).all() for k, v in r.last_metrics.items() if k.startswith("loss/"))),

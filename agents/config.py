@@ -1,0 +1,203 @@
+"""The run's config (`TrainConfig`), its validation and its JSON round trip.
+
+A run's config is stored with every checkpoint and policy export; `config_from_json` rebuilds it
+(the algorithm's config class comes from `agents.registry` by the stored `algo_name`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import types
+import typing
+import warnings
+from typing import Any, Generic, Literal, TypeVar
+
+import jax
+
+import envs
+from agents import registry
+from agents.loop import MULTI_DEVICE_MODES
+
+EnvConfigT = TypeVar("EnvConfigT")
+AlgoConfigT = TypeVar("AlgoConfigT")
+PRECISIONS = ("default", "high", "highest")
+
+
+@dataclasses.dataclass(frozen=True)
+class TrainConfig(Generic[EnvConfigT, AlgoConfigT]):
+    """One training run. `train.py` builds it from a preset plus command-line overrides."""
+
+    env: EnvConfigT
+    """Options of the environment (its config dataclass, `--env.<field>` on the command line)."""
+    algo: AlgoConfigT
+    """Algorithm hyperparameters: a config class registered in agents.registry (PPOConfig, SACConfig)."""
+    env_name: str = "point-mass"
+    """Registered environment name (see envs.names())."""
+    preset: str = ""
+    """Name of the preset this config started from (informational)."""
+    num_timesteps: int = 1_000_000
+    """Environment steps per seed (rounded up to whole updates)."""
+    seed: int = 0
+    """Seed of the first run; the runs of --seeds N use seed, seed + 1, ..., seed + N - 1."""
+    seeds: int = 1
+    """Independent runs trained together in one compiled program (vmapped)."""
+    devices: int = 0
+    """Local devices to split the environments over (0 = all)."""
+    multi_device: Literal["shard_map", "gspmd"] = "gspmd"
+    """How several devices share the work: gspmd (the one-device program under jit with sharded env
+    axes; XLA inserts the collectives) or shard_map (each device runs the chunk on its envs; the
+    learners average gradients explicitly). Same results up to float rounding; ignored on one device.
+    gspmd is the default because XLA's GPU compiler crashed on the shard_map program of the MJX arms."""
+    logdir: str = ""
+    """Output directory ("" = runs/<preset>/<date-time>)."""
+    resume: bool = False
+    """Continue from the newest checkpoint in logdir (with the config stored there)."""
+    checkpoint_every: int = 0
+    """Save a checkpoint every this many env steps (0 = only at the end)."""
+    keep_checkpoints: int = 3
+    """Newest checkpoints kept on disk."""
+    checkpoint_envs: bool = True
+    """Store the environments' states in checkpoints, so --resume continues every episode exactly
+    (a resumed run then ends with the parameters of an unbroken one). False keeps checkpoints to the
+    learner, RNG and step count and leaves out the learner's transient fields (SAC's replay buffer):
+    a resume then starts fresh episodes and SAC refills its buffer with min_replay_size random steps
+    first. Smaller checkpoints, for moving runs between machines."""
+    log_every: int = 0
+    """Log every this many env steps (0 = 50 times per run)."""
+    stop_after_steps: int = 0
+    """Checkpoint and stop once this many env steps are done (0 = run to num_timesteps); continue
+    later with --resume (for time-limited jobs)."""
+    eval_envs: int = 4096
+    """Environments of the final deterministic evaluation (one episode each; 0 = no evaluation)."""
+    eval_seed: int = 1_000_000
+    """Seed of the evaluation episodes (the same episodes for every seed and checkpoint)."""
+    eval_last_steps: int = 10
+    """The evaluation also reports each metric averaged over an episode's last this many steps."""
+    matmul_precision: Literal["default", "high", "highest"] = "default"
+    """float32 matmul precision: "default" lets NVIDIA GPUs use TF32 (fast, ~1e-3 relative error),
+    "highest" computes in full float32. Stored with the run so results state what they used."""
+    tensorboard: bool = True
+    """Write TensorBoard event files (needs tensorboardX)."""
+    progress: bool = True
+    """Print a progress line."""
+
+    @property
+    def algo_name(self) -> str:
+        return registry.of_config(self.algo).name
+
+
+RUN_FIELDS = ("num_timesteps", "devices", "multi_device", "logdir", "resume", "checkpoint_every", "keep_checkpoints",
+              "checkpoint_envs", "log_every", "stop_after_steps", "eval_envs", "eval_seed", "eval_last_steps",
+              "tensorboard", "progress")
+"""Fields that may differ between a checkpoint's config and a resuming command line."""
+
+
+def num_devices(config: TrainConfig) -> int:
+    return config.devices or jax.local_device_count()
+
+
+def env_steps_per_update(config: TrainConfig) -> int:
+    return config.algo.env_steps_per_update
+
+
+def total_updates(config: TrainConfig) -> int:
+    return math.ceil(config.num_timesteps / env_steps_per_update(config))
+
+
+def validate(config: TrainConfig) -> None:
+    """Raises a ValueError naming the field, the value and what is allowed; compiles nothing."""
+    registry.of_config(config.algo)
+    envs.registry.spec(config.env_name)  # unknown name -> ValueError listing the names
+    expected = type(envs.default_config(config.env_name))
+    if type(config.env) is not expected:
+        raise ValueError(f"env={type(config.env).__name__} does not fit env_name={config.env_name!r}: allowed is {expected.__name__}.")
+    config.env.validate()
+    available = jax.local_device_count()
+    if not 0 <= config.devices <= available:
+        raise ValueError(f"devices={config.devices} is invalid: allowed are 0 (all) to {available} (local devices).")
+    config.algo.validate(num_devices(config))
+    for name, low in (("num_timesteps", 1), ("seeds", 1), ("keep_checkpoints", 1), ("eval_last_steps", 1),
+                      ("checkpoint_every", 0), ("log_every", 0), ("stop_after_steps", 0), ("eval_envs", 0)):
+        if int(getattr(config, name)) < low:
+            raise ValueError(f"{name}={getattr(config, name)!r} is invalid: allowed is an integer >= {low}.")
+    if config.multi_device not in MULTI_DEVICE_MODES:
+        raise ValueError(f"multi_device={config.multi_device!r} is unknown: allowed are {', '.join(MULTI_DEVICE_MODES)}.")
+    if config.matmul_precision not in PRECISIONS:
+        raise ValueError(f"matmul_precision={config.matmul_precision!r} is unknown: allowed are {', '.join(PRECISIONS)}.")
+    if config.resume and not config.logdir:
+        raise ValueError("logdir='' is invalid with resume=True: allowed is the directory of the run to continue.")
+
+
+# ----------------------------------------------------------------------------------------------
+# JSON round trip.
+
+
+def config_to_dict(config) -> dict:
+    """A JSON-ready dict of a (nested) frozen-dataclass config."""
+    return json.loads(json.dumps(dataclasses.asdict(config)))
+
+
+def dataclass_from_dict(cls, data: dict):
+    """Inverse of `config_to_dict` for one dataclass type: nested dataclasses and tuples are rebuilt
+    from the field annotations; unknown keys raise a ValueError naming them."""
+    hints = typing.get_type_hints(cls)
+    names = {f.name for f in dataclasses.fields(cls)}
+    unknown = sorted(set(data) - names)
+    if unknown:
+        raise ValueError(f"config field {unknown[0]!r} does not exist in {cls.__name__}: allowed are {', '.join(sorted(names))}.")
+    return cls(**{name: _coerce(hints.get(name, Any), value) for name, value in data.items()})
+
+
+def _coerce(tp, value):
+    origin = typing.get_origin(tp)
+    if dataclasses.is_dataclass(tp) and isinstance(value, dict):
+        return dataclass_from_dict(tp, value)
+    if origin is tuple and isinstance(value, list):
+        args = typing.get_args(tp)
+        inner = args[0] if args else Any
+        return tuple(_coerce(inner, v) for v in value)
+    if origin in (typing.Union, types.UnionType):
+        for arg in typing.get_args(tp):
+            if arg is type(None) and value is None:
+                return None
+        for arg in typing.get_args(tp):
+            if arg is not type(None):
+                return _coerce(arg, value)
+    if tp is float and isinstance(value, int):
+        return float(value)
+    return value
+
+
+def config_json(config: TrainConfig) -> dict:
+    return {"algo_name": config.algo_name, **config_to_dict(config)}
+
+
+def config_from_json(data: dict) -> TrainConfig:
+    data = dict(data)
+    algo_cls = registry.by_name(data.pop("algo_name")).config_cls
+    env_cls = type(envs.default_config(data["env_name"]))
+    data["env"] = dataclass_from_dict(env_cls, data["env"])
+    data["algo"] = dataclass_from_dict(algo_cls, data["algo"])
+    return dataclass_from_dict(TrainConfig, data)
+
+
+def merge_resume_config(config: TrainConfig, saved: TrainConfig) -> TrainConfig:
+    """The saved config, with only the run-control fields (`RUN_FIELDS`) taken from `config`;
+    ValueError naming the first other field that differs."""
+    for field in dataclasses.fields(TrainConfig):
+        if field.name in RUN_FIELDS or field.name == "preset":
+            continue
+        mine, theirs = getattr(config, field.name), getattr(saved, field.name)
+        if mine != theirs:
+            if dataclasses.is_dataclass(mine) and type(mine) is type(theirs):
+                for sub in dataclasses.fields(mine):
+                    if getattr(mine, sub.name) != getattr(theirs, sub.name):
+                        raise ValueError(
+                            f"{field.name}.{sub.name}={getattr(mine, sub.name)!r} differs from the checkpoint's "
+                            f"{getattr(theirs, sub.name)!r}: allowed on --resume is only the checkpoint's value.")
+            raise ValueError(f"{field.name}={mine!r} differs from the checkpoint's {theirs!r}: allowed on --resume is only the checkpoint's value.")
+    if config.num_timesteps != saved.num_timesteps and saved.algo.schedule_spans_run:
+        warnings.warn("num_timesteps changed on resume: the learning-rate schedule is stretched to the new length.")
+    return dataclasses.replace(saved, **{f: getattr(config, f) for f in RUN_FIELDS})

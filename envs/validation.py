@@ -1,0 +1,35 @@
+"""Config checks shared by the env and algorithm configs: each raises a ValueError naming the
+field, the value and what is allowed, before anything is traced."""
+
+from __future__ import annotations
+
+import math
+import numbers
+
+
+def _is_real(value) -> bool:
+    return isinstance(value, numbers.Real) and not isinstance(value, bool)
+
+
+def choice(name: str, value, allowed) -> None:
+    if value not in allowed:
+        raise ValueError(f"{name}={value!r} is invalid: allowed are {', '.join(map(repr, allowed))}.")
+
+
+def positive(name: str, value, strict: bool = True) -> None:
+    """A finite real number > 0 (>= 0 with strict=False); numpy scalars count, bools and strings do not."""
+    ok = _is_real(value) and math.isfinite(float(value))
+    if not ok or (float(value) <= 0 if strict else float(value) < 0):
+        raise ValueError(f"{name}={value!r} is invalid: allowed is a finite number {'>' if strict else '>='} 0.")
+
+
+def integer(name: str, value, minimum: int) -> None:
+    """An integer >= minimum (numpy integers count; bools, floats and strings do not)."""
+    if not isinstance(value, numbers.Integral) or isinstance(value, bool) or value < minimum:
+        raise ValueError(f"{name}={value!r} is invalid: allowed is an integer >= {minimum}.")
+
+
+def in_range(name: str, value, low: float, high: float) -> None:
+    """A real number in [low, high]."""
+    if not (_is_real(value) and low <= float(value) <= high):
+        raise ValueError(f"{name}={value!r} is invalid: allowed is a number in [{float(low)}, {float(high)}].")
