@@ -48,8 +48,8 @@ def categorical_projection(next_probs, rewards, discounts, support):
 
     A scatter-add, O(batch * K) memory; the hat-function form sum_j p_j max(0, 1 - |b_j - i|)
     (Rowland et al. 2018, the projection Pi_C) is the same numbers but built a (batch, K, K) array
-    and ran 10x slower on CPU (4,096 and 32,768 samples of 101 atoms). On a GPU the adds into one atom may be summed in any order (float
-    rounding differs between runs in the last bits).
+    and ran 10x slower on CPU (4,096 and 32,768 samples of 101 atoms). On a GPU the adds into one
+    atom may be summed in any order (float rounding differs between runs in the last bits).
     """
     num_atoms = support.shape[-1]
     v_min, v_max = support[0], support[-1]
