@@ -48,15 +48,15 @@ def categorical_projection(next_probs, rewards, discounts, support):
 
     A scatter-add, O(batch * K) memory; the hat-function form sum_j p_j max(0, 1 - |b_j - i|)
     (Rowland et al. 2018, the projection Pi_C) is the same numbers but built a (batch, K, K) array
-    and ran 10x slower on CPU. On a GPU the adds into one atom may be summed in any order (float
-    rounding differs between runs in the last bits).
+    and ran 10x slower on CPU (4,096 and 32,768 samples of 101 atoms). On a GPU the adds into one
+    atom may be summed in any order (float rounding differs between runs in the last bits).
     """
     num_atoms = support.shape[-1]
     v_min, v_max = support[0], support[-1]
     delta = (v_max - v_min) / (num_atoms - 1)
     shifted = rewards[..., None] + discounts[..., None] * support  # (..., K): T z_j
-    # Clip b too: rounding must not push an end atom's mass off the support.
-    b = jnp.clip((jnp.clip(shifted, v_min, v_max) - v_min) / delta, 0.0, num_atoms - 1)
+    # Clipping b to [0, K - 1] is clipping T z_j to [v_min, v_max], and no rounding can leave the support.
+    b = jnp.clip((shifted - v_min) / delta, 0.0, num_atoms - 1)
     lower = jnp.clip(jnp.floor(b), 0, num_atoms - 2)
     upper_weight = b - lower
     shape = jnp.broadcast_shapes(next_probs.shape, b.shape)
