@@ -59,21 +59,25 @@ class MLP(nn.Module):
 
 
 class TwinQ(nn.Module):
-    """Two independent Q(s, a) MLPs; returns shape (..., 2)."""
+    """Two independent Q(s, a) MLPs; returns shape (..., 2), or (..., 2, out_size) with out_size > 1
+    (the logits of a categorical return distribution per critic)."""
 
     hidden_sizes: Sequence[int]
     activation: str = "swish"
     kernel_init: str = "lecun_uniform"
     layer_norm: bool = False
+    out_size: int = 1
 
     @nn.compact
     def __call__(self, obs: jax.Array, action: jax.Array) -> jax.Array:
         x = jnp.concatenate([obs, action], axis=-1)
         qs = [
-            MLP(self.hidden_sizes, 1, self.activation, self.kernel_init, self.layer_norm, name=f"q{i}")(x)
+            MLP(self.hidden_sizes, self.out_size, self.activation, self.kernel_init, self.layer_norm, name=f"q{i}")(x)
             for i in range(2)
         ]
-        return jnp.concatenate(qs, axis=-1)
+        if self.out_size == 1:
+            return jnp.concatenate(qs, axis=-1)
+        return jnp.stack(qs, axis=-2)
 
 
 def policy_network(action_size: int, hidden_sizes, activation="swish", init="lecun_uniform", layer_norm=False) -> MLP:
@@ -86,8 +90,8 @@ def value_network(hidden_sizes, activation="swish", init="lecun_uniform", layer_
     return MLP(tuple(hidden_sizes), 1, activation, init, layer_norm)
 
 
-def q_network(hidden_sizes, activation="swish", init="lecun_uniform", layer_norm=False) -> TwinQ:
-    return TwinQ(tuple(hidden_sizes), activation, init, layer_norm)
+def q_network(hidden_sizes, activation="swish", init="lecun_uniform", layer_norm=False, out_size=1) -> TwinQ:
+    return TwinQ(tuple(hidden_sizes), activation, init, layer_norm, out_size)
 
 
 def validate_network_fields(hidden_field: str, hidden_sizes, activation: str, init: str, prefix: str = "algo.") -> None:

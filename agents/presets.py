@@ -42,6 +42,18 @@ PPO_PANDA_REACH_AVOID = dataclasses.replace(PPO_PAPER_REACH_AVOID, discount=0.98
 # env step: 8 learned fastest of 1, 8 and 32 (results: SAC study).
 SAC_PAPER = SACConfig(grad_updates_per_step=8)
 
+# Fast SAC for thousands of envs (FastTD3 / FastSAC's recipe, agents/sac.py): 4,096 envs, batch 16,384, 4 gradient
+# steps per vector step, 3-step returns, a categorical critic, LayerNorm, tau 0.1, a small initial temperature.
+SAC_FAST = SACConfig(num_envs=4096, batch_size=16_384, learning_rate=3e-4, discount=0.97, reward_scaling=1.0, tau=0.1,
+                     min_replay_size=4096 * 8, max_replay_size=4096 * 512, grad_updates_per_step=4, init_alpha=0.01,
+                     layer_norm=True, n_step=3, distributional=True, num_atoms=101, v_min=-10.0, v_max=40.0,
+                     max_grad_norm=0.0)
+# Reach-avoid's semi-sparse reward is larger per step: a wider support.
+SAC_FAST_REACH_AVOID = dataclasses.replace(SAC_FAST, v_min=-20.0, v_max=120.0)
+# The buffer is left out of checkpoints (checkpoint_envs=False): saving and resuming take seconds and a resume
+# refills min_replay_size transitions first.
+_FAST_RUN = dict(checkpoint_envs=False)
+
 _ABSOLUTE = dict(action="absolute", observation=("joint_pos", "ee_pos", "target_pos", "ee_to_target", "prev_action"))
 # The paper does not state the relative action scale; 0.3 beat 0.2 on the UR5e (results: action-scale study).
 _UR5E_RELATIVE = dict(action_scale=0.3)
@@ -60,12 +72,17 @@ PPO_PROBE = PPOConfig(num_envs=64, batch_size=64, num_minibatches=8, unroll_leng
                       learning_rate=3e-3, value_hidden_sizes=(64, 64), **_PROBE_NETS)
 SAC_PROBE = SACConfig(num_envs=16, batch_size=256, learning_rate=1e-3, reward_scaling=1.0, min_replay_size=1024,
                       max_replay_size=32_000, grad_updates_per_step=4, q_hidden_sizes=(64, 64), **_PROBE_NETS)
+SAC_FAST_PROBE = dataclasses.replace(SAC_FAST, num_envs=64, batch_size=512, learning_rate=1e-3, min_replay_size=1024,
+                                     max_replay_size=64 * 500, grad_updates_per_step=2, v_min=-5.0, v_max=25.0,
+                                     q_hidden_sizes=(64, 64), **_PROBE_NETS)
 
 PRESETS: dict[str, Preset] = {
     "point-mass-ppo": Preset("probe task, PPO (checks the learner in seconds)", "point-mass", PPO_PROBE,
                              run=dict(num_timesteps=150_000, eval_envs=256)),
     "point-mass-sac": Preset("probe task, SAC (checks the learner in seconds)", "point-mass", SAC_PROBE,
                              run=dict(num_timesteps=40_000, eval_envs=256)),
+    "point-mass-sac-fast": Preset("probe task, fast SAC's ingredients at a small scale (checks the learner in seconds)",
+                                  "point-mass", SAC_FAST_PROBE, run=dict(num_timesteps=60_000, eval_envs=256, **_FAST_RUN)),
     # The paper's experiments; each env's default config is the paper's best configuration for that task.
     "ur5e-reach-ppo": Preset("UR5e reach, full workspace, relative control (action scale 0.3), dense reward (paper) with a "
                              "joint-limit penalty of 0.05, discount 0.99", "ur5e-reach", PPO_REACH, env=_UR5E_REACH,
@@ -78,6 +95,19 @@ PRESETS: dict[str, Preset] = {
                              run=dict(num_timesteps=40_000_000)),
     "panda-reach-sac": Preset("Panda reach with SAC (paper; 8 gradient steps per env step)", "panda-reach", SAC_PAPER,
                               run=dict(num_timesteps=40_000_000)),
+    "ur5e-reach-sac-limited": Preset("UR5e reach with SAC from the limited initial joint range (paper)", "ur5e-reach",
+                                     SAC_PAPER, env=dict(init_range="limited"), run=dict(num_timesteps=40_000_000)),
+    # Fast SAC (not in the paper): the same tasks and env options as the PPO presets.
+    "ur5e-reach-sac-fast": Preset("UR5e reach with fast SAC (4,096 envs, n-step, categorical critic)", "ur5e-reach",
+                                  SAC_FAST, env=_UR5E_REACH, run=dict(num_timesteps=60_000_000, **_FAST_RUN)),
+    "panda-reach-sac-fast": Preset("Panda reach with fast SAC (4,096 envs, n-step, categorical critic)", "panda-reach",
+                                   SAC_FAST, run=dict(num_timesteps=60_000_000, **_FAST_RUN)),
+    "ur5e-reach-avoid-sac-fast": Preset("UR5e reach-avoid with fast SAC (4,096 envs, n-step, categorical critic)",
+                                        "ur5e-reach-avoid", SAC_FAST_REACH_AVOID, env=_UR5E_REACH_AVOID,
+                                        run=dict(num_timesteps=100_000_000, **_FAST_RUN)),
+    "panda-reach-avoid-sac-fast": Preset("Panda reach-avoid with fast SAC (4,096 envs, n-step, categorical critic)",
+                                         "panda-reach-avoid", SAC_FAST_REACH_AVOID,
+                                         run=dict(num_timesteps=100_000_000, **_FAST_RUN)),
     "ur5e-reach-avoid-ppo": Preset("UR5e reach-avoid, 0.1 m obstacle, semi-sparse reward (paper) with a joint-limit "
                                    "penalty of 1.0, 4x256 (paper), action scale 0.3", "ur5e-reach-avoid",
                                    PPO_PAPER_REACH_AVOID, env=_UR5E_REACH_AVOID, run=dict(num_timesteps=192_000_000)),

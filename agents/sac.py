@@ -15,18 +15,25 @@ global sample index, so a run on two devices reproduces the one-device run.
 
 Bootstrapping: the critic target uses the stored `next_obs`, which on a truncated step is the
 terminal observation, and drops the bootstrap only on real terminations.
+
+Switches for thousands of environments and large batches (as in FastTD3 / FastSAC, Seo et al. 2025):
+`n_step` returns read from consecutive buffer rows (cut at episode ends, `agents.offpolicy`), and a
+`distributional` critic: a categorical return distribution on `num_atoms` atoms in [v_min, v_max]
+trained by cross-entropy against the projected target (Bellemare et al. 2017), with the clipped
+double-Q choice made per sample by the two target critics' means.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import jax
 import jax.numpy as jnp
 import optax
 from flax import struct
 
-from agents import networks, normalizer
+from agents import networks, normalizer, offpolicy
 from agents.distributions import TanhNormal
 from agents.loop import Parallel, Transition, env_random, per_env_keys
 from envs import validation
@@ -77,7 +84,17 @@ class SACConfig:
     kernel_init: str = "lecun_uniform"
     """Weight initialiser: lecun_uniform, orthogonal or glorot_uniform."""
     layer_norm: bool = False
-    """LayerNorm after each hidden layer."""
+    """LayerNorm after each hidden layer (of the policy and the critics)."""
+    n_step: int = 1
+    """Steps summed in each critic target before bootstrapping (cut at episode ends); 1 = one-step SAC."""
+    distributional: bool = False
+    """Categorical return distribution per critic (C51) instead of a scalar Q."""
+    num_atoms: int = 101
+    """Atoms of the distributional critic's support."""
+    v_min: float = -10.0
+    """Lowest atom: returns (times reward_scaling) below it are clipped onto it."""
+    v_max: float = 10.0
+    """Highest atom: returns (times reward_scaling) above it are clipped onto it."""
 
     @property
     def env_steps_per_update(self) -> int:
@@ -109,6 +126,16 @@ class SACConfig:
             raise ValueError(
                 f"algo.min_replay_size={self.min_replay_size} is invalid: allowed is 0 ... algo.max_replay_size={self.max_replay_size}."
             )
+        validation.integer("algo.n_step", self.n_step, 1)
+        if self.max_replay_size < self.n_step * self.num_envs:
+            raise ValueError(f"algo.max_replay_size={self.max_replay_size} is invalid with algo.n_step={self.n_step}: "
+                             f"allowed is at least n_step * num_envs = {self.n_step * self.num_envs}.")
+        validation.integer("algo.num_atoms", self.num_atoms, 2)
+        for name in ("v_min", "v_max"):
+            if not (isinstance(getattr(self, name), (int, float)) and math.isfinite(getattr(self, name))):
+                raise ValueError(f"algo.{name}={getattr(self, name)!r} is invalid: allowed is a finite number.")
+        if not self.v_min < self.v_max:
+            raise ValueError(f"algo.v_max={self.v_max!r} is invalid: allowed is a number > algo.v_min={self.v_min!r}.")
         validation.positive("algo.learning_rate", self.learning_rate)
         validation.positive("algo.reward_scaling", self.reward_scaling)
         validation.positive("algo.init_alpha", self.init_alpha)
@@ -193,7 +220,9 @@ class SAC:
         self.rows = c.max_replay_size // c.num_envs
         self.target_entropy = -float(action_size) if c.target_entropy is None else float(c.target_entropy)
         self.policy_net = networks.policy_network(action_size, c.policy_hidden_sizes, c.activation, c.kernel_init, c.layer_norm)
-        self.q_net = networks.q_network(c.q_hidden_sizes, c.activation, c.kernel_init, c.layer_norm)
+        self.q_net = networks.q_network(c.q_hidden_sizes, c.activation, c.kernel_init, c.layer_norm,
+                                        c.num_atoms if c.distributional else 1)
+        self.support = offpolicy.categorical_support(c.v_min, c.v_max, c.num_atoms) if c.distributional else None
         clip = [optax.clip_by_global_norm(c.max_grad_norm)] if c.max_grad_norm > 0 else []
         # On one flat vector per network: few large GPU kernels per gradient step (see agents/ppo.py).
         self.optimizer = optax.flatten(optax.chain(*clip, optax.adam(c.learning_rate)))
@@ -214,9 +243,12 @@ class SAC:
         q_params = self.q_net.init(k_q, obs, jnp.zeros((1, self.action_size)))
         log_alpha = jnp.log(jnp.asarray(c.init_alpha, jnp.float32))
         z = lambda *shape: jnp.zeros((self.rows, c.num_envs) + shape)
+        data = {"obs": z(self.observation_size), "action": z(self.action_size), "reward": z(),
+                "termination": z(), "next_obs": z(self.observation_size)}
+        if c.n_step > 1:  # n-step windows stop at time-outs too
+            data["truncation"] = z()
         replay = Replay(
-            data={"obs": z(self.observation_size), "action": z(self.action_size), "reward": z(),
-                  "termination": z(), "next_obs": z(self.observation_size)},
+            data=data,
             position=jnp.zeros((), jnp.int32), rows=jnp.zeros((), jnp.int32),
         )
         return SACState(policy_params, q_params, q_params, log_alpha, self.optimizer.init(policy_params),
@@ -229,7 +261,8 @@ class SAC:
         return jax.tree.map(lambda _: None, state).replace(replay=replay)
 
     def _warming_up(self, state: SACState):
-        return state.replay.rows * self.config.num_envs < self.config.min_replay_size
+        c = self.config
+        return state.replay.rows * c.num_envs < max(c.min_replay_size, c.n_step * c.num_envs)
 
     def act(self, state: SACState, obs, key, par: Parallel):
         dist = self._dist(state.policy_params, self._obs(state.obs_stats, obs))
@@ -261,7 +294,8 @@ class SAC:
         steps = batch.reward.shape[0]
         rows = (replay.position + jnp.arange(steps)) % self.rows
         new = {"obs": batch.obs, "action": batch.action, "reward": batch.reward,
-               "termination": batch.termination, "next_obs": batch.next_obs}
+               "termination": batch.termination, "next_obs": batch.next_obs, "truncation": batch.truncation}
+        new = {k: new[k] for k in replay.data}
         data = jax.tree.map(lambda buf, x: buf.at[rows].set(x), replay.data, new)
         return Replay(data, (replay.position + steps) % self.rows, jnp.minimum(replay.rows + steps, self.rows))
 
@@ -281,27 +315,60 @@ class SAC:
             sample_ids = ids[0] // group + blocks
             offset = jax.vmap(lambda k: jax.random.randint(k, (), 0, group))(per_env_keys(k_env, sample_ids))
             local_env = blocks * group + offset
-        rows = jax.vmap(lambda k: jax.random.randint(k, (), 0, replay.rows))(per_env_keys(k_row, sample_ids))
-        return jax.tree.map(lambda x: x[rows, local_env], replay.data), sample_ids
+        if c.n_step == 1:
+            rows = jax.vmap(lambda k: jax.random.randint(k, (), 0, replay.rows))(per_env_keys(k_row, sample_ids))
+            mb = jax.tree.map(lambda x: x[rows, local_env], replay.data)
+            return {**mb, "discount": c.discount * (1.0 - mb["termination"])}, sample_ids
+        return self._sample_nstep(replay, local_env, per_env_keys(k_row, sample_ids)), sample_ids
+
+    def _sample_nstep(self, replay: Replay, local_env, keys):
+        """n-step transitions: a window of n consecutive rows per sample, its first row uniform over
+        the rows whose window is fully written, summed by `offpolicy.nstep_targets`."""
+        c = self.config
+        oldest = (replay.position - replay.rows) % self.rows
+        first = jax.vmap(lambda k: jax.random.randint(k, (), 0, replay.rows - c.n_step + 1))(keys)
+        rows = (oldest + first[None, :] + jnp.arange(c.n_step)[:, None]) % self.rows  # (n, batch)
+        window = jax.tree.map(lambda x: x[rows, local_env[None, :]], replay.data)
+        returns, discounts, offsets = offpolicy.nstep_targets(window["reward"], window["termination"],
+                                                              window["truncation"], c.discount, c.n_step)
+        next_obs = window["next_obs"][offsets[0], jnp.arange(offsets.shape[1])]
+        return {"obs": window["obs"][0], "action": window["action"][0], "reward": returns[0],
+                "discount": discounts[0], "next_obs": next_obs}
 
     # -- the objectives (each one overridable) --------------------------------------------------
 
     def critic_target(self, s: SACState, mb: dict, next_obs, noise, alpha):
-        """The soft Bellman target of the sampled transitions (eq. 3 with the clipped double-Q minimum)."""
+        """The soft Bellman target of the sampled (n-step) transitions (eq. 3 with the clipped
+        double-Q minimum): a number per sample, or with the distributional critic the projected
+        target distribution (Bellemare et al. 2017, Algorithm 1) of the target critic whose mean is
+        smaller. `mb["discount"]` is gamma^n, or 0 where the episode terminated in the window."""
         c = self.config
         next_action, _, next_log_prob = self._dist(s.policy_params, next_obs).sample_with_noise(noise)
         next_q = self.q_net.apply(s.target_q_params, next_obs, next_action)
-        return critic_target(mb["reward"], mb["termination"], next_q, next_log_prob, alpha, c.discount, c.reward_scaling)
+        if not c.distributional:
+            return critic_target(mb["reward"], 0.0, next_q, next_log_prob, alpha, mb["discount"], c.reward_scaling)
+        probs = jax.nn.softmax(next_q, axis=-1)  # (batch, 2, atoms)
+        means = offpolicy.categorical_mean(probs, self.support, is_logits=False)
+        chosen = jnp.where((means[:, 0] <= means[:, 1])[:, None], probs[:, 0], probs[:, 1])
+        shift = c.reward_scaling * mb["reward"] - mb["discount"] * alpha * next_log_prob
+        return offpolicy.categorical_projection(chosen, shift, mb["discount"], self.support)
 
     def critic_loss(self, q_params, obs, action, target):
-        """Both critics' error against the target (eq. 5); returns (loss, mean Q)."""
+        """Both critics' error against the target (eq. 5; with the distributional critic the
+        cross-entropy to the target distribution, summed over the critics); returns (loss, mean Q)."""
         q = self.q_net.apply(q_params, obs, action)
-        return critic_loss(q, target), jnp.mean(q)
+        if not self.config.distributional:
+            return critic_loss(q, target), jnp.mean(q)
+        loss = jnp.mean(jnp.sum(offpolicy.categorical_cross_entropy(q, target[:, None]), axis=-1))
+        return loss, jnp.mean(offpolicy.categorical_mean(q, self.support, is_logits=True))
 
     def actor_loss(self, policy_params, q_params, obs, noise, alpha):
         """E[alpha log pi(a|s) - min Q(s, a)] with reparameterised actions (eq. 7); returns (loss, log-probs)."""
         action, _, log_prob = self._dist(policy_params, obs).sample_with_noise(noise)
-        return actor_loss(log_prob, self.q_net.apply(q_params, obs, action), alpha), log_prob
+        q = self.q_net.apply(q_params, obs, action)
+        if self.config.distributional:
+            q = offpolicy.categorical_mean(q, self.support, is_logits=True)
+        return actor_loss(log_prob, q, alpha), log_prob
 
     def temperature_loss(self, log_alpha, log_prob):
         """Automatic temperature (eq. 18) towards the entropy target."""

@@ -37,7 +37,10 @@ def test_train_cli_writes_checkpoints_logs_and_eval_that_load_back(tmp_path):
            "--eval-envs", "32", "--logdir", str(logdir), "--no-progress", "--env.goal-radius", "0.15"]
     proc = subprocess.run(cmd, cwd=ROOT, env=_subprocess_env(), capture_output=True, text=True, timeout=240)
     assert proc.returncode == 0, proc.stderr[-3000:]
-    assert "done after 10240 env steps" in proc.stdout
+    assert "done after 10,240 env steps" in proc.stdout
+    # The closing summary names the paper's metrics and says what to run next.
+    assert "\n  target reached: " in proc.stdout and "episode return: " in proc.stdout
+    assert f"next: python eval.py --checkpoint {logdir}" in proc.stdout
 
     saved = json.loads((logdir / "config.json").read_text())
     config = config_from_json(saved)
@@ -243,12 +246,12 @@ BAD_INPUTS = [
      r"algo.num_envs=6 is invalid: it must be divisible by the 4 devices"),
     (lambda: SACConfig(num_envs=12, batch_size=24, max_replay_size=1200).validate(num_devices=8), r"algo.num_envs=12 is invalid: .* 8 devices"),
     (lambda: train_cli.parse(["point-mass-ppo", "--devices", "64"]), r"devices=64 is invalid: allowed are 0 \(all\) to"),
-    (lambda: train_cli.parse(["point-mass-ppo", "--algo.activation", "sigmoid"]), r"algo.activation='sigmoid' is unknown: allowed are swish"),
+    (lambda: train_cli.parse(["point-mass-ppo", "--algo.activation", "sigmoid"]), r"algo.activation='sigmoid' is invalid: allowed are 'swish'"),
     (lambda: train_cli.parse(["point-mass-ppo", "--algo.lr-schedule", "step"]), None),  # tyro: not a Literal choice
     (lambda: train_cli.parse(["point-mass-ppo", "--algo.discount", "1.5"]), r"algo.discount=1.5 is invalid: allowed is a number in \[0.0, 1.0\]"),
     (lambda: train_cli.parse(["point-mass-ppo", "--algo.value-hidden-sizes"]),
      r"algo.value_hidden_sizes=\(\) is invalid: allowed is a non-empty tuple"),
-    (lambda: train_cli.parse(["point-mass-ppo", "--algo.kernel-init", "zeros"]), r"algo.kernel_init='zeros' is unknown"),
+    (lambda: train_cli.parse(["point-mass-ppo", "--algo.kernel-init", "zeros"]), r"algo.kernel_init='zeros' is invalid: allowed are 'lecun_uniform'"),
     (lambda: train_cli.parse(["point-mass-ppo", "--algo.unroll-length", "0"]), r"algo.unroll_length=0 is invalid: allowed is an integer >= 1"),
     (lambda: train_cli.parse(["point-mass-ppo", "--num-timesteps", "ten"]), None),  # tyro: not an integer
     (lambda: train_cli.parse(["point-mass-ppo", "--seeds", "0"]), r"seeds=0 is invalid: allowed is an integer >= 1"),

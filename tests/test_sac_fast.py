@@ -1,0 +1,113 @@
+"""Fast SAC's switches (agents/sac.py: n-step returns from the buffer, the categorical critic),
+its probe preset and its checkpoints without the replay buffer."""
+
+import dataclasses
+import time
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from agents import driver, presets
+from agents.loop import Parallel, Transition
+from agents.sac import SAC, SACConfig
+
+
+def _plain_nstep(rewards, terms, truncs, t, e, gamma, n):
+    """n-step return, bootstrap discount and bootstrap row of transition (t, e), by hand."""
+    ret, k = 0.0, 0
+    while True:
+        ret += gamma**k * rewards[t + k, e]
+        if terms[t + k, e]:
+            return ret, 0.0, t + k
+        if truncs[t + k, e] or k == n - 1:
+            return ret, gamma ** (k + 1), t + k
+        k += 1
+
+
+def test_nstep_samples_from_the_buffer_match_a_plain_loop():
+    """A buffer of 9 rows x 4 envs filled with 11 steps (so it wrapped), terminations and time-outs
+    inside; every sampled transition's 3-step return, discount and bootstrap observation agree with
+    a plain-Python walk over the steps in time order, and no window reaches past the newest row."""
+    n, gamma, num_envs, steps = 3, 0.9, 4, 11
+    config = SACConfig(num_envs=num_envs, batch_size=64, max_replay_size=9 * num_envs, min_replay_size=0, n_step=n,
+                       discount=gamma)
+    sac = SAC(config, 2, 1)
+    rng = np.random.default_rng(0)
+    rewards = rng.normal(size=(steps, num_envs)).astype(np.float32)
+    terms = np.zeros((steps, num_envs), np.float32)
+    truncs = np.zeros((steps, num_envs), np.float32)
+    terms[4, 0] = terms[8, 2] = terms[9, 1] = 1
+    truncs[5, 1] = truncs[6, 3] = truncs[9, 0] = 1
+    # Observations say which (step, env) they belong to; next_obs is marked with + 0.5.
+    ids = np.stack(np.meshgrid(np.arange(steps), np.arange(num_envs), indexing="ij"), -1).astype(np.float32)
+    replay = sac.init(jax.random.PRNGKey(0)).replay
+    for t in range(steps):
+        tr = Transition(obs=jnp.asarray(ids[t:t + 1]), action=jnp.zeros((1, num_envs, 1)),
+                        reward=jnp.asarray(rewards[t:t + 1]), termination=jnp.asarray(terms[t:t + 1]),
+                        truncation=jnp.asarray(truncs[t:t + 1]), next_obs=jnp.asarray(ids[t:t + 1] + 0.5), extras={})
+        replay = sac.insert(replay, tr)
+    seen = set()
+    for k in range(8):
+        mb, _ = sac.sample(replay, jax.random.PRNGKey(k), Parallel(num_envs))
+        for obs, ret, disc, nxt in zip(*(np.asarray(mb[key]) for key in ("obs", "reward", "discount", "next_obs"))):
+            t, e = int(obs[0]), int(obs[1])
+            assert 2 <= t <= steps - n  # rows 0-1 were overwritten; the newest n - 1 rows start no window
+            expected = _plain_nstep(rewards, terms, truncs, t, e, gamma, n)
+            assert ret == pytest.approx(expected[0], abs=1e-5)
+            assert disc == pytest.approx(expected[1], abs=1e-6)
+            np.testing.assert_array_equal(nxt, [expected[2] + 0.5, e + 0.5])
+            seen.add((t, e))
+    assert len(seen) > 20  # the samples spread over the buffer
+
+
+def test_distributional_target_of_a_terminal_transition_is_its_reward():
+    """With discount 0 (terminated at the first step) the projected target puts all mass around the
+    reward: r = 1.25 on atoms [-5, -2.5, 0, 2.5, 5, ...] -> 0.5 on 0 and 0.5 on 2.5."""
+    config = SACConfig(num_envs=4, batch_size=4, distributional=True, num_atoms=5, v_min=-5.0, v_max=5.0, reward_scaling=1.0,
+                       q_hidden_sizes=(8,), policy_hidden_sizes=(8,))
+    sac = SAC(config, 3, 2)
+    state = sac.init(jax.random.PRNGKey(0))
+    mb = {"reward": jnp.full(4, 1.25), "discount": jnp.array([0.0, 0.0, 0.0, 0.97])}
+    target = sac.critic_target(state, mb, jnp.zeros((4, 3)), jnp.zeros((4, 2)), 0.5)
+    np.testing.assert_allclose(np.asarray(target[:3]), [[0, 0, 0.5, 0.5, 0]] * 3, atol=1e-6)
+    np.testing.assert_allclose(np.asarray(target.sum(-1)), 1.0, atol=1e-6)
+    assert float(jnp.abs(target[3] - target[0]).sum()) > 0.1  # a bootstrapped one spreads further
+
+
+def test_fast_sac_probe_learns_the_point_mass():
+    result = driver.train(presets.make_config("point-mass-sac-fast", tensorboard=False, progress=False,
+                                              logdir=""), )
+    assert result.status == "done"
+    assert np.mean(result.eval_metrics["episode/target_reached"]) > 0.9
+
+
+def test_fast_sac_saves_without_its_buffer_and_resumes(tmp_path):
+    """Fast presets keep the buffer out of checkpoints: a stopped run resumes from the learner,
+    refills min_replay_size random transitions and finishes."""
+    base = dict(num_timesteps=6_400, eval_envs=0, tensorboard=False, progress=False, logdir=str(tmp_path / "run"))
+    config = presets.make_config("point-mass-sac-fast", stop_after_steps=3_200, **base)
+    assert config.checkpoint_envs is False
+    first = driver.train(config)
+    assert first.status == "stopped" and first.env_steps == 3_200
+    t0 = time.perf_counter()
+    resumed = driver.train(presets.make_config("point-mass-sac-fast", resume=True, **base))
+    assert resumed.status == "done" and resumed.env_steps == 6_400
+    assert time.perf_counter() - t0 < 120
+    # The resumed learner continued from the saved one (same temperature trajectory start), and the
+    # buffer was refilled: the last chunk trained (losses non-zero).
+    assert np.all(np.asarray(resumed.last_metrics["loss/critic"]) != 0)
+
+
+@pytest.mark.parametrize("field, value, message", [
+    ("n_step", 0, r"algo.n_step=0 is invalid: allowed is an integer >= 1"),
+    ("num_atoms", 1, r"algo.num_atoms=1 is invalid: allowed is an integer >= 2"),
+    ("v_min", float("nan"), r"algo.v_min=nan is invalid: allowed is a finite number"),
+    ("v_max", -20.0, r"algo.v_max=-20.0 is invalid: allowed is a number > algo.v_min=-10.0"),
+    ("max_replay_size", 128, r"algo.max_replay_size=128 is invalid with algo.n_step=3"),
+])
+def test_fast_sac_fields_reject_bad_values(field, value, message):
+    config = dataclasses.replace(SACConfig(num_envs=64, batch_size=64, n_step=3, min_replay_size=0), **{field: value})
+    with pytest.raises(ValueError, match=message):
+        config.validate()
