@@ -39,7 +39,7 @@ results/baselines.md for our numbers and their commands):
 {FINDINGS}
 
 Video: `--video PATH` (.mp4 or .gif) renders the first `--video-envs` envs' first episodes (a grid)
-with MuJoCo's offscreen renderer (`benchmarks.render`; headless: EGL or OSMesa, chosen
+with MuJoCo's offscreen renderer (`envs.render`; headless: EGL or OSMesa, chosen
 automatically, or set MUJOCO_GL). Needs the `viz` extra (imageio, imageio-ffmpeg).
 
 Exit codes: 0 done, 2 bad input (a one-line `error:` message: missing or corrupt checkpoint,
@@ -285,7 +285,7 @@ def write_video(path: str, policy, env_name: str, env_config, num_envs: int, see
     """Renders each of `num_envs` envs' first episode (a grid of views) to an mp4 or gif, with the
     actions the evaluation took (sampled with `stochastic`)."""
     from agents import evaluation
-    from benchmarks import render
+    from envs import render
 
     width, height = _video_size(size)
     import envs

@@ -1,5 +1,5 @@
 """Evaluation of trained policies and baselines on any env configuration (the library behind eval.py
-and benchmarks/paper_tables.py).
+and tools/paper_tables.py).
 
     from agents import evaluation
     policy = evaluation.checkpoint_policy("runs/ur5e-reach-ppo/20250101-120000")
@@ -435,7 +435,7 @@ def device_description() -> str:
 
 def rollout(policy: Policy, env_name: str, env_config, num_envs: int = 1, eval_seed: int = DEFAULT_EVAL_SEED,
             unit: int = 0, stochastic: bool = False) -> dict:
-    """Joint positions, target and obstacle of each env's first episode (for `benchmarks.render`):
+    """Joint positions, target and obstacle of each env's first episode (for `envs.render`):
     {"qpos": (T + 1, n, nq), "target_pos": ..., ["obstacle_pos": ...], "length": (n,), "metrics": {...}}
     with the policy's unit `unit` (a trained seed's index); the episodes that `run` evaluates with as
     many envs, the same seed and the same `stochastic`."""

@@ -1,6 +1,6 @@
 """Brax's PPO and ours on the same environment with the same hyperparameters and budget, in one run.
 
-    python benchmarks/brax_reference.py --out results/brax_reference      # on the GPU machine
+    python -m benchmarks.brax_reference --out results/brax_reference      # on the GPU machine
 
 Both train on `ur5e-reach` (the paper's configuration) with the preset's PPO settings, which both
 learners get: 8,192 envs, batch 512, 64 minibatches, unroll 10, 5 updates per batch, lr 8e-4, entropy
@@ -28,16 +28,12 @@ import sys
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+import jax
+import jax.numpy as jnp
 
-import jax  # noqa: E402
-import jax.numpy as jnp  # noqa: E402
-
-import envs  # noqa: E402
-import train as train_cli  # noqa: E402
-from agents import driver  # noqa: E402
-from agents.loop import make_evaluate  # noqa: E402
+import envs
+from agents import driver, presets
+from agents.loop import make_evaluate
 
 if not hasattr(jax, "device_put_replicated"):
     # brax 0.14.2 still calls this; jax >= 0.10 removed it. Same result for our single-host use.
@@ -63,7 +59,7 @@ def summarize(metrics) -> dict:
 
 
 def main():
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.brax_reference", description=__doc__.split("\n\n")[0])
     parser.add_argument("--preset", default="ur5e-reach-ppo")
     parser.add_argument("--evals", type=int, default=8, help="evaluations after the initial one")
     parser.add_argument("--updates-per-eval", type=int, default=16, help="PPO updates between evaluations")
@@ -72,7 +68,7 @@ def main():
     parser.add_argument("--out", default="results/brax_reference")
     args = parser.parse_args()
 
-    config = train_cli.make_config(args.preset, eval_envs=args.eval_envs, progress=False, tensorboard=False)
+    config = presets.make_config(args.preset, eval_envs=args.eval_envs, progress=False, tensorboard=False)
     algo = config.algo
     spu = algo.env_steps_per_update
     total = args.evals * args.updates_per_eval * spu
@@ -80,8 +76,9 @@ def main():
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     device = jax.devices()[0]
+    command = " ".join(["python", "-m", "benchmarks.brax_reference"] + sys.argv[1:])
     report = {"meta": {"device": device.device_kind, "jax": jax.__version__, "date": datetime.date.today().isoformat(),
-                       "command": " ".join(["python"] + sys.argv), "preset": args.preset, "env_name": config.env_name,
+                       "command": command, "preset": args.preset, "env_name": config.env_name,
                        "num_timesteps": total, "eval_envs": args.eval_envs},
               "ours": {"evals": []}, "brax": {"evals": []}}
 

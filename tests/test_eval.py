@@ -7,6 +7,7 @@ evaluation is shared: module-scoped fixtures, and eval.py subprocesses run the s
 in-process tests with the persistent compilation cache (`.jax_cache/`, see conftest.py) switched on.
 """
 
+import dataclasses
 import json
 import os
 import shutil
@@ -20,7 +21,6 @@ import pytest
 
 import envs
 import eval as eval_cli
-import train as train_cli
 from agents import baselines, driver, evaluation, export, presets, registry
 from agents.config import config_json
 from agents.loop import episode_metrics
@@ -170,7 +170,7 @@ def test_checkpoint_without_export_gets_one_from_the_full_state(point_run, tmp_p
 
 
 def test_export_of_one_seed_acts_as_that_seed_of_the_run(point_run, tmp_path):
-    from benchmarks import ship_checkpoint
+    from tools import ship_checkpoint
 
     full = evaluation.checkpoint_policy(str(point_run))
     r_full = evaluation.run(full, "point-mass", full.train_env_config, num_envs=32)
@@ -370,7 +370,7 @@ def test_rollout_shows_the_evaluated_episodes(arm_rollout):
 
 
 def test_rendered_frames_show_robot_and_target(arm_rollout):
-    from benchmarks import render
+    from envs import render
 
     policy, config, records = arm_rollout
     env = envs.make("ur5e-reach", **{**ARM_ENV, "workspace": "front"})
@@ -511,7 +511,7 @@ def test_cli_error_is_one_line_with_exit_code_2(tmp_path):
 
 
 def test_training_curves_from_train_logs(point_run, tmp_path):
-    from benchmarks import plots
+    from tools import plots
 
     steps, mean, std, seeds = plots.curve([str(point_run)], "episode/target_reached")
     rows = plots.read_metrics(str(point_run))
@@ -526,7 +526,7 @@ def test_training_curves_from_train_logs(point_run, tmp_path):
 
 
 def test_paper_tables_from_given_checkpoints_and_skips_the_rest(point_run, tmp_path, capsys):
-    from benchmarks import paper_tables
+    from tools import paper_tables
 
     written = paper_tables.main(["--tables", "action", "workspace", "obstacle", "--out", str(tmp_path),
                                  "--num-envs", "16", "--action", f"relative={point_run}"])
@@ -546,7 +546,7 @@ def test_paper_tables_from_given_checkpoints_and_skips_the_rest(point_run, tmp_p
 def test_paper_tables_evaluate_each_pair_on_the_right_env_config(arm_export, tmp_path, monkeypatch):
     """The workspace and obstacle cross-evaluations: which env config each (trained, evaluated) row
     gets (evaluation itself replaced by a recorder)."""
-    from benchmarks import paper_tables
+    from tools import paper_tables
 
     calls = []
 
@@ -608,11 +608,11 @@ def test_sac_export_acts_as_the_learner(tmp_path):
 
 
 # ------------------------------------------------------------------------------------------------
-# benchmarks/failure_report.py: episode outcomes from recorded poses (CPU MuJoCo as the reference)
+# tools/failure_report.py: episode outcomes from recorded poses (CPU MuJoCo as the reference)
 
 
 def test_failure_report_names_the_colliding_pair_and_bins_the_misses(monkeypatch):
-    from benchmarks import failure_report
+    from tools import failure_report
 
     monkeypatch.setattr(failure_report, "END_STEPS", 2)  # end_motion from 2 steps before each episode's end
 
@@ -671,7 +671,7 @@ def test_failure_report_tells_when_the_obstacle_is_in_the_way():
     target in env 1 (which misses) and beside it in env 0 (which reaches)."""
     import mujoco
 
-    from benchmarks import failure_report
+    from tools import failure_report
 
     robot = envs.make("ur5e-reach-avoid").robot
     free = np.zeros(robot.nq, np.float32)
@@ -713,7 +713,7 @@ def test_failure_report_tells_when_the_obstacle_is_in_the_way():
 
 def test_failure_report_bins_outcomes_by_target_height():
     """Hand-sorted: heights on a bin edge go to the bin above it; empty bins are left out."""
-    from benchmarks import failure_report
+    from tools import failure_report
 
     heights = [-0.05, 0.02, 0.05, 0.1, 0.25, 0.6, 0.7]
     outcomes = ["missed", "missed", "reached", "reached", "self collision", "reached", "reached"]

@@ -1,10 +1,10 @@
 """The paper's tables, regenerated: markdown (and JSON with every number) under results/.
 
     # Baselines (no checkpoints needed), both robots, 1 and 2 cm targets, absolute and relative control:
-    python benchmarks/paper_tables.py --tables baselines --num-envs 4096 --seeds 5
+    python -m tools.paper_tables --tables baselines --num-envs 4096 --seeds 5
     # Tables from trained runs (train.py logdirs, checkpoint step dirs or policy exports; several
     # comma-separated paths per role are pooled, e.g. one run per seed):
-    python benchmarks/paper_tables.py --tables action workspace obstacle \\
+    python -m tools.paper_tables --tables action workspace obstacle \\
         --action relative=runs/rel absolute=runs/abs \\
         --workspace pandagym=runs/wp front=runs/wf upper=runs/wu full=runs/wl full-range=runs/wr \\
         --obstacle 0.025=runs/o1 0.05=runs/o2 0.1=runs/o3 0.2=runs/o4 0.3=runs/o5 reach=runs/reach
@@ -40,11 +40,9 @@ import os
 import shlex
 import sys
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-if ROOT not in sys.path:
-    sys.path.insert(0, ROOT)
+from agents import evaluation
 
-from agents import evaluation  # noqa: E402
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 TABLES = ("baselines", "action", "workspace", "obstacle")
 WORKSPACE_ROLES = ("pandagym", "front", "upper", "full", "full-range")
@@ -293,7 +291,7 @@ def obstacle_table(args, command: str) -> str | None:
 
 
 def parse(argv):
-    p = argparse.ArgumentParser(prog="benchmarks/paper_tables.py", description=__doc__.split("\n\n")[0],
+    p = argparse.ArgumentParser(prog="python -m tools.paper_tables", description=__doc__.split("\n\n")[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter, allow_abbrev=False)
     p.add_argument("--tables", nargs="+", choices=TABLES, default=list(TABLES), help="tables to make (default: all)")
     p.add_argument("--out", default=os.path.join(ROOT, "results"), help="output directory (default results/)")
@@ -333,7 +331,7 @@ def parse(argv):
 def main(argv=None) -> list[str]:
     argv = list(sys.argv[1:] if argv is None else argv)
     args = parse(argv)
-    command = "python benchmarks/paper_tables.py " + " ".join(shlex.quote(a) for a in argv)
+    command = "python -m tools.paper_tables " + " ".join(shlex.quote(a) for a in argv)
     makers = {"baselines": baselines_table, "action": action_table, "workspace": workspace_table,
               "obstacle": obstacle_table}
     written = []
@@ -345,6 +343,6 @@ def main(argv=None) -> list[str]:
 
 
 if __name__ == "__main__":
-    from benchmarks import run_cli
+    from tools import run_cli
 
     run_cli(main)
