@@ -206,16 +206,16 @@ def main(argv: list[str] | None = None) -> list:
     env_name = args.env or policies[0].train_env_name
     envs.registry.spec(env_name)  # unknown name -> ValueError listing the names
 
-    if args.video and evaluation.robot_of(env_name) == env_name:
+    if args.video and envs.registry.spec(env_name).robot is None:
         raise ValueError(f"--video needs an arm env: {env_name!r} has no robot model to render.")
-    first_base = evaluation.env_config_for(env_name, policies[0].train_env_config)
+    first_base = envs.make_config(env_name, policies[0].train_env_config)
     if args.help:
         _parser().print_help()
         parse_env_options(env_name, first_base, [], help_only=True)  # prints tyro's help, exits 0
     overrides = parse_env_options(env_name, first_base, rest)
     eval_seeds = [args.seed + i for i in range(args.seeds)]
 
-    configs = [evaluation.env_config_for(env_name, policy.train_env_config, **overrides) for policy in policies]
+    configs = [envs.make_config(env_name, policy.train_env_config, **overrides) for policy in policies]
     for policy, config in zip(policies, configs):  # every bad combination refused before anything runs
         evaluation.check(policy, env_name, config)
     results = []

@@ -1,9 +1,10 @@
 """Evaluation of trained policies and baselines on any env configuration (the library behind eval.py
 and tools/paper_tables.py).
 
+    import envs
     from agents import evaluation
     policy = evaluation.checkpoint_policy("runs/ur5e-reach-ppo/20250101-120000")
-    config = evaluation.env_config_for("ur5e-reach", policy.train_env_config, workspace="front")
+    config = envs.make_config("ur5e-reach", policy.train_env_config, workspace="front")
     result = evaluation.run(policy, "ur5e-reach", config, num_envs=4096, eval_seeds=[1_000_000])
     print(evaluation.markdown([result]))
 
@@ -32,7 +33,6 @@ import numpy as np
 import envs
 from agents import baselines, driver, export, registry
 from agents.loop import make_evaluate
-from envs.robots import ROBOTS
 
 PAPER_METRICS = {
     "target_reached": "episode/target_reached",
@@ -50,37 +50,6 @@ EXTRA_METRICS = {"episode_length": "episode/length", "return": "episode/return",
 """Also reported (JSON / CSV), not part of the paper's tables."""
 DEFAULT_EVAL_SEED = 1_000_000
 """The training driver's `eval_seed`: eval.py on a run's own env config reproduces its eval.json."""
-
-
-def robot_of(env_name: str) -> str:
-    """The robot of a registered env name ("ur5e", "panda"), or the name itself for other envs."""
-    for robot in ROBOTS:
-        if env_name.startswith(robot + "-"):
-            return robot
-    return env_name
-
-
-def env_config_for(env_name: str, base, **overrides):
-    """The config of `env_name` that starts from `base` (e.g. a checkpoint's env config, possibly of
-    the other task: a reach config on a reach-avoid env keeps every field both have and takes the
-    rest from reach-avoid's defaults) with `overrides` (config fields) replacing values; validated."""
-    envs.registry.spec(env_name)  # unknown name -> ValueError listing the names
-    default = envs.default_config(env_name)
-    if base is None:
-        config = default
-    elif type(base) is type(default):
-        config = base
-    else:
-        names = {f.name for f in dataclasses.fields(default)}
-        shared = {f.name: getattr(base, f.name) for f in dataclasses.fields(base) if f.name in names}
-        config = dataclasses.replace(default, **shared)
-    fields = {f.name for f in dataclasses.fields(config)}
-    unknown = sorted(set(overrides) - fields)
-    if unknown:
-        raise ValueError(f"option {unknown[0]!r} does not exist for env {env_name!r}: allowed are {', '.join(sorted(fields))}.")
-    config = dataclasses.replace(config, **overrides)
-    config.validate()
-    return config
 
 
 # ------------------------------------------------------------------------------------------------
@@ -149,9 +118,11 @@ def check_compatible(policy: Policy, env_name: str, env) -> None:
         baselines.check(policy.name, env)
         return
     e = policy.export
-    if robot_of(e.env_name) != robot_of(env_name):
-        raise ValueError(f"checkpoint {policy.name!r} was trained on {e.env_name!r} (robot {robot_of(e.env_name)}): "
-                         f"env={env_name!r} is another robot; allowed are the envs of robot {robot_of(e.env_name)}.")
+    trained, asked = envs.registry.spec(e.env_name).robot, envs.registry.spec(env_name).robot
+    if trained != asked:
+        allowed = f"the envs of robot {trained}" if trained else "the envs without a robot"
+        raise ValueError(f"checkpoint {policy.name!r} was trained on {e.env_name!r} (robot {trained or 'none'}): "
+                         f"env={env_name!r} is another robot; allowed are {allowed}.")
     if env.observation_size != e.observation_size:
         observation = getattr(getattr(env.unwrapped, "config", None), "observation", None)
         raise ValueError(f"the network of checkpoint {policy.name!r} takes observations of shape ({e.observation_size},) but "
@@ -171,11 +142,10 @@ def _evaluator(env_name: str, env_config, algo_config, obs_size: int, act_size: 
                stochastic: bool = False):
     """(batched env, compiled `evaluate(params, key) -> (per-env metrics, records)`), cached per
     setting so that several checkpoints / seeds / baselines (and a video of as many envs) share one
-    compilation. The env is not auto-reset (`_NoAutoReset`): only each env's first episode counts,
-    and its poses are recorded for rendering. `stochastic`: a checkpoint's actions are drawn from its
+    compilation. The env is not auto-reset (`envs.wrap(..., autoreset=False)`): only each env's first
+    episode counts, and its poses are recorded for rendering. `stochastic`: a checkpoint's actions are drawn from its
     policy's distribution (the learner's `stochastic_policy`, a fresh key per step) instead of its mode."""
-    base = envs.from_config(env_name, env_config)
-    env = envs.wrappers.VmapWrapper(_NoAutoReset(envs.wrappers.EpisodeWrapper(base, env_config.episode_length)))
+    env = envs.wrap(envs.from_config(env_name, env_config), autoreset=False)
     length = env_config.episode_length
     if algo_config is None:
         fn = make_evaluate(env, None, num_envs, length, last_steps, act=baselines.make_act(env), per_env=True,
@@ -198,16 +168,6 @@ def _evaluate_fn(policy: Policy, env_name: str, env_config, num_envs: int, last_
                                e.action_size if e else 0, int(num_envs), int(last_steps), bool(stochastic))
     check_compatible(policy, env_name, env)
     return evaluate
-
-
-class _NoAutoReset(envs.wrappers.AutoResetWrapper):
-    """The training stack's episodes (AutoResetWrapper's reset: the same initial states as
-    `envs.wrap` and the driver's evaluation for one key) without the auto-reset: an env whose
-    episode ended keeps stepping its terminal state (ignored by `episode_metrics`), so recorded poses
-    end where the episode did, and no fresh episode is sampled every step."""
-
-    def step(self, state, action):
-        return self.env.step(state, action)
 
 
 def _record(state):

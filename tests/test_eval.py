@@ -339,7 +339,7 @@ def arm_export(tmp_path_factory):
 def test_checkpoint_evaluated_on_another_workspace(arm_export):
     policy = evaluation.checkpoint_policy(str(arm_export))
     assert policy.train_env_config.workspace == "full"
-    config = evaluation.env_config_for("ur5e-reach", policy.train_env_config, workspace="front")
+    config = envs.make_config("ur5e-reach", policy.train_env_config, workspace="front")
     assert config.substeps == 2 and config.episode_length == 20  # the checkpoint's, not the defaults
     result = evaluation.run(policy, "ur5e-reach", config, num_envs=4)
     report = result.to_json()
@@ -353,7 +353,7 @@ def test_checkpoint_evaluated_on_another_workspace(arm_export):
 @pytest.fixture(scope="module")
 def arm_rollout(arm_export):
     policy = evaluation.checkpoint_policy(str(arm_export))
-    config = evaluation.env_config_for("ur5e-reach", policy.train_env_config, workspace="front")
+    config = envs.make_config("ur5e-reach", policy.train_env_config, workspace="front")
     return policy, config, evaluation.rollout(policy, "ur5e-reach", config, num_envs=4)
 
 
@@ -367,6 +367,29 @@ def test_rollout_shows_the_evaluated_episodes(arm_rollout):
     for name in ("distance", "self_collision", "episode_length"):
         key = evaluation.PAPER_METRICS.get(name) or evaluation.EXTRA_METRICS[name]
         np.testing.assert_allclose(records["metrics"][key], result.per_env[name][0], rtol=1e-5, atol=1e-6)
+
+
+def test_env_without_autoreset_stays_in_its_first_episode():
+    """`envs.wrap(env, autoreset=False)`, the evaluation's env: for one key the initial states of the
+    training stack, and no fresh episode once the first ends (point mass, 3-step episodes, standing still)."""
+    env = envs.make("point-mass", episode_length=3)
+    keys = jax.random.split(jax.random.PRNGKey(0), 4)
+    once, auto = envs.wrap(env, autoreset=False), envs.wrap(env)
+    first, fresh = once.reset(keys), auto.reset(keys)
+    np.testing.assert_array_equal(first.obs, fresh.obs)
+    still = jnp.zeros((4, env.action_size))
+    for _ in range(4):
+        first, fresh = once.step(first, still), auto.step(fresh, still)
+    np.testing.assert_array_equal(first.info["steps"], 4)  # still the first episode, ended at step 3
+    np.testing.assert_array_equal(first.done, 1)
+    np.testing.assert_array_equal(fresh.info["steps"], 1)  # the next episode's first step
+
+
+def test_registry_names_each_envs_robot():
+    """What eval.py asks to refuse a checkpoint on another robot and a video of an env without one."""
+    robots = {name: envs.registry.spec(name).robot for name in envs.names()}
+    assert robots == {"panda-reach": "panda", "panda-reach-avoid": "panda", "point-mass": None, "ur5e-reach": "ur5e",
+                      "ur5e-reach-avoid": "ur5e"}
 
 
 def test_rendered_frames_show_robot_and_target(arm_rollout):

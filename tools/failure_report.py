@@ -238,6 +238,7 @@ def markdown(summary: dict, title: str) -> str:
 
 
 def main(argv: list[str] | None = None) -> dict:
+    import envs
     from agents import evaluation
 
     p = argparse.ArgumentParser(prog="python -m tools.failure_report", description=__doc__.splitlines()[0])
@@ -255,10 +256,8 @@ def main(argv: list[str] | None = None) -> dict:
     if args.num_envs < 1:
         raise ValueError(f"--num-envs {args.num_envs} is invalid: allowed is an integer >= 1.")
     env_name = args.env or policy.train_env_name
-    config = evaluation.env_config_for(env_name, policy.train_env_config)
+    config = envs.make_config(env_name, policy.train_env_config)
     records = evaluation.rollout(policy, env_name, config, num_envs=args.num_envs, eval_seed=args.seed, unit=args.unit)
-    import envs
-
     rows = classify(envs.from_config(env_name, config).robot, records, getattr(config, "obstacle_radius", None))
     summary = summarize(rows, getattr(config, "joint_limit_margin", NEAR_LIMIT))
     print(markdown(summary, f"{args.checkpoint} (seed {policy.units[args.unit]}) on {env_name}, eval seed {args.seed}"))

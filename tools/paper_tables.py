@@ -40,6 +40,7 @@ import os
 import shlex
 import sys
 
+import envs
 from agents import evaluation
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -151,8 +152,7 @@ def baselines_table(args, command: str) -> str:
         rows = []
         for radius in args.radii:
             for action in args.actions:
-                config = evaluation.env_config_for(f"{robot}-reach", None, target_radius=radius, action=action,
-                                                   **args.env_overrides)
+                config = envs.make_config(f"{robot}-reach", target_radius=radius, action=action, **args.env_overrides)
                 for name in ("random", "standstill", "pseudo_ik"):
                     _progress(f"baselines: {robot} {name} {action} target {radius} ({seeds} x {num_envs} envs)")
                     r = evaluation.run(evaluation.baseline_policy(name), f"{robot}-reach", config, num_envs, eval_seeds)
@@ -205,7 +205,7 @@ def _evaluate_role(args, paths, setting):
     for path in paths:
         policy = evaluation.checkpoint_policy(path)
         env_name, overrides = setting(policy)
-        config = evaluation.env_config_for(env_name, policy.train_env_config, **{**overrides, **args.env_overrides})
+        config = envs.make_config(env_name, policy.train_env_config, **{**overrides, **args.env_overrides})
         _progress(f"evaluating {path} on {env_name} {overrides or ''} ({len(policy.units)} x {args.num_envs} envs)")
         results.append(evaluation.run(policy, env_name, config, args.num_envs, eval_seeds))
     return results
@@ -263,10 +263,14 @@ def obstacle_table(args, command: str) -> str | None:
 
     def row(trained, size):
         def setting(policy):
-            env_name = evaluation.robot_of(policy.train_env_name) + "-reach-avoid"
+            robot = envs.registry.spec(policy.train_env_name).robot
+            if robot is None:
+                raise ValueError(f"--obstacle {trained}={policy.name} is invalid: it was trained on {policy.train_env_name!r}, "
+                                 "which has no robot; allowed are arm checkpoints (evaluated on their robot's reach-avoid env).")
+            env_name = f"{robot}-reach-avoid"
             overrides = {"obstacle_radius": float(size)}
             if trained == "reach":
-                overrides["target_radius"] = target_radius or evaluation.envs.default_config(env_name).target_radius
+                overrides["target_radius"] = target_radius or envs.default_config(env_name).target_radius
             return env_name, overrides
 
         results = _evaluate_role(args, roles[trained], setting)
