@@ -48,7 +48,6 @@ another robot, unknown policy or option).
 
 from __future__ import annotations
 
-import argparse
 import csv
 import dataclasses
 import importlib.util
@@ -56,11 +55,12 @@ import json
 import os
 import shlex
 import sys
-from typing import Generic, TypeVar
+from typing import Annotated, Generic, TypeVar
 
-ROOT = os.path.dirname(os.path.abspath(__file__))
-if ROOT not in sys.path:
-    sys.path.insert(0, ROOT)
+import tyro
+
+import envs
+from agents import baselines, evaluation
 
 FINDINGS = """\
 - Action mode. The paper's baselines ran with absolute position control. Random actions under
@@ -95,96 +95,69 @@ FINDINGS = """\
 
 __doc__ = __doc__.replace("{FINDINGS}", FINDINGS)
 
-ConfigT = TypeVar("ConfigT")
+EnvConfigT = TypeVar("EnvConfigT")
 
 
 @dataclasses.dataclass(frozen=True)
-class EnvOptions(Generic[ConfigT]):
-    """Environment options (fields of the env's config dataclass)."""
-
-    env: ConfigT
-    """The env config: starts from the checkpoint's stored one (baselines: the env's defaults)."""
+class NoEnvOptions:
+    """Stands for the env's config until the env is known (`--env` or the checkpoint's)."""
 
 
-def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
-        prog="eval.py", add_help=False, allow_abbrev=False,
-        description="Evaluate a checkpoint or a baseline on any env configuration (--env.<field> VALUE overrides).")
-    what = p.add_argument_group("what to evaluate (one of)")
-    what.add_argument("--checkpoint", nargs="+", action="extend", default=[], metavar="PATH",
-                      help="train.py logdir (newest checkpoint), checkpoint step directory or policy export "
-                           "directory; several are evaluated one after the other")
-    what.add_argument("--policy", help="a baseline: random, standstill, pseudo_ik")
-    p.add_argument("--env", help="registered env name (default: the checkpoint's env)")
-    p.add_argument("--num-envs", type=int, default=4096, help="environments (= episodes) per seed (default 4096)")
-    p.add_argument("--seeds", type=int, default=1, help="evaluation seeds, each a fresh set of episodes (default 1)")
-    p.add_argument("--seed", type=int, default=1_000_000,
-                   help="first evaluation seed (default: the training driver's eval seed)")
-    p.add_argument("--stochastic", action="store_true",
-                   help="sample a checkpoint's actions from its policy's distribution instead of taking the mode")
-    p.add_argument("--last-steps", type=int, default=10, help="steps the final distance is averaged over (default 10)")
-    p.add_argument("--json", metavar="PATH", help="write every number and the full configuration as JSON")
-    p.add_argument("--csv", metavar="PATH", help="write one row per unit (policy seed x eval seed) as CSV")
-    p.add_argument("--video", metavar="PATH", help="render a rollout to PATH (.mp4 or .gif)")
-    p.add_argument("--video-envs", type=int, default=1, help="envs shown in the video, as a grid (default 1)")
-    p.add_argument("--video-size", default="480x360", help="pixels per env, WIDTHxHEIGHT (default 480x360)")
-    p.add_argument("-h", "--help", action="store_true", help="show this help (with --env or --checkpoint: also the "
-                                                             "--env.* options) and exit")
-    return p
+@dataclasses.dataclass(frozen=True)
+class EvalConfig(Generic[EnvConfigT]):
+    """Evaluate a checkpoint or a baseline policy on any env configuration (`eval.py --help` with
+    --env NAME or --checkpoint PATH also lists the env's options, --env.<field> VALUE)."""
+
+    env: EnvConfigT
+    """The env's config: starts from the checkpoint's stored one (a baseline: the env's defaults);
+    `--env.<field> VALUE` replaces fields."""
+    checkpoint: Annotated[tuple[str, ...], tyro.conf.arg(metavar="PATH [PATH ...]")] = ()
+    """What to evaluate (or --policy): train.py logdirs (their newest checkpoint), checkpoint step
+    directories or policy export directories, evaluated one after the other."""
+    policy: Annotated[str | None, tyro.conf.arg(metavar="NAME")] = None
+    """What to evaluate (or --checkpoint): a baseline, one of random, standstill, pseudo_ik."""
+    env_name: Annotated[str | None, tyro.conf.arg(name="env", metavar="NAME")] = None
+    """Registered env name; None: the checkpoint's env."""
+    num_envs: int = 4096
+    """Environments (= episodes) per evaluation seed."""
+    seeds: int = 1
+    """Evaluation seeds, each a fresh set of episodes."""
+    seed: int = evaluation.DEFAULT_EVAL_SEED
+    """First evaluation seed; the default is the training driver's eval seed."""
+    stochastic: bool = False
+    """Sample a checkpoint's actions from its policy's distribution instead of taking the mode."""
+    last_steps: int = 10
+    """Steps the final distance is averaged over."""
+    json: Annotated[str | None, tyro.conf.arg(metavar="PATH")] = None
+    """Write every number and the full configuration as JSON."""
+    csv: Annotated[str | None, tyro.conf.arg(metavar="PATH")] = None
+    """Write one row per unit (policy seed x eval seed) as CSV."""
+    video: Annotated[str | None, tyro.conf.arg(metavar="PATH")] = None
+    """Render a rollout to PATH (.mp4 or .gif)."""
+    video_envs: int = 1
+    """Envs shown in the video, as a grid."""
+    video_size: Annotated[str, tyro.conf.arg(metavar="WIDTHxHEIGHT")] = "480x360"
+    """Pixels per env in the video."""
 
 
-def _given_fields(tokens: list[str], config) -> list[str]:
-    """Config fields named by `--env.<field>` tokens (tyro's `--env.no-<field>` included)."""
-    names = {f.name for f in dataclasses.fields(config)}
-    given = []
-    for token in tokens:
-        if not token.startswith("--env."):
-            continue
-        name = token[len("--env."):].split("=", 1)[0].replace("-", "_")
-        if name not in names and name.startswith("no_") and name[3:] in names:
-            name = name[3:]
-        given.append(name)
-    return given
+def parse(argv: list[str], base=None, show_help: bool = False) -> EvalConfig:
+    """`argv` parsed by tyro over `EvalConfig` with `base` as the env config's defaults (None: the
+    env options are left for a second call, once the env is known). `show_help`: prints the help and
+    exits 0. Unknown options: ValueError; bad values: tyro's message, exit code 2."""
+    config_cls = NoEnvOptions if base is None else type(base)
+    default = EvalConfig(env=NoEnvOptions() if base is None else base)
+    parsed, unknown = tyro.cli(EvalConfig[config_cls], default=default, args=["--help"] if show_help else argv,
+                               return_unknown_args=True, prog="eval.py")
+    if base is not None and unknown:
+        raise ValueError(f"option {unknown[0]!r} is unknown: allowed are eval.py's options (--help) and --env.<field>.")
+    return parsed
 
 
-def _is_number(token: str) -> bool:
-    try:
-        float(token)
-        return True
-    except ValueError:
-        return False
-
-
-def parse_env_options(env_name: str, base, tokens: list[str], help_only: bool = False) -> dict:
-    """{field: value} of the `--env.*` tokens, parsed by tyro over the env's config dataclass with
-    `base` as defaults (bad values: tyro's message, exit code 2)."""
-    import tyro
-
-    if help_only:
-        tokens = ["--help"]
-    else:
-        for token in tokens:
-            if token.startswith("-") and not token.startswith("--env.") and not _is_number(token):
-                raise ValueError(f"option {token!r} is unknown: allowed are eval.py's options (--help) and --env.<field>.")
-    parsed = tyro.cli(EnvOptions[type(base)], default=EnvOptions(base), args=tokens, prog=f"eval.py --env {env_name}",
-                      description=f"Options of env {env_name!r}, starting from {'the checkpoint' if base else 'defaults'}.")
-    return {name: getattr(parsed.env, name) for name in _given_fields(tokens, base)}
-
-
-def main(argv: list[str] | None = None) -> list:
-    argv = list(sys.argv[1:] if argv is None else argv)
-    args, rest = _parser().parse_known_args(argv)
-    if args.help and not (args.env or args.checkpoint):
-        _parser().print_help()
-        print("\nEnv options: --env.<field> VALUE (`eval.py --env NAME --help` lists them).")
-        raise SystemExit(0)
-
-    import envs
-    from agents import evaluation
-
-    if bool(args.checkpoint) == bool(args.policy) and not args.help:
+def check(args: EvalConfig) -> None:
+    """ValueError naming the option, its value and what is allowed (before anything is loaded)."""
+    if bool(args.checkpoint) == bool(args.policy):
         raise ValueError("give exactly one of --checkpoint PATH... and --policy NAME (allowed policies: "
-                         "random, standstill, pseudo_ik).")
+                         f"{', '.join(baselines.BASELINES)}).")
     for name in ("num_envs", "seeds", "last_steps", "video_envs"):
         if getattr(args, name) < 1:
             raise ValueError(f"--{name.replace('_', '-')}={getattr(args, name)} is invalid: allowed is an integer >= 1.")
@@ -197,25 +170,35 @@ def main(argv: list[str] | None = None) -> list:
     if args.stochastic and args.policy:
         raise ValueError(f"--stochastic is invalid with --policy {args.policy}: allowed only with --checkpoint (the "
                          "baselines have no action distribution).")
+    if args.policy and not args.env_name:
+        raise ValueError("--policy needs --env NAME (allowed: " + ", ".join(envs.names()) + ").")
+
+
+def main(argv: list[str] | None = None) -> list:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    wants_help = any(a in ("-h", "--help") for a in argv)
+    args = parse([a for a in argv if a not in ("-h", "--help")])
+    if wants_help and not (args.env_name or args.checkpoint):
+        parse([], show_help=True)  # eval.py's options; the env's need the env
+    if not wants_help:
+        check(args)
     if args.checkpoint:
         policies = [evaluation.checkpoint_policy(path) for path in args.checkpoint]
     else:
-        if not args.env:
-            raise ValueError("--policy needs --env NAME (allowed: " + ", ".join(envs.names()) + ").")
         policies = [evaluation.baseline_policy(args.policy or "standstill")]
-    env_name = args.env or policies[0].train_env_name
-    envs.registry.spec(env_name)  # unknown name -> ValueError listing the names
-
-    if args.video and envs.registry.spec(env_name).robot is None:
+    env_name = args.env_name or policies[0].train_env_name
+    spec = envs.registry.spec(env_name)  # unknown name -> ValueError listing the names
+    if args.video and spec.robot is None:
         raise ValueError(f"--video needs an arm env: {env_name!r} has no robot model to render.")
-    first_base = envs.make_config(env_name, policies[0].train_env_config)
-    if args.help:
-        _parser().print_help()
-        parse_env_options(env_name, first_base, [], help_only=True)  # prints tyro's help, exits 0
-    overrides = parse_env_options(env_name, first_base, rest)
+    bases = [envs.make_config(env_name, policy.train_env_config) for policy in policies]
+    if wants_help:
+        parse([], bases[0], show_help=True)  # every option, the env's included
+    # Each checkpoint's own env config with the --env.<field> options replacing fields.
+    configs = [envs.make_config(env_name, parse(argv, base).env) for base in bases]
+    overrides = {f.name: getattr(config, f.name) for base, config in zip(bases, configs)
+                 for f in dataclasses.fields(config) if getattr(config, f.name) != getattr(base, f.name)}
     eval_seeds = [args.seed + i for i in range(args.seeds)]
 
-    configs = [envs.make_config(env_name, policy.train_env_config, **overrides) for policy in policies]
     for policy, config in zip(policies, configs):  # every bad combination refused before anything runs
         evaluation.check(policy, env_name, config)
     results = []
@@ -284,12 +267,9 @@ def write_video(path: str, policy, env_name: str, env_config, num_envs: int, see
                 stochastic: bool = False) -> None:
     """Renders each of `num_envs` envs' first episode (a grid of views) to an mp4 or gif, with the
     actions the evaluation took (sampled with `stochastic`)."""
-    from agents import evaluation
     from envs import render
 
     width, height = _video_size(size)
-    import envs
-
     env = envs.from_config(env_name, env_config)
     records = evaluation.rollout(policy, env_name, env_config, num_envs, seed, stochastic=stochastic)
     frames = render.rollout_frames(env, records, width=width, height=height)

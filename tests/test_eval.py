@@ -516,6 +516,18 @@ def test_bad_input_is_refused_with_a_clear_message(make, message, arm_export, po
     assert "\n" not in str(info.value)
 
 
+def test_help_lists_the_env_options_once_the_env_is_known(arm_export, capsys):
+    """`eval.py --help`: eval.py's options; with a checkpoint (or --env): also its env's --env.<field>."""
+    for args, env_option in ((["--help"], None), (["--checkpoint", str(arm_export), "--help"], "--env.workspace"),
+                             (["--env", "point-mass", "-h"], "--env.episode-length")):
+        with pytest.raises(SystemExit) as info:
+            eval_cli.main(args)
+        out = capsys.readouterr().out
+        assert info.value.code == 0 and "--num-envs" in out and "--checkpoint" in out
+        assert ("--env.episode-length" in out) == (env_option is not None)
+        assert env_option is None or env_option in out
+
+
 def test_bad_option_values_exit_2():
     with pytest.raises(SystemExit) as info:  # tyro: not a workspace
         eval_cli.main(["--env", "ur5e-reach", "--policy", "random", "--env.workspace", "everywhere"])
