@@ -202,11 +202,12 @@ def main(argv: list[str] | None = None) -> list:
     for policy, config in zip(policies, configs):  # every bad combination refused before anything runs
         evaluation.check(policy, env_name, config)
     results = []
-    for policy, config in zip(policies, configs):
-        print(f"evaluating {policy.name} on {env_name} ({len(policy.units)} x {len(eval_seeds)} unit(s) x "
-              f"{args.num_envs} envs) ...", file=sys.stderr, flush=True)
+    for i, (policy, config) in enumerate(zip(policies, configs)):
+        trained = f"{len(policy.units)} trained seed(s) x " if policy.export else ""
+        _progress(f"[{i + 1}/{len(policies)}] {policy.name} on {env_name}: {trained}{len(eval_seeds)} eval seed(s) x "
+                  f"{args.num_envs} episodes")
         results.append(evaluation.run(policy, env_name, config, args.num_envs, eval_seeds, args.last_steps,
-                                      stochastic=args.stochastic))
+                                      stochastic=args.stochastic, progress=lambda line: _progress("  " + line)))
 
     command = "python eval.py " + " ".join(shlex.quote(a) for a in argv)
     print(evaluation.markdown(results))
@@ -229,10 +230,16 @@ def main(argv: list[str] | None = None) -> list:
     if args.csv:
         _write_csv(args.csv, results)
     if args.video:
+        _progress(f"rendering the first episode of {args.video_envs} env(s) to {args.video} ...")
         write_video(args.video, policies[0], env_name, configs[0], args.video_envs, args.seed, args.video_size,
                     stochastic=args.stochastic)
-        print(f"video: {args.video}", file=sys.stderr)
+        _progress(f"video: {args.video}")
     return results
+
+
+def _progress(line: str) -> None:
+    """Progress goes to stderr; stdout holds the results table."""
+    print(line, file=sys.stderr, flush=True)
 
 
 def _makedirs_for(path: str) -> None:

@@ -25,7 +25,7 @@ import os
 import sys
 import time
 import warnings
-from typing import Any
+from typing import Any, Callable
 
 import jax
 import numpy as np
@@ -137,37 +137,48 @@ def check_compatible(policy: Policy, env_name: str, env) -> None:
 # Running
 
 
+@dataclasses.dataclass
+class _Program:
+    """A batched env and its jitted `evaluate(params, key) -> (per-env metrics, records)`."""
+
+    env: Any
+    evaluate: Callable
+    compiled: set = dataclasses.field(default_factory=set)
+    """Trained-seed counts (the leading axis of a checkpoint's params; 0 for baselines) it has run
+    with, i.e. compiled for: progress messages say when a call compiles first."""
+
+
 @functools.lru_cache(maxsize=16)
 def _evaluator(env_name: str, env_config, algo_config, obs_size: int, act_size: int, num_envs: int, last_steps: int,
-               stochastic: bool = False):
-    """(batched env, compiled `evaluate(params, key) -> (per-env metrics, records)`), cached per
-    setting so that several checkpoints / seeds / baselines (and a video of as many envs) share one
-    compilation. The env is not auto-reset (`envs.wrap(..., autoreset=False)`): only each env's first
-    episode counts, and its poses are recorded for rendering. `stochastic`: a checkpoint's actions are drawn from its
-    policy's distribution (the learner's `stochastic_policy`, a fresh key per step) instead of its mode."""
+               stochastic: bool = False) -> _Program:
+    """The evaluation program, cached per setting so that several checkpoints / seeds / baselines
+    (and a video of as many envs) share one compilation. The env is not auto-reset
+    (`envs.wrap(..., autoreset=False)`): only each env's first episode counts, and its poses are
+    recorded for rendering. `stochastic`: a checkpoint's actions are drawn from its policy's
+    distribution (the learner's `stochastic_policy`, a fresh key per step) instead of its mode."""
     env = envs.wrap(envs.from_config(env_name, env_config), autoreset=False)
     length = env_config.episode_length
     if algo_config is None:
         fn = make_evaluate(env, None, num_envs, length, last_steps, act=baselines.make_act(env), per_env=True,
                            record=_record)
-        return env, jax.jit(fn)
+        return _Program(env, jax.jit(fn))
     learner = registry.make_learner(algo_config, obs_size, act_size)
     act = (lambda ls, state, start, key: learner.stochastic_policy(ls, state.obs, key)) if stochastic else None
     fn = make_evaluate(env, learner, num_envs, length, last_steps, act=act, per_env=True, record=_record)
-    return env, jax.jit(jax.vmap(fn, in_axes=(0, None)))
+    return _Program(env, jax.jit(jax.vmap(fn, in_axes=(0, None))))
 
 
-def _evaluate_fn(policy: Policy, env_name: str, env_config, num_envs: int, last_steps: int, stochastic: bool):
-    """The cached compiled evaluation (`_evaluator`) for `policy`'s network on this env, after checking that
-    the env fits the policy and that a stochastic evaluation has a distribution to sample."""
+def _program(policy: Policy, env_name: str, env_config, num_envs: int, last_steps: int, stochastic: bool) -> _Program:
+    """The cached evaluation program (`_evaluator`) for `policy`'s network on this env, after checking
+    that the env fits the policy and that a stochastic evaluation has a distribution to sample."""
     if stochastic and policy.export is None:
         raise ValueError(f"stochastic=True is invalid for the baseline {policy.name!r}: allowed only for checkpoints "
                          "(the baselines have no action distribution).")
     e = policy.export
-    env, evaluate = _evaluator(env_name, env_config, e.config.algo if e else None, e.observation_size if e else 0,
-                               e.action_size if e else 0, int(num_envs), int(last_steps), bool(stochastic))
-    check_compatible(policy, env_name, env)
-    return evaluate
+    program = _evaluator(env_name, env_config, e.config.algo if e else None, e.observation_size if e else 0,
+                         e.action_size if e else 0, int(num_envs), int(last_steps), bool(stochastic))
+    check_compatible(policy, env_name, program.env)
+    return program
 
 
 def _record(state):
@@ -241,19 +252,25 @@ def _metric_names(per_step: dict, last_steps: int) -> dict:
 
 
 def run(policy: Policy, env_name: str, env_config, num_envs: int = 4096, eval_seeds=(DEFAULT_EVAL_SEED,),
-        last_steps: int = 10, stochastic: bool = False) -> Result:
+        last_steps: int = 10, stochastic: bool = False, progress: Callable[[str], None] | None = None) -> Result:
     """Evaluates `policy` on `num_envs` episodes per unit and evaluation seed (see module doc);
-    `stochastic=True` samples a checkpoint's actions instead of taking its deterministic mode."""
+    `stochastic=True` samples a checkpoint's actions instead of taking its deterministic mode.
+    `progress(line)` is told when the program compiles and what each evaluation seed gave."""
     if int(num_envs) < 1:
         raise ValueError(f"num_envs={num_envs!r} is invalid: allowed is an integer >= 1.")
     if not eval_seeds:
         raise ValueError("eval_seeds=[] is invalid: allowed is at least one seed.")
-    evaluate = _evaluate_fn(policy, env_name, env_config, num_envs, last_steps, stochastic)
+    program = _program(policy, env_name, env_config, num_envs, last_steps, stochastic)
     params = policy.export.state if policy.export else baselines.index(policy.name)
+    batch = len(policy.units) if policy.export else 0
     t0 = time.perf_counter()
+    if progress and batch not in program.compiled:
+        progress(f"compiling the evaluation of {num_envs} envs x {env_config.episode_length} steps"
+                 + (f", {batch} trained seed(s) at once" if batch else "") + " (the first eval seed waits for it) ...")
     units, per_env = [], {}
-    for eval_seed in eval_seeds:
-        out = jax.device_get(evaluate(params, jax.random.PRNGKey(int(eval_seed)))[0])
+    for k, eval_seed in enumerate(eval_seeds):
+        out = jax.device_get(program.evaluate(params, jax.random.PRNGKey(int(eval_seed)))[0])
+        program.compiled.add(batch)
         names = _metric_names(out, last_steps)
         for i, label in enumerate(policy.units):
             values = {name: np.asarray(out[key][i] if policy.export else out[key], np.float64) for name, key in names.items()}
@@ -261,6 +278,8 @@ def run(policy: Policy, env_name: str, env_config, num_envs: int = 4096, eval_se
                           "metrics": {name: float(np.mean(v)) for name, v in values.items()}})
             for name, v in values.items():
                 per_env.setdefault(name, []).append(v)
+        if progress:
+            progress(_seed_line(k, len(eval_seeds), eval_seed, units[-len(policy.units):], time.perf_counter() - t0))
     per_env = {k: np.stack(v) for k, v in per_env.items()}
     derived = collided_distances(per_env)
     per_env.update(derived)
@@ -270,6 +289,17 @@ def run(policy: Policy, env_name: str, env_config, num_envs: int = 4096, eval_se
             unit["metrics"].update({name: float(np.nanmean(v[i])) for name, v in derived.items()})
     return Result(policy, env_name, env_config, int(num_envs), [int(s) for s in eval_seeds], int(last_steps), units,
                   per_env, time.perf_counter() - t0, bool(stochastic))
+
+
+def _seed_line(k: int, n: int, eval_seed: int, units: list, seconds: float) -> str:
+    """"eval seed k of n (seed): x% reached, y% self collision ..., elapsed" over one seed's units."""
+    parts = []
+    for name, what in (("target_reached", "reached"), ("self_collision", "self collision"),
+                       ("obstacle_collision", "obstacle collision")):
+        if name in units[0]["metrics"]:
+            parts.append(f"{100 * np.mean([u['metrics'][name] for u in units]):.1f} % {what}")
+    over = f" (mean over {len(units)} trained seeds)" if len(units) > 1 else ""
+    return f"eval seed {k + 1} of {n} ({eval_seed}): {', '.join(parts)}{over}; {seconds:.0f} s elapsed"
 
 
 def collided_distances(per_env: dict) -> dict:
@@ -399,14 +429,16 @@ def rollout(policy: Policy, env_name: str, env_config, num_envs: int = 1, eval_s
     {"qpos": (T + 1, n, nq), "target_pos": ..., ["obstacle_pos": ...], "length": (n,), "metrics": {...}}
     with the policy's unit `unit` (a trained seed's index); the episodes that `run` evaluates with as
     many envs, the same seed and the same `stochastic`."""
-    evaluate = _evaluate_fn(policy, env_name, env_config, num_envs, 10, stochastic)
+    program = _program(policy, env_name, env_config, num_envs, 10, stochastic)
     if policy.export:
         params = jax.tree.map(lambda x: x[unit:unit + 1], policy.export.state)
-        out, records = jax.device_get(evaluate(params, jax.random.PRNGKey(int(eval_seed))))
+        out, records = jax.device_get(program.evaluate(params, jax.random.PRNGKey(int(eval_seed))))
         out = {k: v[0] for k, v in out.items()}
         records = jax.tree.map(lambda x: x[0], records)
+        program.compiled.add(1)
     else:
-        out, records = jax.device_get(evaluate(baselines.index(policy.name), jax.random.PRNGKey(int(eval_seed))))
+        out, records = jax.device_get(program.evaluate(baselines.index(policy.name), jax.random.PRNGKey(int(eval_seed))))
+        program.compiled.add(0)
     records = {k: np.asarray(v) for k, v in records.items()}
     records["length"] = np.asarray(out["episode/length"]).astype(int)
     records["metrics"] = {k: np.asarray(v) for k, v in out.items()}

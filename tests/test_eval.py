@@ -439,8 +439,8 @@ def no_compile(monkeypatch):
     original = evaluation._evaluator.__wrapped__
 
     def building_only(*args):
-        env, _ = original(*args)
-        return env, lambda *a, **k: pytest.fail("evaluated despite bad input")
+        program = original(*args)
+        return dataclasses.replace(program, evaluate=lambda *a, **k: pytest.fail("evaluated despite bad input"))
 
     monkeypatch.setattr(evaluation, "_evaluator", building_only)
 
@@ -585,7 +585,7 @@ def test_paper_tables_evaluate_each_pair_on_the_right_env_config(arm_export, tmp
 
     calls = []
 
-    def record(policy, env_name, config, num_envs, eval_seeds, last_steps=10):
+    def record(policy, env_name, config, num_envs, eval_seeds, last_steps=10, progress=None):
         calls.append((policy.name, env_name, config))
         per_env = {k: np.zeros((1, 2)) for k in ("target_reached", "self_collision", "obstacle_collision", "distance")}
         return evaluation.Result(policy, env_name, config, 2, list(eval_seeds), 10, [{"metrics": {}}], per_env, 0.0)

@@ -134,6 +134,10 @@ def _progress(text: str) -> None:
     print(text, file=sys.stderr, flush=True)
 
 
+def _indented(text: str) -> None:
+    _progress("  " + text)
+
+
 # ------------------------------------------------------------------------------------------------
 
 
@@ -155,7 +159,8 @@ def baselines_table(args, command: str) -> str:
                 config = envs.make_config(f"{robot}-reach", target_radius=radius, action=action, **args.env_overrides)
                 for name in ("random", "standstill", "pseudo_ik"):
                     _progress(f"baselines: {robot} {name} {action} target {radius} ({seeds} x {num_envs} envs)")
-                    r = evaluation.run(evaluation.baseline_policy(name), f"{robot}-reach", config, num_envs, eval_seeds)
+                    r = evaluation.run(evaluation.baseline_policy(name), f"{robot}-reach", config, num_envs, eval_seeds,
+                                       progress=_indented)
                     s = r.summary()
                     rows.append([{"random": "Random", "standstill": "Standstill", "pseudo_ik": "Pseudo IK"}[name], action,
                                  f"{radius:.2f} m", evaluation.fmt(s.get("target_reached"), 3),
@@ -207,7 +212,7 @@ def _evaluate_role(args, paths, setting):
         env_name, overrides = setting(policy)
         config = envs.make_config(env_name, policy.train_env_config, **{**overrides, **args.env_overrides})
         _progress(f"evaluating {path} on {env_name} {overrides or ''} ({len(policy.units)} x {args.num_envs} envs)")
-        results.append(evaluation.run(policy, env_name, config, args.num_envs, eval_seeds))
+        results.append(evaluation.run(policy, env_name, config, args.num_envs, eval_seeds, progress=_indented))
     return results
 
 
