@@ -552,7 +552,8 @@ def test_training_curves_from_train_logs(point_run, tmp_path):
     rows = plots.read_metrics(str(point_run))
     assert seeds == 2 and list(steps) == [5120, 10240]
     at_end = rows["episode/target_reached"][rows["env_steps"] == 10240]
-    np.testing.assert_allclose(mean[-1], at_end.mean()) and np.testing.assert_allclose(std[-1], at_end.std())
+    np.testing.assert_allclose(mean[-1], at_end.mean())
+    np.testing.assert_allclose(std[-1], at_end.std())
     out = tmp_path / "curves.png"
     fig = plots.training_curves({"ppo": str(point_run)}, out=str(out))
     assert out.stat().st_size > 10_000 and len(fig.axes) == 2  # target reached and return (point mass has no collisions)
