@@ -34,9 +34,10 @@ pose whose forward kinematics produced the target; needs target_sampling="reacha
 and pseudo_ik command a joint configuration, which maps onto both action modes (absolute: its
 action; relative: the clipped step towards it); random means something else in each mode.
 
-Against the paper's UR5e baseline table (full workspace, reach, 125 steps; see
-results/baselines.md for our numbers and their commands):
-{FINDINGS}
+Compare with the paper's baseline table under absolute control: its numbers are absolute
+control's (results: baselines study). The distance column is each episode's own last 10 steps
+(the paper's definition); the JSON's `distance_collided_as_0` is our reading of the paper's
+evaluator, Brax's: an episode that ended in a collision counts as 0 m.
 
 Video: `--video PATH` (.mp4 or .gif) renders the first `--video-envs` envs' first episodes (a grid)
 with MuJoCo's offscreen renderer (`envs.render`; headless: EGL or OSMesa, chosen
@@ -61,39 +62,6 @@ import tyro
 
 import envs
 from agents import baselines, evaluation
-
-FINDINGS = """\
-- Action mode. The paper's baselines ran with absolute position control. Random actions under
-  relative control are a small random walk: 5.0 % self-collision and 0.871 m, the standstill's
-  distance; under absolute control the arm flails around the middle of its range: 22.4 % and
-  0.978 m, above the standstill as in the paper (30 %, 0.929 m vs 0.855 m). The pseudo-IK under
-  relative control (measured with action_scale 0.1, the default then) moves its servo target only
-  0.1 rad per step, the arm creeps and 0.6 % reach the 1 cm target; under absolute control 41.5 %
-  (paper 36.9 %).
-- Ours vs the paper, absolute control, 5 seeds x 4096 envs (GPU; a CPU run of the first 64 episodes
-  gives identical numbers): random 0.000 / 0.224 / 0.978 m (paper 0.000 / 0.300 / 0.929 m);
-  standstill 0 / 0.001 / 0.870 m (paper 0 / 0 / 0.855 m); pseudo-IK 0.415 (1 cm) and 0.570
-  (2 cm) reached, 0.332 self-collision, 0.272 m (paper 0.369, 0.510, 0.222, 0.033 m).
-- The distance column: the paper's pseudo-IK 0.033 m is what ours gives when episodes that ended
-  in a collision count as 0 m (0.036 m; collision-free episodes alone: 0.050 m; all episodes,
-  each at its last 10 steps: 0.272 m). Brax's evaluator (brax.envs.wrappers.training.EvalWrapper),
-  which the paper used, sums each per-step metric over an episode's active steps; an env that
-  records the distance only over the last 10 of the 125 steps thus scores 0 for an episode that
-  collided earlier (our reading; the paper's env code is not public). We report the distance over every episode's own last 10 steps (the
-  paper's definition) and give the collided-as-0 reading in results/baselines.md. For the random
-  agent that reading is 0.783 m, further from the paper's 0.929 m than ours: unexplained.
-- Standstill collides in 0.07 % of episodes: initial poses are rejected only if already in
-  contact, and a pose within millimetres of contact sags under gravity (the servos' steady-state
-  error) into it within 7 steps. The paper rounds its rate to 0.000.
-- Collision rates (random 22 vs 30 %, pseudo-IK 33 vs 22 %) depend on how fast each joint follows
-  its target, which sets the joint-space path: our joint damping is tuned so the peak speeds stay
-  within the official limits (assets/README.md); the paper added damping too, with values it does
-  not give. Collision geometry differs as well (our capsules, base sphere and 18 checked pairs,
-  tested after every 2 ms substep, against the paper's MJX contacts).
-- The zero relative action is no standstill: it re-targets the sagged pose every step, and the
-  UR5e's end effector drops 0.10 m (median; 2 % collide), the Panda's 0.67 m (13 % collide)."""
-
-__doc__ = __doc__.replace("{FINDINGS}", FINDINGS)
 
 EnvConfigT = TypeVar("EnvConfigT")
 

@@ -2,19 +2,18 @@
 
     python -m benchmarks.brax_reference --out results/brax_reference      # on the GPU machine
 
-Both train on `ur5e-reach` (the paper's configuration) with the preset's PPO settings, which both
-learners get: 8,192 envs, batch 512, 64 minibatches, unroll 10, 5 updates per batch, lr 8e-4, entropy
-1e-4, 3x256 policy and value networks, observation normalisation (the paper's), and the `ur5e-reach-ppo`
-preset's discount 0.99 (the paper's 0.97 until 2026-11-22, in every committed comparison). Ours adds
-its documented stability defaults (learning-rate decay, gradient clipping, value normalisation). Brax
-runs with its own training wrappers, as a Brax user would (its auto-reset restores each env's cached
-first state).
+Both train on the preset's env (`--preset`, default `ur5e-reach-ppo`: the paper's configuration)
+with the preset's PPO settings (`agents/presets.py`), which both learners get, observation
+normalisation included. Ours adds its documented stability defaults (learning-rate decay, gradient
+clipping, value normalisation). Brax runs with its own training wrappers, as a Brax user would (its
+auto-reset restores each env's cached first state).
 
 Both are scored by the same evaluator (`agents.loop.make_evaluate`): the deterministic policy on the
-same 4,096 freshly sampled episodes, at the same env-step counts. Training speed excludes evaluation:
-ours times the compiled training chunks; Brax's is its own `training/sps` (median over epochs after
-the first, which compiles). Results are written after every evaluation, so a cut-off run keeps them.
-Brax is only a reference: this script is the one place outside tests that imports it.
+same `--eval-envs` freshly sampled episodes, at the same env-step counts. Training speed excludes
+evaluation: ours times the compiled training chunks; Brax's is its own `training/sps` (median over
+epochs after the first, which compiles). Results are written after every evaluation, so a cut-off
+run keeps them. Brax is only a reference: this script is the one place outside tests that imports
+it.
 """
 
 from __future__ import annotations
@@ -155,7 +154,7 @@ def main():
         report["speedup"] = ours / brax
     save()
     lines = [f"# Brax PPO vs ours on {config.env_name} ({report['meta']['device']}, {report['meta']['date']})", "",
-             f"Command: `{report['meta']['command']}`; jax {jax.__version__}; paper hyperparameters; both evaluated by "
+             f"Command: `{report['meta']['command']}`; jax {jax.__version__}; the preset's hyperparameters; both evaluated by "
              f"`agents.loop.make_evaluate` on the same {args.eval_envs} fresh episodes (deterministic policy).", "",
              f"Training env steps/s: ours {ours or float('nan'):,.0f}, Brax {brax or float('nan'):,.0f}"
              + (f", ratio {report['speedup']:.2f}x" if "speedup" in report else "") + ".", "",

@@ -6,14 +6,14 @@ of the same environment in the same run, and on 1..N local GPUs at the same per-
     python -m benchmarks.train_throughput --devices 2 --multi-device gspmd shard_map --skip-env-only
     python -m benchmarks.train_throughput --trace traces/  # + profile: python -m benchmarks.trace_summary traces/1dev
 
-Training rate: the compiled chunk of `--updates` PPO updates (rollouts, GAE, 5 epochs x 64
-minibatches of gradient steps), timed after a one-update warm-up that compiles it; env steps per
+Training rate: the compiled chunk of `--updates` PPO updates (rollouts, GAE, the preset's epochs of
+minibatch gradient steps), timed after a one-update warm-up that compiles it; env steps per
 second = updates x env steps per update x seeds / seconds. Env-only rate: the preset's own env
 config (same substeps, action scale, reward terms), wrapped as in training (episode limit, fresh
 auto-reset, vmap) and stepped with uniform random actions (`benchmarks/env_throughput.py`), same
 number of envs. Everything is compiled first; then `--rounds` rounds each time the env alone
 (median of three calls) and every setting once, so that a drift of the GPU's speed during the
-process (a few per cent were seen) falls on both sides of each round's ratio. Reported: per-round
+process (results: throughput study) falls on both sides of each round's ratio. Reported: per-round
 figures, their medians, and the fraction of env-only = the median of the rounds' ratios. With
 several device counts, each run keeps the per-device `num_envs` and `batch_size` of the preset, so
 the global batch grows with the devices (weak scaling).

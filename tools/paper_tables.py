@@ -12,7 +12,7 @@
 Tables (paper section in brackets):
 - `baselines` ["Baselines", Table "reaching baselines"]: random, standstill, pseudo-IK on `<robot>-reach`
   (full workspace), target radius 0.01 and 0.02 m, in both action modes (the paper does not say
-  which mode its baselines used; the numbers show it: see eval.py's docstring). Rates are means
+  which mode its baselines used; absolute control's match its numbers: results, baselines study). Rates are means
   over evaluation seeds (± std over seeds); the distance is mean ± std over all episodes, as in
   the paper's table.
 - `action` ["Action space", precision table]: distance, steps in target, times left target of a
@@ -145,7 +145,7 @@ def baselines_table(args, command: str) -> str:
     w = Writer(args.out, args.name or "baselines", "Baselines on the reach task (paper, Table \"reaching baselines\")", command,
                "Full workspace, reachable targets, 125-step episodes, the env defaults otherwise. Rates: mean over "
                "evaluation seeds (± std over seeds when several); distance: mean ± std over all episodes (the paper's "
-               "format); every baseline in both action modes (see eval.py's docstring for what each means). "
+               "format); every baseline in both action modes (`agents/baselines.py` says what each means). "
                "\"distance, collided = 0\" counts episodes that ended in a collision as 0 m (what an evaluator that "
                "sums the last steps' distances over active steps reports; it matches the paper's pseudo-IK distance).")
     provenance = []
