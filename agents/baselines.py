@@ -11,21 +11,19 @@ Two of them are defined by a joint configuration to command, which maps onto the
   depends strongly on the mode: with `absolute` control every step commands a uniformly random
   configuration of the full joint range (the arm flails around the range's middle); with
   `relative` control it is a random walk of at most `action_scale` rad per step around the initial
-  pose. UR5e, 4096 envs: absolute 22 % self-collision, 0.98 m final distance; relative 5 %, 0.87 m
-  (= standstill). The paper's 30 % and 0.929 m (standstill 0.855 m) are absolute control's (see
-  eval.py's docstring). The Panda is the other way round (absolute 0.2 %, relative 22 %): its
-  narrow ranges' middle is a safe pose, and a random walk runs into its joint limits.
+  pose. The paper's random agent is absolute control's (results: baselines study). On the Panda
+  absolute control is the safer mode: the middle of its narrow ranges is a safe pose, while a
+  random walk runs into its joint limits.
 - `standstill`: commands the episode's initial pose ("uses its initial pose as the action").
   absolute: that pose's action; relative: the step back to it, (q0 - q) / action_scale, clipped, so
   the position servo's target is q0 in both modes. The zero relative action is *not* a standstill:
-  it re-targets the sagged pose every step, so gravity pulls the arm down step by step (UR5e: the
-  end effector drops 0.10 m in 5 s, median; Panda: 0.67 m).
+  it re-targets the sagged pose every step, so gravity pulls the arm down step by step.
 - `pseudo_ik`: commands `info["target_qpos"]`, the configuration whose forward kinematics produced
   the target (so it is known to reach it), the same way; only defined for target_sampling =
   "reachable". Relative control moves the servo target by at most `action_scale` per step
-  towards it and the arm creeps after it (UR5e: 0.6 % reach the 1 cm target in 125 steps), while
-  absolute control jumps (41.5 %). It fails by self-collision on the way (joint-space path) and
-  by the servos' steady-state error under gravity (the end effector settles off the target).
+  towards it and the arm creeps after it, while absolute control jumps. It fails by
+  self-collision on the way (joint-space path) and by the servos' steady-state error under
+  gravity (the end effector settles off the target).
 
 `standstill` reads the first episode's initial pose from `start`: only the first episode of each
 env is valid (which is all `make_evaluate` counts).

@@ -1,9 +1,10 @@
 """Evaluation of trained policies and baselines on any env configuration (the library behind eval.py
-and benchmarks/paper_tables.py).
+and tools/paper_tables.py).
 
+    import envs
     from agents import evaluation
     policy = evaluation.checkpoint_policy("runs/ur5e-reach-ppo/20250101-120000")
-    config = evaluation.env_config_for("ur5e-reach", policy.train_env_config, workspace="front")
+    config = envs.make_config("ur5e-reach", policy.train_env_config, workspace="front")
     result = evaluation.run(policy, "ur5e-reach", config, num_envs=4096, eval_seeds=[1_000_000])
     print(evaluation.markdown([result]))
 
@@ -24,7 +25,7 @@ import os
 import sys
 import time
 import warnings
-from typing import Any
+from typing import Any, Callable
 
 import jax
 import numpy as np
@@ -32,7 +33,6 @@ import numpy as np
 import envs
 from agents import baselines, driver, export, registry
 from agents.loop import make_evaluate
-from envs.robots import ROBOTS
 
 PAPER_METRICS = {
     "target_reached": "episode/target_reached",
@@ -50,37 +50,6 @@ EXTRA_METRICS = {"episode_length": "episode/length", "return": "episode/return",
 """Also reported (JSON / CSV), not part of the paper's tables."""
 DEFAULT_EVAL_SEED = 1_000_000
 """The training driver's `eval_seed`: eval.py on a run's own env config reproduces its eval.json."""
-
-
-def robot_of(env_name: str) -> str:
-    """The robot of a registered env name ("ur5e", "panda"), or the name itself for other envs."""
-    for robot in ROBOTS:
-        if env_name.startswith(robot + "-"):
-            return robot
-    return env_name
-
-
-def env_config_for(env_name: str, base, **overrides):
-    """The config of `env_name` that starts from `base` (e.g. a checkpoint's env config, possibly of
-    the other task: a reach config on a reach-avoid env keeps every field both have and takes the
-    rest from reach-avoid's defaults) with `overrides` (config fields) replacing values; validated."""
-    envs.registry.spec(env_name)  # unknown name -> ValueError listing the names
-    default = envs.default_config(env_name)
-    if base is None:
-        config = default
-    elif type(base) is type(default):
-        config = base
-    else:
-        names = {f.name for f in dataclasses.fields(default)}
-        shared = {f.name: getattr(base, f.name) for f in dataclasses.fields(base) if f.name in names}
-        config = dataclasses.replace(default, **shared)
-    fields = {f.name for f in dataclasses.fields(config)}
-    unknown = sorted(set(overrides) - fields)
-    if unknown:
-        raise ValueError(f"option {unknown[0]!r} does not exist for env {env_name!r}: allowed are {', '.join(sorted(fields))}.")
-    config = dataclasses.replace(config, **overrides)
-    config.validate()
-    return config
 
 
 # ------------------------------------------------------------------------------------------------
@@ -149,9 +118,11 @@ def check_compatible(policy: Policy, env_name: str, env) -> None:
         baselines.check(policy.name, env)
         return
     e = policy.export
-    if robot_of(e.env_name) != robot_of(env_name):
-        raise ValueError(f"checkpoint {policy.name!r} was trained on {e.env_name!r} (robot {robot_of(e.env_name)}): "
-                         f"env={env_name!r} is another robot; allowed are the envs of robot {robot_of(e.env_name)}.")
+    trained, asked = envs.registry.spec(e.env_name).robot, envs.registry.spec(env_name).robot
+    if trained != asked:
+        allowed = f"the envs of robot {trained}" if trained else "the envs without a robot"
+        raise ValueError(f"checkpoint {policy.name!r} was trained on {e.env_name!r} (robot {trained or 'none'}): "
+                         f"env={env_name!r} is another robot; allowed are {allowed}.")
     if env.observation_size != e.observation_size:
         observation = getattr(getattr(env.unwrapped, "config", None), "observation", None)
         raise ValueError(f"the network of checkpoint {policy.name!r} takes observations of shape ({e.observation_size},) but "
@@ -166,48 +137,48 @@ def check_compatible(policy: Policy, env_name: str, env) -> None:
 # Running
 
 
+@dataclasses.dataclass
+class _Program:
+    """A batched env and its jitted `evaluate(params, key) -> (per-env metrics, records)`."""
+
+    env: Any
+    evaluate: Callable
+    compiled: set = dataclasses.field(default_factory=set)
+    """Trained-seed counts (the leading axis of a checkpoint's params; 0 for baselines) it has run
+    with, i.e. compiled for: progress messages say when a call compiles first."""
+
+
 @functools.lru_cache(maxsize=16)
 def _evaluator(env_name: str, env_config, algo_config, obs_size: int, act_size: int, num_envs: int, last_steps: int,
-               stochastic: bool = False):
-    """(batched env, compiled `evaluate(params, key) -> (per-env metrics, records)`), cached per
-    setting so that several checkpoints / seeds / baselines (and a video of as many envs) share one
-    compilation. The env is not auto-reset (`_NoAutoReset`): only each env's first episode counts,
-    and its poses are recorded for rendering. `stochastic`: a checkpoint's actions are drawn from its
-    policy's distribution (the learner's `stochastic_policy`, a fresh key per step) instead of its mode."""
-    base = envs.from_config(env_name, env_config)
-    env = envs.wrappers.VmapWrapper(_NoAutoReset(envs.wrappers.EpisodeWrapper(base, env_config.episode_length)))
+               stochastic: bool = False) -> _Program:
+    """The evaluation program, cached per setting so that several checkpoints / seeds / baselines
+    (and a video of as many envs) share one compilation. The env is not auto-reset
+    (`envs.wrap(..., autoreset=False)`): only each env's first episode counts, and its poses are
+    recorded for rendering. `stochastic`: a checkpoint's actions are drawn from its policy's
+    distribution (the learner's `stochastic_policy`, a fresh key per step) instead of its mode."""
+    env = envs.wrap(envs.from_config(env_name, env_config), autoreset=False)
     length = env_config.episode_length
     if algo_config is None:
         fn = make_evaluate(env, None, num_envs, length, last_steps, act=baselines.make_act(env), per_env=True,
                            record=_record)
-        return env, jax.jit(fn)
+        return _Program(env, jax.jit(fn))
     learner = registry.make_learner(algo_config, obs_size, act_size)
     act = (lambda ls, state, start, key: learner.stochastic_policy(ls, state.obs, key)) if stochastic else None
     fn = make_evaluate(env, learner, num_envs, length, last_steps, act=act, per_env=True, record=_record)
-    return env, jax.jit(jax.vmap(fn, in_axes=(0, None)))
+    return _Program(env, jax.jit(jax.vmap(fn, in_axes=(0, None))))
 
 
-def _evaluate_fn(policy: Policy, env_name: str, env_config, num_envs: int, last_steps: int, stochastic: bool):
-    """The cached compiled evaluation (`_evaluator`) for `policy`'s network on this env, after checking that
-    the env fits the policy and that a stochastic evaluation has a distribution to sample."""
+def _program(policy: Policy, env_name: str, env_config, num_envs: int, last_steps: int, stochastic: bool) -> _Program:
+    """The cached evaluation program (`_evaluator`) for `policy`'s network on this env, after checking
+    that the env fits the policy and that a stochastic evaluation has a distribution to sample."""
     if stochastic and policy.export is None:
         raise ValueError(f"stochastic=True is invalid for the baseline {policy.name!r}: allowed only for checkpoints "
                          "(the baselines have no action distribution).")
     e = policy.export
-    env, evaluate = _evaluator(env_name, env_config, e.config.algo if e else None, e.observation_size if e else 0,
-                               e.action_size if e else 0, int(num_envs), int(last_steps), bool(stochastic))
-    check_compatible(policy, env_name, env)
-    return evaluate
-
-
-class _NoAutoReset(envs.wrappers.AutoResetWrapper):
-    """The training stack's episodes (AutoResetWrapper's reset: the same initial states as
-    `envs.wrap` and the driver's evaluation for one key) without the auto-reset: an env whose
-    episode ended keeps stepping its terminal state (ignored by `episode_metrics`), so recorded poses
-    end where the episode did, and no fresh episode is sampled every step."""
-
-    def step(self, state, action):
-        return self.env.step(state, action)
+    program = _evaluator(env_name, env_config, e.config.algo if e else None, e.observation_size if e else 0,
+                         e.action_size if e else 0, int(num_envs), int(last_steps), bool(stochastic))
+    check_compatible(policy, env_name, program.env)
+    return program
 
 
 def _record(state):
@@ -281,19 +252,25 @@ def _metric_names(per_step: dict, last_steps: int) -> dict:
 
 
 def run(policy: Policy, env_name: str, env_config, num_envs: int = 4096, eval_seeds=(DEFAULT_EVAL_SEED,),
-        last_steps: int = 10, stochastic: bool = False) -> Result:
+        last_steps: int = 10, stochastic: bool = False, progress: Callable[[str], None] | None = None) -> Result:
     """Evaluates `policy` on `num_envs` episodes per unit and evaluation seed (see module doc);
-    `stochastic=True` samples a checkpoint's actions instead of taking its deterministic mode."""
+    `stochastic=True` samples a checkpoint's actions instead of taking its deterministic mode.
+    `progress(line)` is told when the program compiles and what each evaluation seed gave."""
     if int(num_envs) < 1:
         raise ValueError(f"num_envs={num_envs!r} is invalid: allowed is an integer >= 1.")
     if not eval_seeds:
         raise ValueError("eval_seeds=[] is invalid: allowed is at least one seed.")
-    evaluate = _evaluate_fn(policy, env_name, env_config, num_envs, last_steps, stochastic)
+    program = _program(policy, env_name, env_config, num_envs, last_steps, stochastic)
     params = policy.export.state if policy.export else baselines.index(policy.name)
+    batch = len(policy.units) if policy.export else 0
     t0 = time.perf_counter()
+    if progress and batch not in program.compiled:
+        progress(f"compiling the evaluation of {num_envs} envs x {env_config.episode_length} steps"
+                 + (f", {batch} trained seed(s) at once" if batch else "") + " (the first eval seed waits for it) ...")
     units, per_env = [], {}
-    for eval_seed in eval_seeds:
-        out = jax.device_get(evaluate(params, jax.random.PRNGKey(int(eval_seed)))[0])
+    for k, eval_seed in enumerate(eval_seeds):
+        out = jax.device_get(program.evaluate(params, jax.random.PRNGKey(int(eval_seed)))[0])
+        program.compiled.add(batch)
         names = _metric_names(out, last_steps)
         for i, label in enumerate(policy.units):
             values = {name: np.asarray(out[key][i] if policy.export else out[key], np.float64) for name, key in names.items()}
@@ -301,6 +278,8 @@ def run(policy: Policy, env_name: str, env_config, num_envs: int = 4096, eval_se
                           "metrics": {name: float(np.mean(v)) for name, v in values.items()}})
             for name, v in values.items():
                 per_env.setdefault(name, []).append(v)
+        if progress:
+            progress(_seed_line(k, len(eval_seeds), eval_seed, units[-len(policy.units):], time.perf_counter() - t0))
     per_env = {k: np.stack(v) for k, v in per_env.items()}
     derived = collided_distances(per_env)
     per_env.update(derived)
@@ -310,6 +289,17 @@ def run(policy: Policy, env_name: str, env_config, num_envs: int = 4096, eval_se
             unit["metrics"].update({name: float(np.nanmean(v[i])) for name, v in derived.items()})
     return Result(policy, env_name, env_config, int(num_envs), [int(s) for s in eval_seeds], int(last_steps), units,
                   per_env, time.perf_counter() - t0, bool(stochastic))
+
+
+def _seed_line(k: int, n: int, eval_seed: int, units: list, seconds: float) -> str:
+    """"eval seed k of n (seed): x% reached, y% self collision ..., elapsed" over one seed's units."""
+    parts = []
+    for name, what in (("target_reached", "reached"), ("self_collision", "self collision"),
+                       ("obstacle_collision", "obstacle collision")):
+        if name in units[0]["metrics"]:
+            parts.append(f"{100 * np.mean([u['metrics'][name] for u in units]):.1f} % {what}")
+    over = f" (mean over {len(units)} trained seeds)" if len(units) > 1 else ""
+    return f"eval seed {k + 1} of {n} ({eval_seed}): {', '.join(parts)}{over}; {seconds:.0f} s elapsed"
 
 
 def collided_distances(per_env: dict) -> dict:
@@ -435,18 +425,20 @@ def device_description() -> str:
 
 def rollout(policy: Policy, env_name: str, env_config, num_envs: int = 1, eval_seed: int = DEFAULT_EVAL_SEED,
             unit: int = 0, stochastic: bool = False) -> dict:
-    """Joint positions, target and obstacle of each env's first episode (for `benchmarks.render`):
+    """Joint positions, target and obstacle of each env's first episode (for `envs.render`):
     {"qpos": (T + 1, n, nq), "target_pos": ..., ["obstacle_pos": ...], "length": (n,), "metrics": {...}}
     with the policy's unit `unit` (a trained seed's index); the episodes that `run` evaluates with as
     many envs, the same seed and the same `stochastic`."""
-    evaluate = _evaluate_fn(policy, env_name, env_config, num_envs, 10, stochastic)
+    program = _program(policy, env_name, env_config, num_envs, 10, stochastic)
     if policy.export:
         params = jax.tree.map(lambda x: x[unit:unit + 1], policy.export.state)
-        out, records = jax.device_get(evaluate(params, jax.random.PRNGKey(int(eval_seed))))
+        out, records = jax.device_get(program.evaluate(params, jax.random.PRNGKey(int(eval_seed))))
         out = {k: v[0] for k, v in out.items()}
         records = jax.tree.map(lambda x: x[0], records)
+        program.compiled.add(1)
     else:
-        out, records = jax.device_get(evaluate(baselines.index(policy.name), jax.random.PRNGKey(int(eval_seed))))
+        out, records = jax.device_get(program.evaluate(baselines.index(policy.name), jax.random.PRNGKey(int(eval_seed))))
+        program.compiled.add(0)
     records = {k: np.asarray(v) for k, v in records.items()}
     records["length"] = np.asarray(out["episode/length"]).astype(int)
     records["metrics"] = {k: np.asarray(v) for k, v in out.items()}

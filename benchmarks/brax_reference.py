@@ -1,20 +1,19 @@
 """Brax's PPO and ours on the same environment with the same hyperparameters and budget, in one run.
 
-    python benchmarks/brax_reference.py --out results/brax_reference      # on the GPU machine
+    python -m benchmarks.brax_reference --out results/brax_reference      # on the GPU machine
 
-Both train on `ur5e-reach` (the paper's configuration) with the preset's PPO settings, which both
-learners get: 8,192 envs, batch 512, 64 minibatches, unroll 10, 5 updates per batch, lr 8e-4, entropy
-1e-4, 3x256 policy and value networks, observation normalisation (the paper's), and the `ur5e-reach-ppo`
-preset's discount 0.99 (the paper's 0.97 until 2026-11-22, in every committed comparison). Ours adds
-its documented stability defaults (learning-rate decay, gradient clipping, value normalisation). Brax
-runs with its own training wrappers, as a Brax user would (its auto-reset restores each env's cached
-first state).
+Both train on the preset's env (`--preset`, default `ur5e-reach-ppo`: the paper's configuration)
+with the preset's PPO settings (`agents/presets.py`), which both learners get, observation
+normalisation included. Ours adds its documented stability defaults (learning-rate decay, gradient
+clipping, value normalisation). Brax runs with its own training wrappers, as a Brax user would (its
+auto-reset restores each env's cached first state).
 
 Both are scored by the same evaluator (`agents.loop.make_evaluate`): the deterministic policy on the
-same 4,096 freshly sampled episodes, at the same env-step counts. Training speed excludes evaluation:
-ours times the compiled training chunks; Brax's is its own `training/sps` (median over epochs after
-the first, which compiles). Results are written after every evaluation, so a cut-off run keeps them.
-Brax is only a reference: this script is the one place outside tests that imports it.
+same `--eval-envs` freshly sampled episodes, at the same env-step counts. Training speed excludes
+evaluation: ours times the compiled training chunks; Brax's is its own `training/sps` (median over
+epochs after the first, which compiles). Results are written after every evaluation, so a cut-off
+run keeps them. Brax is only a reference: this script is the one place outside tests that imports
+it.
 """
 
 from __future__ import annotations
@@ -28,16 +27,12 @@ import sys
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+import jax
+import jax.numpy as jnp
 
-import jax  # noqa: E402
-import jax.numpy as jnp  # noqa: E402
-
-import envs  # noqa: E402
-import train as train_cli  # noqa: E402
-from agents import driver  # noqa: E402
-from agents.loop import make_evaluate  # noqa: E402
+import envs
+from agents import driver, presets
+from agents.loop import make_evaluate
 
 if not hasattr(jax, "device_put_replicated"):
     # brax 0.14.2 still calls this; jax >= 0.10 removed it. Same result for our single-host use.
@@ -63,7 +58,7 @@ def summarize(metrics) -> dict:
 
 
 def main():
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.brax_reference", description=__doc__.split("\n\n")[0])
     parser.add_argument("--preset", default="ur5e-reach-ppo")
     parser.add_argument("--evals", type=int, default=8, help="evaluations after the initial one")
     parser.add_argument("--updates-per-eval", type=int, default=16, help="PPO updates between evaluations")
@@ -72,7 +67,7 @@ def main():
     parser.add_argument("--out", default="results/brax_reference")
     args = parser.parse_args()
 
-    config = train_cli.make_config(args.preset, eval_envs=args.eval_envs, progress=False, tensorboard=False)
+    config = presets.make_config(args.preset, eval_envs=args.eval_envs, progress=False, tensorboard=False)
     algo = config.algo
     spu = algo.env_steps_per_update
     total = args.evals * args.updates_per_eval * spu
@@ -80,8 +75,9 @@ def main():
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     device = jax.devices()[0]
+    command = " ".join(["python", "-m", "benchmarks.brax_reference"] + sys.argv[1:])
     report = {"meta": {"device": device.device_kind, "jax": jax.__version__, "date": datetime.date.today().isoformat(),
-                       "command": " ".join(["python"] + sys.argv), "preset": args.preset, "env_name": config.env_name,
+                       "command": command, "preset": args.preset, "env_name": config.env_name,
                        "num_timesteps": total, "eval_envs": args.eval_envs},
               "ours": {"evals": []}, "brax": {"evals": []}}
 
@@ -158,7 +154,7 @@ def main():
         report["speedup"] = ours / brax
     save()
     lines = [f"# Brax PPO vs ours on {config.env_name} ({report['meta']['device']}, {report['meta']['date']})", "",
-             f"Command: `{report['meta']['command']}`; jax {jax.__version__}; paper hyperparameters; both evaluated by "
+             f"Command: `{report['meta']['command']}`; jax {jax.__version__}; the preset's hyperparameters; both evaluated by "
              f"`agents.loop.make_evaluate` on the same {args.eval_envs} fresh episodes (deterministic policy).", "",
              f"Training env steps/s: ours {ours or float('nan'):,.0f}, Brax {brax or float('nan'):,.0f}"
              + (f", ratio {report['speedup']:.2f}x" if "speedup" in report else "") + ".", "",

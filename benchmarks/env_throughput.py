@@ -1,7 +1,7 @@
 """Environment throughput: env steps/s with random actions and auto-resets, next to the MJX
 physics ceiling of the same robot model measured in the same run.
 
-    python benchmarks/env_throughput.py --out results/env_throughput   # on the GPU machine
+    python -m benchmarks.env_throughput --out results/env_throughput   # on the GPU machine
 
 For each environment and batch size, one jitted `lax.scan` runs `--steps` environment steps of
 the fully wrapped environment (episode limit, fresh auto-reset, vmap) with uniform random
@@ -23,17 +23,15 @@ import sys
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+import agents  # noqa: F401  (first: the project's XLA settings, agents/xla_flags.py, as in training)
+import jax
+import jax.numpy as jnp
+import mujoco
+from mujoco import mjx
 
-import agents  # noqa: E402,F401  (first: the project's XLA settings, agents/xla_flags.py, as in training)
-import jax  # noqa: E402
-import jax.numpy as jnp  # noqa: E402
-import mujoco  # noqa: E402
-from mujoco import mjx  # noqa: E402
-
-import envs  # noqa: E402
-from envs.fast_mjx import fast_mjx  # noqa: E402
-from envs.robots import ROBOTS  # noqa: E402
+import envs
+from envs.fast_mjx import fast_mjx
+from envs.robots import ROBOTS
 
 
 def time_calls(fn, args, repeats):
@@ -109,7 +107,7 @@ def ceiling_rate(robot_name, num_envs, steps, repeats, substeps, fast=None):
 
 
 def main():
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.env_throughput", description=__doc__.split("\n\n")[0])
     parser.add_argument("--envs", nargs="+", default=["ur5e-reach", "ur5e-reach-avoid", "panda-reach", "panda-reach-avoid"])
     parser.add_argument("--sizes", nargs="+", type=int, default=[1024, 8192, 32768])
     parser.add_argument("--steps", type=int, default=100, help="env steps per timed call")
@@ -126,7 +124,8 @@ def main():
     meta = {
         "device": device.device_kind, "platform": device.platform, "num_devices": jax.device_count(),
         "jax": jax.__version__, "mujoco": mujoco.__version__, "python": platform.python_version(),
-        "date": datetime.date.today().isoformat(), "command": " ".join(["python"] + sys.argv),
+        "date": datetime.date.today().isoformat(),
+        "command": " ".join(["python", "-m", "benchmarks.env_throughput"] + sys.argv[1:]),
         "substeps": args.substeps, "steps_per_call": args.steps, "repeats": args.repeats,
     }
     out = Path(args.out)

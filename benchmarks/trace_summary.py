@@ -1,7 +1,7 @@
 """Where the GPU time of a profiled program goes: a text summary of a JAX profiler trace.
 
-    python benchmarks/train_throughput.py --trace traces/      # writes traces/<setting>/...
-    python benchmarks/trace_summary.py traces/1dev             # summary of that trace
+    python -m benchmarks.train_throughput --trace traces/      # writes traces/<setting>/...
+    python -m benchmarks.trace_summary traces/1dev             # summary of that trace
 
 Reads the `perfetto_trace.json.gz` that `jax.profiler.trace(..., create_perfetto_trace=True)`
 writes (the newest one under the given directory). For each device it reports the traced span,
@@ -183,7 +183,7 @@ def format_summary(summary: dict, host: list[dict] | None = None) -> str:
 
 
 def main():
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.trace_summary", description=__doc__.split("\n\n")[0])
     parser.add_argument("trace", help="trace directory (or perfetto_trace.json.gz file)")
     parser.add_argument("--scopes", nargs="+", default=list(DEFAULT_SCOPES), help="scope names, most specific first")
     parser.add_argument("--top", type=int, default=15, help="kernel families listed per device")

@@ -1,19 +1,19 @@
 """Training throughput: env steps/s of our PPO (or SAC) at the paper's setup, next to the env-only rate
 of the same environment in the same run, and on 1..N local GPUs at the same per-GPU batch.
 
-    python benchmarks/train_throughput.py --out results/train_throughput            # one GPU
-    python benchmarks/train_throughput.py --devices 1 2 --out results/multi_gpu     # scaling
-    python benchmarks/train_throughput.py --devices 2 --multi-device gspmd shard_map --skip-env-only
-    python benchmarks/train_throughput.py --trace traces/  # + profile: benchmarks/trace_summary.py traces/1dev
+    python -m benchmarks.train_throughput --out results/train_throughput            # one GPU
+    python -m benchmarks.train_throughput --devices 1 2 --out results/multi_gpu     # scaling
+    python -m benchmarks.train_throughput --devices 2 --multi-device gspmd shard_map --skip-env-only
+    python -m benchmarks.train_throughput --trace traces/  # + profile: python -m benchmarks.trace_summary traces/1dev
 
-Training rate: the compiled chunk of `--updates` PPO updates (rollouts, GAE, 5 epochs x 64
-minibatches of gradient steps), timed after a one-update warm-up that compiles it; env steps per
+Training rate: the compiled chunk of `--updates` PPO updates (rollouts, GAE, the preset's epochs of
+minibatch gradient steps), timed after a one-update warm-up that compiles it; env steps per
 second = updates x env steps per update x seeds / seconds. Env-only rate: the preset's own env
 config (same substeps, action scale, reward terms), wrapped as in training (episode limit, fresh
 auto-reset, vmap) and stepped with uniform random actions (`benchmarks/env_throughput.py`), same
 number of envs. Everything is compiled first; then `--rounds` rounds each time the env alone
 (median of three calls) and every setting once, so that a drift of the GPU's speed during the
-process (a few per cent were seen) falls on both sides of each round's ratio. Reported: per-round
+process (results: throughput study) falls on both sides of each round's ratio. Reported: per-round
 figures, their medians, and the fraction of env-only = the median of the rounds' ratios. With
 several device counts, each run keeps the per-device `num_envs` and `batch_size` of the preset, so
 the global batch grows with the devices (weak scaling).
@@ -30,17 +30,12 @@ import sys
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / "benchmarks"))
+import jax
+import jax.numpy as jnp
 
-import jax  # noqa: E402
-import jax.numpy as jnp  # noqa: E402
-
-import train as train_cli  # noqa: E402
-from agents import config as config_lib, driver  # noqa: E402
-from agents.loop import MULTI_DEVICE_MODES  # noqa: E402
-from env_throughput import env_rollout, time_calls  # noqa: E402
+from agents import config as config_lib, driver, presets
+from agents.loop import MULTI_DEVICE_MODES
+from benchmarks.env_throughput import env_rollout, time_calls
 
 
 class Training:
@@ -76,7 +71,7 @@ class Training:
 
 
 def main():
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.train_throughput", description=__doc__.split("\n\n")[0])
     parser.add_argument("--preset", default="ur5e-reach-ppo")
     parser.add_argument("--updates", type=int, default=10, help="timed updates per measurement")
     parser.add_argument("--rounds", type=int, default=3, help="rounds of (env only, every setting) timings")
@@ -92,7 +87,7 @@ def main():
     if args.updates < 1 or args.rounds < 1 or args.env_steps < 1:
         parser.error(f"--updates, --rounds and --env-steps must be >= 1, got {args.updates}, {args.rounds}, {args.env_steps}")
 
-    base = train_cli.make_config(args.preset, seeds=args.seeds, eval_envs=0, progress=False, tensorboard=False)
+    base = presets.make_config(args.preset, seeds=args.seeds, eval_envs=0, progress=False, tensorboard=False)
     # Several devices: each --multi-device mode; one device: no mode (None runs the default program).
     settings = {}
     for devices in args.devices:
@@ -146,7 +141,8 @@ def main():
 
     device = jax.devices()[0]
     meta = {"device": device.device_kind, "local_devices": jax.local_device_count(), "jax": jax.__version__,
-            "date": datetime.date.today().isoformat(), "command": " ".join(["python"] + sys.argv),
+            "date": datetime.date.today().isoformat(),
+            "command": " ".join(["python", "-m", "benchmarks.train_throughput"] + sys.argv[1:]),
             "preset": args.preset, "updates": args.updates, "rounds": args.rounds, "env_steps": args.env_steps,
             "algo": dataclasses.asdict(base.algo), "env_name": base.env_name, "env": dataclasses.asdict(base.env),
             "matmul_precision": base.matmul_precision}

@@ -33,7 +33,7 @@ def _arm_spec(robot: str, task: str) -> EnvSpec:
     def build(config):
         return env_cls(ROBOTS[robot](gravity_compensation=config.gravity_compensation), config)
 
-    return EnvSpec(config_cls, build, f"{ROBOTS[robot].__name__} {task}")
+    return EnvSpec(config_cls, build, f"{ROBOTS[robot].__name__} {task}", robot=robot)
 
 
 for _robot in ROBOTS:

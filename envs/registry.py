@@ -23,6 +23,9 @@ class EnvSpec:
     """Builds the environment from a validated config."""
     description: str
     """One line shown by `envs.names()` users and error messages."""
+    robot: str | None = None
+    """The arm's name (a key of `envs.robots.ROBOTS`), None for envs without one (the point mass):
+    a policy moves only the robot it was trained on, and only arms can be rendered."""
 
 
 _REGISTRY: dict[str, EnvSpec] = {}
@@ -50,9 +53,17 @@ def default_config(name: str):
     return spec(name).default_config()
 
 
-def make_config(name: str, **options):
-    """The default config of `name` with `options` replacing fields; validated."""
+def make_config(name: str, base=None, /, **options):
+    """The config of `name`: `base` (default: the env's defaults) with `options` replacing fields;
+    validated. A `base` of another config class (a reach checkpoint's config for a reach-avoid env)
+    gives the fields both classes have, the rest from `name`'s defaults."""
     config = default_config(name)
+    if base is not None and type(base) is type(config):
+        config = base
+    elif base is not None:
+        names = {f.name for f in dataclasses.fields(config)}
+        config = dataclasses.replace(config, **{f.name: getattr(base, f.name) for f in dataclasses.fields(base)
+                                                if f.name in names})
     fields = {f.name for f in dataclasses.fields(config)}
     unknown = sorted(set(options) - fields)
     if unknown:

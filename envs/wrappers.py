@@ -124,6 +124,16 @@ class AutoResetWrapper(Wrapper):
         )
 
 
+class NoAutoResetWrapper(AutoResetWrapper):
+    """AutoResetWrapper's reset (for one key the same initial states and `info` keys as the training
+    stack) without its auto-reset: an env whose episode ended keeps stepping its terminal state.
+    For evaluation, which counts each env's first episode only: no fresh episode is sampled every
+    step, and recorded poses end where the episode did."""
+
+    def step(self, state: State, action: jax.Array) -> State:
+        return self.env.step(state, action)
+
+
 class VmapWrapper(Wrapper):
     """Batches an environment with `jax.vmap`.
 
@@ -144,14 +154,16 @@ class VmapWrapper(Wrapper):
         return jax.vmap(self.env.step)(state, action)
 
 
-def wrap(env: Env, episode_length: int | None = None, batch_size: int | None = None) -> Env:
+def wrap(env: Env, episode_length: int | None = None, batch_size: int | None = None, autoreset: bool = True) -> Env:
     """The standard training stack: episode limit, fresh auto-reset, then vmap.
 
-    `episode_length` defaults to the environment's `config.episode_length`.
+    `episode_length` defaults to the environment's `config.episode_length`. `autoreset=False`: the
+    same stack and initial states, each env staying in its first episode (`NoAutoResetWrapper`).
     """
     if episode_length is None:
         config = getattr(env.unwrapped, "config", None)
         if config is None or not hasattr(config, "episode_length"):
             raise ValueError("episode_length=None needs an environment with config.episode_length; pass it explicitly.")
         episode_length = config.episode_length
-    return VmapWrapper(AutoResetWrapper(EpisodeWrapper(env, episode_length)), batch_size=batch_size)
+    reset = AutoResetWrapper if autoreset else NoAutoResetWrapper
+    return VmapWrapper(reset(EpisodeWrapper(env, episode_length)), batch_size=batch_size)

@@ -7,6 +7,7 @@ evaluation is shared: module-scoped fixtures, and eval.py subprocesses run the s
 in-process tests with the persistent compilation cache (`.jax_cache/`, see conftest.py) switched on.
 """
 
+import dataclasses
 import json
 import os
 import shutil
@@ -20,7 +21,6 @@ import pytest
 
 import envs
 import eval as eval_cli
-import train as train_cli
 from agents import baselines, driver, evaluation, export, presets, registry
 from agents.config import config_json
 from agents.loop import episode_metrics
@@ -170,7 +170,7 @@ def test_checkpoint_without_export_gets_one_from_the_full_state(point_run, tmp_p
 
 
 def test_export_of_one_seed_acts_as_that_seed_of_the_run(point_run, tmp_path):
-    from benchmarks import ship_checkpoint
+    from tools import ship_checkpoint
 
     full = evaluation.checkpoint_policy(str(point_run))
     r_full = evaluation.run(full, "point-mass", full.train_env_config, num_envs=32)
@@ -339,7 +339,7 @@ def arm_export(tmp_path_factory):
 def test_checkpoint_evaluated_on_another_workspace(arm_export):
     policy = evaluation.checkpoint_policy(str(arm_export))
     assert policy.train_env_config.workspace == "full"
-    config = evaluation.env_config_for("ur5e-reach", policy.train_env_config, workspace="front")
+    config = envs.make_config("ur5e-reach", policy.train_env_config, workspace="front")
     assert config.substeps == 2 and config.episode_length == 20  # the checkpoint's, not the defaults
     result = evaluation.run(policy, "ur5e-reach", config, num_envs=4)
     report = result.to_json()
@@ -353,7 +353,7 @@ def test_checkpoint_evaluated_on_another_workspace(arm_export):
 @pytest.fixture(scope="module")
 def arm_rollout(arm_export):
     policy = evaluation.checkpoint_policy(str(arm_export))
-    config = evaluation.env_config_for("ur5e-reach", policy.train_env_config, workspace="front")
+    config = envs.make_config("ur5e-reach", policy.train_env_config, workspace="front")
     return policy, config, evaluation.rollout(policy, "ur5e-reach", config, num_envs=4)
 
 
@@ -369,8 +369,31 @@ def test_rollout_shows_the_evaluated_episodes(arm_rollout):
         np.testing.assert_allclose(records["metrics"][key], result.per_env[name][0], rtol=1e-5, atol=1e-6)
 
 
+def test_env_without_autoreset_stays_in_its_first_episode():
+    """`envs.wrap(env, autoreset=False)`, the evaluation's env: for one key the initial states of the
+    training stack, and no fresh episode once the first ends (point mass, 3-step episodes, standing still)."""
+    env = envs.make("point-mass", episode_length=3)
+    keys = jax.random.split(jax.random.PRNGKey(0), 4)
+    once, auto = envs.wrap(env, autoreset=False), envs.wrap(env)
+    first, fresh = once.reset(keys), auto.reset(keys)
+    np.testing.assert_array_equal(first.obs, fresh.obs)
+    still = jnp.zeros((4, env.action_size))
+    for _ in range(4):
+        first, fresh = once.step(first, still), auto.step(fresh, still)
+    np.testing.assert_array_equal(first.info["steps"], 4)  # still the first episode, ended at step 3
+    np.testing.assert_array_equal(first.done, 1)
+    np.testing.assert_array_equal(fresh.info["steps"], 1)  # the next episode's first step
+
+
+def test_registry_names_each_envs_robot():
+    """What eval.py asks to refuse a checkpoint on another robot and a video of an env without one."""
+    robots = {name: envs.registry.spec(name).robot for name in envs.names()}
+    assert robots == {"panda-reach": "panda", "panda-reach-avoid": "panda", "point-mass": None, "ur5e-reach": "ur5e",
+                      "ur5e-reach-avoid": "ur5e"}
+
+
 def test_rendered_frames_show_robot_and_target(arm_rollout):
-    from benchmarks import render
+    from envs import render
 
     policy, config, records = arm_rollout
     env = envs.make("ur5e-reach", **{**ARM_ENV, "workspace": "front"})
@@ -416,8 +439,8 @@ def no_compile(monkeypatch):
     original = evaluation._evaluator.__wrapped__
 
     def building_only(*args):
-        env, _ = original(*args)
-        return env, lambda *a, **k: pytest.fail("evaluated despite bad input")
+        program = original(*args)
+        return dataclasses.replace(program, evaluate=lambda *a, **k: pytest.fail("evaluated despite bad input"))
 
     monkeypatch.setattr(evaluation, "_evaluator", building_only)
 
@@ -493,6 +516,18 @@ def test_bad_input_is_refused_with_a_clear_message(make, message, arm_export, po
     assert "\n" not in str(info.value)
 
 
+def test_help_lists_the_env_options_once_the_env_is_known(arm_export, capsys):
+    """`eval.py --help`: eval.py's options; with a checkpoint (or --env): also its env's --env.<field>."""
+    for args, env_option in ((["--help"], None), (["--checkpoint", str(arm_export), "--help"], "--env.workspace"),
+                             (["--env", "point-mass", "-h"], "--env.episode-length")):
+        with pytest.raises(SystemExit) as info:
+            eval_cli.main(args)
+        out = capsys.readouterr().out
+        assert info.value.code == 0 and "--num-envs" in out and "--checkpoint" in out
+        assert ("--env.episode-length" in out) == (env_option is not None)
+        assert env_option is None or env_option in out
+
+
 def test_bad_option_values_exit_2():
     with pytest.raises(SystemExit) as info:  # tyro: not a workspace
         eval_cli.main(["--env", "ur5e-reach", "--policy", "random", "--env.workspace", "everywhere"])
@@ -511,13 +546,14 @@ def test_cli_error_is_one_line_with_exit_code_2(tmp_path):
 
 
 def test_training_curves_from_train_logs(point_run, tmp_path):
-    from benchmarks import plots
+    from tools import plots
 
     steps, mean, std, seeds = plots.curve([str(point_run)], "episode/target_reached")
     rows = plots.read_metrics(str(point_run))
     assert seeds == 2 and list(steps) == [5120, 10240]
     at_end = rows["episode/target_reached"][rows["env_steps"] == 10240]
-    np.testing.assert_allclose(mean[-1], at_end.mean()) and np.testing.assert_allclose(std[-1], at_end.std())
+    np.testing.assert_allclose(mean[-1], at_end.mean())
+    np.testing.assert_allclose(std[-1], at_end.std())
     out = tmp_path / "curves.png"
     fig = plots.training_curves({"ppo": str(point_run)}, out=str(out))
     assert out.stat().st_size > 10_000 and len(fig.axes) == 2  # target reached and return (point mass has no collisions)
@@ -526,7 +562,7 @@ def test_training_curves_from_train_logs(point_run, tmp_path):
 
 
 def test_paper_tables_from_given_checkpoints_and_skips_the_rest(point_run, tmp_path, capsys):
-    from benchmarks import paper_tables
+    from tools import paper_tables
 
     written = paper_tables.main(["--tables", "action", "workspace", "obstacle", "--out", str(tmp_path),
                                  "--num-envs", "16", "--action", f"relative={point_run}"])
@@ -546,11 +582,11 @@ def test_paper_tables_from_given_checkpoints_and_skips_the_rest(point_run, tmp_p
 def test_paper_tables_evaluate_each_pair_on_the_right_env_config(arm_export, tmp_path, monkeypatch):
     """The workspace and obstacle cross-evaluations: which env config each (trained, evaluated) row
     gets (evaluation itself replaced by a recorder)."""
-    from benchmarks import paper_tables
+    from tools import paper_tables
 
     calls = []
 
-    def record(policy, env_name, config, num_envs, eval_seeds, last_steps=10):
+    def record(policy, env_name, config, num_envs, eval_seeds, last_steps=10, progress=None):
         calls.append((policy.name, env_name, config))
         per_env = {k: np.zeros((1, 2)) for k in ("target_reached", "self_collision", "obstacle_collision", "distance")}
         return evaluation.Result(policy, env_name, config, 2, list(eval_seeds), 10, [{"metrics": {}}], per_env, 0.0)
@@ -608,11 +644,11 @@ def test_sac_export_acts_as_the_learner(tmp_path):
 
 
 # ------------------------------------------------------------------------------------------------
-# benchmarks/failure_report.py: episode outcomes from recorded poses (CPU MuJoCo as the reference)
+# tools/failure_report.py: episode outcomes from recorded poses (CPU MuJoCo as the reference)
 
 
 def test_failure_report_names_the_colliding_pair_and_bins_the_misses(monkeypatch):
-    from benchmarks import failure_report
+    from tools import failure_report
 
     monkeypatch.setattr(failure_report, "END_STEPS", 2)  # end_motion from 2 steps before each episode's end
 
@@ -671,7 +707,7 @@ def test_failure_report_tells_when_the_obstacle_is_in_the_way():
     target in env 1 (which misses) and beside it in env 0 (which reaches)."""
     import mujoco
 
-    from benchmarks import failure_report
+    from tools import failure_report
 
     robot = envs.make("ur5e-reach-avoid").robot
     free = np.zeros(robot.nq, np.float32)
@@ -713,7 +749,7 @@ def test_failure_report_tells_when_the_obstacle_is_in_the_way():
 
 def test_failure_report_bins_outcomes_by_target_height():
     """Hand-sorted: heights on a bin edge go to the bin above it; empty bins are left out."""
-    from benchmarks import failure_report
+    from tools import failure_report
 
     heights = [-0.05, 0.02, 0.05, 0.1, 0.25, 0.6, 0.7]
     outcomes = ["missed", "missed", "reached", "reached", "self collision", "reached", "reached"]

@@ -291,10 +291,9 @@ def test_resume_without_checkpoint_is_refused(tmp_path):
 
 
 TWO_DEVICES = textwrap.dedent("""
-    import json, jax, numpy as np
+    import dataclasses, json, jax, numpy as np
     jax.config.update("jax_compilation_cache_dir", "{ROOT}/.jax_cache")
-    import train as T
-    from agents import driver
+    from agents import driver, presets as T
     assert jax.local_device_count() == 2
     out = {}
     for preset, steps in (("point-mass-ppo", 2 * 5120), ("point-mass-sac", 40 * 16)):

@@ -1,6 +1,6 @@
 """The checkpoints shipped under results/checkpoints/ load on a CPU and do what results/README.md says;
 the headline tables there and in README.md quote the eval.py JSON files, and the cross-evaluation
-tables in results/README.md quote benchmarks/paper_tables.py's JSON files.
+tables in results/README.md quote tools/paper_tables.py's JSON files.
 
 Every shipped export loads, fits its env and is the checkpoint that its results/*_eval.json
 evaluated (the best seed, for single-seed exports).
@@ -20,9 +20,8 @@ import jax
 import pytest
 
 import envs
-from agents import evaluation
-from benchmarks import paper_tables, ship_checkpoint
-import train as train_cli
+from agents import evaluation, presets
+from tools import paper_tables, ship_checkpoint
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 UR5E_REACH = os.path.join(ROOT, "results", "checkpoints", "ur5e-reach-ppo")
@@ -79,7 +78,7 @@ def test_shipped_checkpoint_loads_and_is_the_evaluated_run(name):
     policy = evaluation.checkpoint_policy(os.path.join(ROOT, "results", "checkpoints", name))
     # each export is named after the preset it was trained with
     assert TRAINED_AS.get(name, name) == policy.export.config.preset
-    preset = train_cli.PRESETS[name]
+    preset = presets.PRESETS[name]
     assert policy.train_env_name == preset.env_name and policy.export.config.algo == preset.algo
     assert all(getattr(policy.train_env_config, k) == v for k, v in preset.env.items())
     env = envs.from_config(policy.train_env_name, policy.train_env_config)

@@ -1,13 +1,9 @@
-"""benchmarks/trace_summary.py on a hand-made trace whose totals are known."""
+"""benchmarks.trace_summary on a hand-made trace whose totals are known."""
 
 import gzip
 import json
-import sys
-from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-
-import trace_summary as ts  # noqa: E402
+from benchmarks import trace_summary as ts
 
 HLO = """
 HloModule jit_chunk

@@ -1,10 +1,10 @@
 """The paper's tables, regenerated: markdown (and JSON with every number) under results/.
 
     # Baselines (no checkpoints needed), both robots, 1 and 2 cm targets, absolute and relative control:
-    python benchmarks/paper_tables.py --tables baselines --num-envs 4096 --seeds 5
+    python -m tools.paper_tables --tables baselines --num-envs 4096 --seeds 5
     # Tables from trained runs (train.py logdirs, checkpoint step dirs or policy exports; several
     # comma-separated paths per role are pooled, e.g. one run per seed):
-    python benchmarks/paper_tables.py --tables action workspace obstacle \\
+    python -m tools.paper_tables --tables action workspace obstacle \\
         --action relative=runs/rel absolute=runs/abs \\
         --workspace pandagym=runs/wp front=runs/wf upper=runs/wu full=runs/wl full-range=runs/wr \\
         --obstacle 0.025=runs/o1 0.05=runs/o2 0.1=runs/o3 0.2=runs/o4 0.3=runs/o5 reach=runs/reach
@@ -12,7 +12,7 @@
 Tables (paper section in brackets):
 - `baselines` ["Baselines", Table "reaching baselines"]: random, standstill, pseudo-IK on `<robot>-reach`
   (full workspace), target radius 0.01 and 0.02 m, in both action modes (the paper does not say
-  which mode its baselines used; the numbers show it: see eval.py's docstring). Rates are means
+  which mode its baselines used; absolute control's match its numbers: results, baselines study). Rates are means
   over evaluation seeds (± std over seeds); the distance is mean ± std over all episodes, as in
   the paper's table.
 - `action` ["Action space", precision table]: distance, steps in target, times left target of a
@@ -40,11 +40,10 @@ import os
 import shlex
 import sys
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-if ROOT not in sys.path:
-    sys.path.insert(0, ROOT)
+import envs
+from agents import evaluation
 
-from agents import evaluation  # noqa: E402
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 TABLES = ("baselines", "action", "workspace", "obstacle")
 WORKSPACE_ROLES = ("pandagym", "front", "upper", "full", "full-range")
@@ -135,6 +134,10 @@ def _progress(text: str) -> None:
     print(text, file=sys.stderr, flush=True)
 
 
+def _indented(text: str) -> None:
+    _progress("  " + text)
+
+
 # ------------------------------------------------------------------------------------------------
 
 
@@ -142,7 +145,7 @@ def baselines_table(args, command: str) -> str:
     w = Writer(args.out, args.name or "baselines", "Baselines on the reach task (paper, Table \"reaching baselines\")", command,
                "Full workspace, reachable targets, 125-step episodes, the env defaults otherwise. Rates: mean over "
                "evaluation seeds (± std over seeds when several); distance: mean ± std over all episodes (the paper's "
-               "format); every baseline in both action modes (see eval.py's docstring for what each means). "
+               "format); every baseline in both action modes (`agents/baselines.py` says what each means). "
                "\"distance, collided = 0\" counts episodes that ended in a collision as 0 m (what an evaluator that "
                "sums the last steps' distances over active steps reports; it matches the paper's pseudo-IK distance).")
     provenance = []
@@ -153,11 +156,11 @@ def baselines_table(args, command: str) -> str:
         rows = []
         for radius in args.radii:
             for action in args.actions:
-                config = evaluation.env_config_for(f"{robot}-reach", None, target_radius=radius, action=action,
-                                                   **args.env_overrides)
+                config = envs.make_config(f"{robot}-reach", target_radius=radius, action=action, **args.env_overrides)
                 for name in ("random", "standstill", "pseudo_ik"):
                     _progress(f"baselines: {robot} {name} {action} target {radius} ({seeds} x {num_envs} envs)")
-                    r = evaluation.run(evaluation.baseline_policy(name), f"{robot}-reach", config, num_envs, eval_seeds)
+                    r = evaluation.run(evaluation.baseline_policy(name), f"{robot}-reach", config, num_envs, eval_seeds,
+                                       progress=_indented)
                     s = r.summary()
                     rows.append([{"random": "Random", "standstill": "Standstill", "pseudo_ik": "Pseudo IK"}[name], action,
                                  f"{radius:.2f} m", evaluation.fmt(s.get("target_reached"), 3),
@@ -207,9 +210,9 @@ def _evaluate_role(args, paths, setting):
     for path in paths:
         policy = evaluation.checkpoint_policy(path)
         env_name, overrides = setting(policy)
-        config = evaluation.env_config_for(env_name, policy.train_env_config, **{**overrides, **args.env_overrides})
+        config = envs.make_config(env_name, policy.train_env_config, **{**overrides, **args.env_overrides})
         _progress(f"evaluating {path} on {env_name} {overrides or ''} ({len(policy.units)} x {args.num_envs} envs)")
-        results.append(evaluation.run(policy, env_name, config, args.num_envs, eval_seeds))
+        results.append(evaluation.run(policy, env_name, config, args.num_envs, eval_seeds, progress=_indented))
     return results
 
 
@@ -265,10 +268,14 @@ def obstacle_table(args, command: str) -> str | None:
 
     def row(trained, size):
         def setting(policy):
-            env_name = evaluation.robot_of(policy.train_env_name) + "-reach-avoid"
+            robot = envs.registry.spec(policy.train_env_name).robot
+            if robot is None:
+                raise ValueError(f"--obstacle {trained}={policy.name} is invalid: it was trained on {policy.train_env_name!r}, "
+                                 "which has no robot; allowed are arm checkpoints (evaluated on their robot's reach-avoid env).")
+            env_name = f"{robot}-reach-avoid"
             overrides = {"obstacle_radius": float(size)}
             if trained == "reach":
-                overrides["target_radius"] = target_radius or evaluation.envs.default_config(env_name).target_radius
+                overrides["target_radius"] = target_radius or envs.default_config(env_name).target_radius
             return env_name, overrides
 
         results = _evaluate_role(args, roles[trained], setting)
@@ -293,7 +300,7 @@ def obstacle_table(args, command: str) -> str | None:
 
 
 def parse(argv):
-    p = argparse.ArgumentParser(prog="benchmarks/paper_tables.py", description=__doc__.split("\n\n")[0],
+    p = argparse.ArgumentParser(prog="python -m tools.paper_tables", description=__doc__.split("\n\n")[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter, allow_abbrev=False)
     p.add_argument("--tables", nargs="+", choices=TABLES, default=list(TABLES), help="tables to make (default: all)")
     p.add_argument("--out", default=os.path.join(ROOT, "results"), help="output directory (default results/)")
@@ -333,7 +340,7 @@ def parse(argv):
 def main(argv=None) -> list[str]:
     argv = list(sys.argv[1:] if argv is None else argv)
     args = parse(argv)
-    command = "python benchmarks/paper_tables.py " + " ".join(shlex.quote(a) for a in argv)
+    command = "python -m tools.paper_tables " + " ".join(shlex.quote(a) for a in argv)
     makers = {"baselines": baselines_table, "action": action_table, "workspace": workspace_table,
               "obstacle": obstacle_table}
     written = []
@@ -345,6 +352,6 @@ def main(argv=None) -> list[str]:
 
 
 if __name__ == "__main__":
-    from benchmarks import run_cli
+    from tools import run_cli
 
     run_cli(main)

@@ -1,7 +1,7 @@
 """Why a policy fails: which links collide, when, from which start, and how far the misses end.
 
-    python benchmarks/failure_report.py --checkpoint results/checkpoints/ur5e-reach-ppo --num-envs 256
-    python benchmarks/failure_report.py --checkpoint RUN --env ur5e-reach-avoid --unit 2 --json report.json
+    python -m tools.failure_report --checkpoint results/checkpoints/ur5e-reach-ppo --num-envs 256
+    python -m tools.failure_report --checkpoint RUN --env ur5e-reach-avoid --unit 2 --json report.json
 
 Runs one episode per env with the deterministic policy of one trained seed (`--unit`, an index into
 the checkpoint's seeds) through `agents.evaluation.rollout` and sorts every episode into one outcome:
@@ -29,10 +29,6 @@ import os
 import sys
 
 import numpy as np
-
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-if ROOT not in sys.path:
-    sys.path.insert(0, ROOT)
 
 MISS_BINS = (0.02, 0.05, 0.10)
 """Upper edges (m) of the final-distance bins of missed episodes; the last bin is open."""
@@ -242,9 +238,10 @@ def markdown(summary: dict, title: str) -> str:
 
 
 def main(argv: list[str] | None = None) -> dict:
+    import envs
     from agents import evaluation
 
-    p = argparse.ArgumentParser(prog="benchmarks/failure_report.py", description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(prog="python -m tools.failure_report", description=__doc__.splitlines()[0])
     p.add_argument("--checkpoint", required=True, help="train.py logdir, checkpoint step directory or policy export")
     p.add_argument("--env", help="registered env name (default: the checkpoint's)")
     p.add_argument("--num-envs", type=int, default=256)
@@ -259,21 +256,19 @@ def main(argv: list[str] | None = None) -> dict:
     if args.num_envs < 1:
         raise ValueError(f"--num-envs {args.num_envs} is invalid: allowed is an integer >= 1.")
     env_name = args.env or policy.train_env_name
-    config = evaluation.env_config_for(env_name, policy.train_env_config)
+    config = envs.make_config(env_name, policy.train_env_config)
     records = evaluation.rollout(policy, env_name, config, num_envs=args.num_envs, eval_seed=args.seed, unit=args.unit)
-    import envs
-
     rows = classify(envs.from_config(env_name, config).robot, records, getattr(config, "obstacle_radius", None))
     summary = summarize(rows, getattr(config, "joint_limit_margin", NEAR_LIMIT))
     print(markdown(summary, f"{args.checkpoint} (seed {policy.units[args.unit]}) on {env_name}, eval seed {args.seed}"))
     if args.json:
         with open(args.json, "w") as f:
-            json.dump({"command": " ".join(["python", "benchmarks/failure_report.py"] + (argv or sys.argv[1:])),
+            json.dump({"command": " ".join(["python", "-m", "tools.failure_report"] + (argv or sys.argv[1:])),
                        "device": evaluation.device_description(), "summary": summary, "episodes": rows}, f, indent=1)
     return summary
 
 
 if __name__ == "__main__":
-    from benchmarks import run_cli
+    from tools import run_cli
 
     run_cli(main)

@@ -1,9 +1,9 @@
 """Copy a trained policy into `results/checkpoints/`: its policy export (`agents.export`), keeping only
 the chosen trained seeds, so the repository carries a few hundred kB per row instead of a checkpoint.
 
-    python benchmarks/ship_checkpoint.py .ckpt/panda-reach-ppo results/checkpoints/panda-reach-ppo \\
+    python -m tools.ship_checkpoint .ckpt/panda-reach-ppo results/checkpoints/panda-reach-ppo \\
         --best-from results/panda_reach_ppo_eval.json     # the seed with the highest target-reached rate
-    python benchmarks/ship_checkpoint.py RUN DST --seeds 0 3                 # or name the seeds
+    python -m tools.ship_checkpoint RUN DST --seeds 0 3                 # or name the seeds
 
 SRC is a train.py logdir (its newest checkpoint), a checkpoint step directory or an export; a
 checkpoint without an export gets one written first. `--best-from` reads an `eval.py --json` file
@@ -16,13 +16,8 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import sys
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-if ROOT not in sys.path:
-    sys.path.insert(0, ROOT)
-
-from agents import evaluation, export  # noqa: E402
+from agents import evaluation, export
 
 
 def best_seed(eval_json: str, env_steps: int) -> int:
@@ -54,7 +49,7 @@ def ship(src: str, dst: str, seeds: list[int] | None = None, best_from: str | No
 
 
 def main(argv: list[str] | None = None) -> str:
-    p = argparse.ArgumentParser(prog="benchmarks/ship_checkpoint.py", description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(prog="python -m tools.ship_checkpoint", description=__doc__.splitlines()[0])
     p.add_argument("src", help="train.py logdir (newest checkpoint), checkpoint step directory or policy export")
     p.add_argument("dst", help="directory to write the export to (e.g. results/checkpoints/<preset>)")
     p.add_argument("--seeds", type=int, nargs="+", help="trained seeds to keep (default: all)")
@@ -67,6 +62,6 @@ def main(argv: list[str] | None = None) -> str:
 
 
 if __name__ == "__main__":
-    from benchmarks import run_cli
+    from tools import run_cli
 
     run_cli(main)

@@ -1,6 +1,6 @@
 """Offscreen rendering of the arm environments with MuJoCo's renderer (CPU MuJoCo, no MJX).
 
-    from benchmarks import render
+    from envs import render
     env = envs.make("ur5e-reach-avoid")
     state = env.reset(jax.random.PRNGKey(0))
     image = render.render_state(env, state)                         # (H, W, 3) uint8
@@ -13,7 +13,8 @@ robot (obstacle radius and target size set from the env config, a backdrop added
 
 Headless OpenGL: MuJoCo picks its GL backend from MUJOCO_GL when `mujoco` is first imported (GLFW,
 which needs a display, if unset). Without a display and without MUJOCO_GL, `ensure_headless_gl`
-switches the renderer to OSMesa if libOSMesa is installed, else to EGL. On Debian/Ubuntu CPU
+switches the renderer to OSMesa if libOSMesa is installed, else to EGL (`envs` imports mujoco
+first, so this usually means handing the renderer a headless context class). On Debian/Ubuntu CPU
 machines: `apt-get install -y libosmesa6` (or `libegl1 libegl-mesa0 libgl1-mesa-dri` for EGL);
 GPU machines use the driver's EGL. Videos need the `viz` extra (imageio, imageio-ffmpeg).
 """

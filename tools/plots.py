@@ -2,17 +2,17 @@
 
 Functions for notebooks (each returns the matplotlib Figure, and writes a PNG if `out` is given):
 
-    from benchmarks import plots
+    from tools import plots
     plots.training_curves({"front": "runs/front", "full": ["runs/full_a", "runs/full_b"]}, out="curves.png")
     plots.initial_state({"ur5e-reach-avoid": {}}, seed=0, out="initial_state.png")
     plots.target_scatter("ur5e-reach", out="targets.png")
 
 Command line (the PNGs under results/figures/ were made with these, on a CPU):
 
-    python benchmarks/plots.py curves runs/front runs/full --labels front full --out results/figures/curves.png
-    python benchmarks/plots.py env --out results/figures
+    python -m tools.plots curves runs/front runs/full --labels front full --out results/figures/curves.png
+    python -m tools.plots env --out results/figures
 
-A rollout video is `python eval.py ... --video PATH` (benchmarks/render.py).
+A rollout video is `python eval.py ... --video PATH` (envs/render.py).
 """
 
 from __future__ import annotations
@@ -25,8 +25,6 @@ import sys
 import numpy as np
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-if ROOT not in sys.path:
-    sys.path.insert(0, ROOT)
 
 CURVE_METRICS = {  # the first four are drawn by default
     "episode/target_reached": "target reached",
@@ -124,11 +122,11 @@ def initial_state(setups: dict, seed: int = 0, out: str | None = None, width: in
                   workspace_alpha: float = 0.12):
     """Rendered initial states (robot, target in green, obstacle in red, the full workspace in
     translucent grey), one panel per env: {env name: env options}. The target is drawn enlarged
-    (`benchmarks.render.TARGET_MARKER_RADIUS`), as in the paper's figure."""
+    (`envs.render.TARGET_MARKER_RADIUS`), as in the paper's figure."""
     import jax
 
     import envs
-    from benchmarks import render
+    from envs import render
 
     plt = _pyplot()
     fig, axes = plt.subplots(1, len(setups), figsize=(width / 100 * len(setups), height / 100), squeeze=False)
@@ -191,7 +189,7 @@ def target_scatter(env_name: str = "ur5e-reach", workspaces=("pandagym", "front"
 
 
 def main(argv=None):
-    p = argparse.ArgumentParser(prog="benchmarks/plots.py", description="Training curves and environment figures.")
+    p = argparse.ArgumentParser(prog="python -m tools.plots", description="Training curves and environment figures.")
     sub = p.add_subparsers(dest="what", required=True)
     c = sub.add_parser("curves", help="training curves from train.py logdirs")
     c.add_argument("logdirs", nargs="+", help="train.py logdirs (one line each; join several with commas to pool them)")
@@ -219,6 +217,6 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
-    from benchmarks import run_cli
+    from tools import run_cli
 
     run_cli(main)

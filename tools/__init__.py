@@ -1,0 +1,15 @@
+"""User tools around trained policies: the paper's tables (`paper_tables`), why a policy fails
+(`failure_report`), shipping a policy export (`ship_checkpoint`) and figures (`plots`). Each runs
+as `python -m tools.<name> --help` from the repository root and imports as `from tools import <name>`."""
+
+import sys
+
+
+def run_cli(main) -> None:
+    """Runs a tool's `main()`; bad input (a ValueError naming the field and what is allowed) prints
+    `error: ...` and exits with status 2 instead of a traceback."""
+    try:
+        main()
+    except ValueError as error:
+        print(f"error: {error}", file=sys.stderr)
+        raise SystemExit(2)
