@@ -1,6 +1,6 @@
 """Brax's PPO and ours on the same environment with the same hyperparameters and budget, in one run.
 
-    python benchmarks/brax_reference.py --out results/brax_reference      # on the GPU machine
+    python benchmarks/brax_reference.py --out results/throughput/brax_reference      # on the GPU machine
 
 Both train on `ur5e-reach` (the paper's configuration) with the preset's PPO settings, which both
 learners get: 8,192 envs, batch 512, 64 minibatches, unroll 10, 5 updates per batch, lr 8e-4, entropy
@@ -69,7 +69,7 @@ def main():
     parser.add_argument("--updates-per-eval", type=int, default=16, help="PPO updates between evaluations")
     parser.add_argument("--eval-envs", type=int, default=4096)
     parser.add_argument("--skip", choices=["ours", "brax"], default=None)
-    parser.add_argument("--out", default="results/brax_reference")
+    parser.add_argument("--out", default="results/throughput/brax_reference")
     args = parser.parse_args()
 
     config = train_cli.make_config(args.preset, eval_envs=args.eval_envs, progress=False, tensorboard=False)
