@@ -35,7 +35,7 @@ and pseudo_ik command a joint configuration, which maps onto both action modes (
 action; relative: the clipped step towards it); random means something else in each mode.
 
 Against the paper's UR5e baseline table (full workspace, reach, 125 steps; see
-results/baselines.md for our numbers and their commands):
+results/baselines/baselines.md for our numbers and their commands):
 {FINDINGS}
 
 Video: `--video PATH` (.mp4 or .gif) renders the first `--video-envs` envs' first episodes (a grid)
@@ -80,7 +80,7 @@ FINDINGS = """\
   which the paper used, sums each per-step metric over an episode's active steps; an env that
   records the distance only over the last 10 of the 125 steps thus scores 0 for an episode that
   collided earlier (our reading; the paper's env code is not public). We report the distance over every episode's own last 10 steps (the
-  paper's definition) and give the collided-as-0 reading in results/baselines.md. For the random
+  paper's definition) and give the collided-as-0 reading in results/baselines/baselines.md. For the random
   agent that reading is 0.783 m, further from the paper's 0.929 m than ours: unexplained.
 - Standstill collides in 0.07 % of episodes: initial poses are rejected only if already in
   contact, and a pose within millimetres of contact sags under gravity (the servos' steady-state

@@ -43,7 +43,7 @@ PPO_PAPER_REACH_AVOID = dataclasses.replace(PPO_PAPER, policy_hidden_sizes=(256,
 # Not the paper's: discount 0.99 instead of 0.97 for the reach presets. With 0.97 (a ~33-step horizon in a 125-step
 # episode) UR5e reach policies pinned joints at their +-360 deg limits and missed (benchmarks/failure_report.py);
 # 0.99 raised UR5e reach from 86.3 % to 93.1 % and UR5e reach plus from 95.2 % to 98.4 % at 150M steps, Panda reach
-# from 98.8 % to 99.0 % at 65M, each with fewer self collisions (5 seeds each, results/README.md, "The discount").
+# from 98.8 % to 99.0 % at 65M, each with fewer self collisions (5 seeds each, results/discount/README.md).
 PPO_REACH = dataclasses.replace(PPO_PAPER, discount=0.99)
 # Panda reach-avoid takes the middle, 0.98: at 100M steps it reached 95.8 % with 0.4 % self and 2.5 % obstacle
 # collisions against 95.4 %, 0.5 % and 3.1 % with 0.97 (0.99: 94.6 %, 0.2 %, 1.7 %). On UR5e reach-avoid 0.99 failed
@@ -51,13 +51,13 @@ PPO_REACH = dataclasses.replace(PPO_PAPER, discount=0.99)
 PPO_PANDA_REACH_AVOID = dataclasses.replace(PPO_PAPER_REACH_AVOID, discount=0.98)
 # 128 envs, batch 256, lr 1e-4, reward scale 20, gamma 0.97, replay 102,400 ... 2,048,000. The paper does not state the
 # gradient steps per env step: Brax's default 1 learned little on UR5e reach (1.5 % at 8.2M steps), 8 reached 29.9 %
-# at 24.6M and 32 collapsed into self collisions (results/README.md, "SAC: gradient steps per env step").
+# at 24.6M and 32 collapsed into self collisions (results/sac/README.md).
 SAC_PAPER = SACConfig(grad_updates_per_step=8)
 
 _ABSOLUTE = dict(action="absolute", observation=("joint_pos", "ee_pos", "target_pos", "ee_to_target", "prev_action"))
 _UR5E_RELATIVE = dict(action_scale=0.3)
 # Not in the paper: a penalty near the joint range limits (envs.config.ReachConfig.w_joint_limit), where most misses of
-# the UR5e policies ended. At the rows' budgets, 5 seeds each (results/README.md, "The joint-limit penalty"): UR5e reach
+# the UR5e policies ended. At the rows' budgets, 5 seeds each (results/joint_limit/README.md): UR5e reach
 # 93.1 % -> 95.7 % with 0.05 (0.2: also 95.7 %); UR5e reach-avoid 71.1 % -> 73.6 % with 0.1, 81.4 % with 0.3, and
 # 84.8 % with 0.6 at 150.7M steps of its 192M schedule, 86.8 % with 1.0 at 192M, with fewer self collisions.
 _UR5E_REACH = dict(_UR5E_RELATIVE, w_joint_limit=0.05, joint_limit_margin=0.5)
@@ -83,7 +83,7 @@ PRESETS: dict[str, Preset] = {
                              run=dict(num_timesteps=40_000, eval_envs=256)),
     # The paper's experiments (its best configuration per task is each env's default config). The paper does
     # not state the relative action scale: on the UR5e, 0.3 rad per step beat the envs' default 0.2 at equal
-    # budgets on both tasks (5 seeds each, results/README.md), so the UR5e PPO presets use it.
+    # budgets on both tasks (5 seeds each, results/action_scale/README.md), so the UR5e PPO presets use it.
     "ur5e-reach-ppo": Preset("UR5e reach, full workspace, relative control (action scale 0.3), dense reward (paper) with a "
                              "joint-limit penalty of 0.05, discount 0.99", "ur5e-reach", PPO_REACH, env=_UR5E_REACH,
                              run=dict(num_timesteps=150_000_000)),

@@ -64,7 +64,7 @@ class TrainConfig(Generic[EnvConfigT, AlgoConfigT]):
     axes; XLA inserts the collectives) or shard_map (each device runs the chunk on its envs; the
     learners average gradients explicitly). Same results up to float rounding; ignored on one device.
     gspmd is the default because XLA's GPU compiler (jax 0.11.2) crashed on the shard_map program of
-    the MJX arms, while gspmd trained them 1.95x faster on 2 H200s than on one (results/README.md)."""
+    the MJX arms, while gspmd trained them 1.95x faster on 2 H200s than on one (results/archive/lab_notebook.md, "Multi-GPU")."""
     logdir: str = ""
     """Output directory ("" = runs/<preset>/<date-time>)."""
     resume: bool = False
@@ -131,7 +131,7 @@ def total_updates(config: TrainConfig) -> int:
 def learning_rate_note(config: TrainConfig, env_steps: int) -> str | None:
     """For a PPO run that ends before its decaying learning-rate schedule does: a line saying where the
     learning rate stands. A policy evaluated there has not had the schedule's low-rate end, which matters
-    for precise reaching (results/README.md, "The learning-rate schedule"). None for finished runs and
+    for precise reaching (results/lr_schedule/README.md). None for finished runs and
     schedules that do not decay."""
     algo = config.algo
     if not isinstance(algo, PPOConfig) or algo.lr_schedule == "constant":

@@ -334,7 +334,7 @@ def over_seeds(fn, num_seeds: int):
     """`fn(state, x)` applied to every seed of a seed-batched `state` (`x` shared): `jax.vmap` over
     the leading axis, or with one seed `fn` itself on the squeezed state. Same numbers up to float
     rounding; XLA compiles a size-1 batch axis into a different program, and one seed trained PPO
-    7 % faster without it on an H200 (results/README.md, "Training throughput")."""
+    7 % faster without it on an H200 (results/archive/lab_notebook.md, "Training throughput")."""
     if num_seeds > 1:
         return jax.vmap(fn, in_axes=(0, None))
     squeeze = lambda tree: jax.tree.map(lambda a: a[0], tree)

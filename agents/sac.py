@@ -54,13 +54,13 @@ class SACConfig:
     """Replay capacity in transitions (a multiple of num_envs); oldest are overwritten."""
     grad_updates_per_step: int = 1
     """Gradient steps per environment step of all envs (Brax's default 1; not stated in the paper; the train.py
-    SAC presets use 8, which learned far faster on the UR5e per env step and per second, results/README.md)."""
+    SAC presets use 8, which learned far faster on the UR5e per env step and per second, results/sac/README.md)."""
     init_alpha: float = 1.0
     """Initial temperature."""
     target_entropy: float | None = None
     """Entropy target of the temperature update; None means -action_size (Haarnoja et al.). Brax's SAC, which the
     paper trained with, uses -0.5 * action_size: on UR5e reach that learned more slowly at every step count we
-    evaluated (results/README.md, "SAC: the entropy target")."""
+    evaluated (results/sac/README.md)."""
     normalize_observations: bool = True
     """Normalise observations with running statistics (updated from every inserted step)."""
     obs_clip: float = 10.0

@@ -5,7 +5,7 @@ mode inside a graph (LHS) chains the kernels one after another in program order;
 mode gives the graph the program's real data dependencies, so independent kernels run side by side:
 the policy and the value network's forward and backward passes in PPO's gradient steps, the twin
 critics in SAC's, independent pieces of a physics substep. With it, `ur5e-reach-ppo` trained at
-about 890k instead of 668k env steps/s on an H200 (env only: 1.16M instead of 988k; results/README.md,
+about 890k instead of 668k env steps/s on an H200 (env only: 1.16M instead of 988k; results/archive/lab_notebook.md,
 "Training throughput"). The kernels and their numbers are the same; only their order changes (three PPO
 updates gave bitwise-equal parameters with and without it). A program may need more GPU memory with it.
 

@@ -50,7 +50,7 @@ class ReachConfig:
     positions; `absolute` maps [-1, 1] onto the joint range. Targets are clipped to the range."""
     action_scale: float = 0.2
     """Radians per step commanded by a relative action of magnitude 1 (ignored for absolute). The
-    paper does not state it; 0.2 trained the UR5e reach ~4x faster than 0.1 (results/README.md,
+    paper does not state it; 0.2 trained the UR5e reach ~4x faster than 0.1 (results/archive/lab_notebook.md,
     "What limits learning"), and the UR5e PPO presets in train.py use 0.3, better again on that arm.
     The joints' damping keeps them within their velocity limits either way."""
     observation: tuple[str, ...] = ("joint_pos", "ee_pos", "target_pos", "ee_to_target")
@@ -78,7 +78,7 @@ class ReachConfig:
     w_joint_limit * sum_i max(0, 1 - m_i / joint_limit_margin), m_i the joint's distance (rad) to the
     nearer end of its range. UR5e policies that miss mostly end with a joint pinned at its +-360 deg
     limit (benchmarks/failure_report.py); this makes approaching a limit cost something. The UR5e
-    PPO presets set 0.05 (reach) and 1.0 (reach-avoid): results/README.md, "The joint-limit penalty"."""
+    PPO presets set 0.05 (reach) and 1.0 (reach-avoid): results/joint_limit/README.md."""
     joint_limit_margin: float = 0.5
     """Distance from a joint limit (rad) at which the w_joint_limit penalty starts (0.5 in every run
     we made with it)."""
