@@ -9,7 +9,7 @@ training driver therefore writes, next to each checkpoint, `<step dir>/policy/`:
 - `policy.npz`: the policy network's parameters and the observation normaliser's statistics, each
   with the run's leading seed axis (`policy/params/hidden_0/kernel`, ..., `obs_stats/mean`, ...).
 
-`select` copies an export keeping only some trained seeds (`benchmarks/ship_checkpoint.py` makes
+`select` copies an export keeping only some trained seeds (`tools/ship_checkpoint.py` makes
 the checkpoints under `results/checkpoints/` with it).
 
 `load` rebuilds the learner's own deterministic policy from it (the registered learner's `policy`

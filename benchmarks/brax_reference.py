@@ -1,6 +1,6 @@
 """Brax's PPO and ours on the same environment with the same hyperparameters and budget, in one run.
 
-    python -m benchmarks.brax_reference --out results/brax_reference      # on the GPU machine
+    python -m benchmarks.brax_reference --out results/throughput/brax_reference      # on the GPU machine
 
 Both train on the preset's env (`--preset`, default `ur5e-reach-ppo`: the paper's configuration)
 with the preset's PPO settings (`agents/presets.py`), which both learners get, observation
@@ -64,7 +64,7 @@ def main():
     parser.add_argument("--updates-per-eval", type=int, default=16, help="PPO updates between evaluations")
     parser.add_argument("--eval-envs", type=int, default=4096)
     parser.add_argument("--skip", choices=["ours", "brax"], default=None)
-    parser.add_argument("--out", default="results/brax_reference")
+    parser.add_argument("--out", default="results/throughput/brax_reference")
     args = parser.parse_args()
 
     config = presets.make_config(args.preset, eval_envs=args.eval_envs, progress=False, tensorboard=False)

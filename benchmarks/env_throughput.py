@@ -1,7 +1,7 @@
 """Environment throughput: env steps/s with random actions and auto-resets, next to the MJX
 physics ceiling of the same robot model measured in the same run.
 
-    python -m benchmarks.env_throughput --out results/env_throughput   # on the GPU machine
+    python -m benchmarks.env_throughput --out results/throughput/env_throughput   # on the GPU machine
 
 For each environment and batch size, one jitted `lax.scan` runs `--steps` environment steps of
 the fully wrapped environment (episode limit, fresh auto-reset, vmap) with uniform random
@@ -117,7 +117,7 @@ def main():
                         help="also time each env without auto-reset (shows what resets cost)")
     parser.add_argument("--stock-ceiling", action="store_true",
                         help="also measure the ceiling of MJX as shipped (without envs.fast_mjx)")
-    parser.add_argument("--out", default="results/env_throughput", help="output path without extension")
+    parser.add_argument("--out", default="results/throughput/env_throughput", help="output path without extension")
     args = parser.parse_args()
 
     device = jax.devices()[0]

@@ -1,8 +1,8 @@
 """Training throughput: env steps/s of our PPO (or SAC) at the paper's setup, next to the env-only rate
 of the same environment in the same run, and on 1..N local GPUs at the same per-GPU batch.
 
-    python -m benchmarks.train_throughput --out results/train_throughput            # one GPU
-    python -m benchmarks.train_throughput --devices 1 2 --out results/multi_gpu     # scaling
+    python -m benchmarks.train_throughput --out results/throughput/train_throughput            # one GPU
+    python -m benchmarks.train_throughput --devices 1 2 --out results/throughput/multi_gpu     # scaling
     python -m benchmarks.train_throughput --devices 2 --multi-device gspmd shard_map --skip-env-only
     python -m benchmarks.train_throughput --trace traces/  # + profile: python -m benchmarks.trace_summary traces/1dev
 
@@ -82,7 +82,7 @@ def main():
                         help="how several devices share the work (TrainConfig.multi_device), each measured")
     parser.add_argument("--skip-env-only", action="store_true")
     parser.add_argument("--trace", metavar="DIR", help="also write a profiler trace of one update per setting to DIR/<setting>")
-    parser.add_argument("--out", default="results/train_throughput")
+    parser.add_argument("--out", default="results/throughput/train_throughput")
     args = parser.parse_args()
     if args.updates < 1 or args.rounds < 1 or args.env_steps < 1:
         parser.error(f"--updates, --rounds and --env-steps must be >= 1, got {args.updates}, {args.rounds}, {args.env_steps}")

@@ -1,5 +1,5 @@
 """User tools around trained policies: the paper's tables (`paper_tables`), why a policy fails
-(`failure_report`), shipping a policy export (`ship_checkpoint`) and figures (`plots`). Each runs
+(`failure_report`), shipping a policy export (`ship_checkpoint`) and figures (`plots`), the results tables (`results_index`). Each runs
 as `python -m tools.<name> --help` from the repository root and imports as `from tools import <name>`."""
 
 import sys

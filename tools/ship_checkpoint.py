@@ -2,7 +2,7 @@
 the chosen trained seeds, so the repository carries a few hundred kB per row instead of a checkpoint.
 
     python -m tools.ship_checkpoint .ckpt/panda-reach-ppo results/checkpoints/panda-reach-ppo \\
-        --best-from results/panda_reach_ppo_eval.json     # the seed with the highest target-reached rate
+        --best-from results/headline/panda_reach_ppo_eval.json     # the seed with the highest target-reached rate
     python -m tools.ship_checkpoint RUN DST --seeds 0 3                 # or name the seeds
 
 SRC is a train.py logdir (its newest checkpoint), a checkpoint step directory or an export; a

@@ -1,0 +1,101 @@
+"""tools/results_index.py: the tables it writes from hand-made eval.py JSON files, and its --check on this
+repository (every committed table is the generated one; an edited cell is caught)."""
+
+import json
+import os
+import shutil
+
+import pytest
+
+from tools import results_index as ri
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def _stats(mean, std, units=5):
+    return {"mean": mean, "std_units": std, "units": units}
+
+
+def _eval_json(env_name, env_steps, reached, self_c, obstacle, discount):
+    summary = {"target_reached": _stats(*reached), "self_collision": _stats(*self_c),
+               "obstacle_collision": _stats(*obstacle), "distance": _stats(0.0204, 0.001)}
+    return {"evaluations": [{
+        "env_name": env_name, "num_envs": 4096, "env_config": {"observation": ["joint_pos"]},
+        "policy": {"env_steps": env_steps, "train_config": {"preset": env_name + "-ppo", "algo": {"discount": discount}}},
+        "summary": summary}]}
+
+
+TINY = ri.EvalTable(("run", "discount", "env_steps", "reached", "self", "obstacle", "file"), (
+    ri.Run("reach", "study/a_eval.json"),
+    ri.Run("reach-avoid", "study/b_eval.json"),
+))
+
+README = """# A study
+
+Text before.
+
+<!-- table:tiny -->
+stale
+<!-- /table -->
+
+Text after.
+"""
+
+EXPECTED = """# A study
+
+Text before.
+
+<!-- table:tiny -->
+| run | discount | env steps per seed | reached | self collision | obstacle collision | file |
+|---|---:|---:|---:|---:|---:|---|
+| reach | 0.99 | 150.1M | 95.7 ± 0.4 % | 2.7 ± 0.1 % |  | [a_eval.json](a_eval.json) |
+| reach-avoid | 0.97 | 8.2M | 86.8 ± 0.3 % | 3.5 ± 0.1 % | 2.3 ± 0.3 % | [b_eval.json](b_eval.json) |
+<!-- /table -->
+
+Text after.
+"""
+
+
+@pytest.fixture
+def tiny_root(tmp_path):
+    study = tmp_path / "results" / "study"
+    study.mkdir(parents=True)
+    (study / "a_eval.json").write_text(json.dumps(
+        _eval_json("ur5e-reach", 150_077_440, (0.95708, 0.0041), (0.0270, 0.0012), (0.0, 0.0), 0.99)))
+    (study / "b_eval.json").write_text(json.dumps(
+        _eval_json("ur5e-reach-avoid", 8_192_000, (0.86753, 0.0031), (0.0349, 0.0011), (0.0231, 0.0029), 0.97)))
+    (study / "README.md").write_text(README)
+    return tmp_path
+
+
+def test_writes_the_table_between_the_markers(tiny_root):
+    path = tiny_root / "results" / "study" / "README.md"
+    assert ri.update(str(tiny_root), {"tiny": TINY}, check=True) == ["results/study/README.md"]
+    assert path.read_text() == README  # --check writes nothing
+    assert ri.update(str(tiny_root), {"tiny": TINY}) == ["results/study/README.md"]
+    assert path.read_text() == EXPECTED
+    assert ri.update(str(tiny_root), {"tiny": TINY}, check=True) == []
+
+
+def test_unknown_table_name_is_an_error(tiny_root):
+    with pytest.raises(ValueError, match="'tiny' is unknown"):
+        ri.update(str(tiny_root), {}, check=True)
+
+
+def test_check_passes_on_the_committed_repository():
+    assert ri.main(["--check", "--root", ROOT]) == 0
+
+
+def test_check_fails_after_a_cell_is_edited(tmp_path):
+    root = tmp_path / "repo"
+    shutil.copytree(os.path.join(ROOT, "results"), root / "results", ignore=shutil.ignore_patterns("checkpoints", "runs"))
+    shutil.copy(os.path.join(ROOT, "README.md"), root / "README.md")
+    path = root / "results" / "headline" / "README.md"
+    text = path.read_text()
+    cell = ri.pct(json.loads((root / "results" / "headline" / "ur5e_reach_ppo_eval.json").read_text())
+                  ["evaluations"][0]["summary"]["target_reached"])
+    assert f"| {cell} |" in text
+    path.write_text(text.replace(f"| {cell} |", "| 99.9 ± 0.1 % |", 1))
+    assert ri.main(["--check", "--root", str(root)]) == 1
+    assert ri.main(["--root", str(root)]) == 0
+    assert path.read_text() == text

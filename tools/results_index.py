@@ -1,0 +1,681 @@
+"""Writes the results tables from the committed JSON files under results/.
+
+    python -m tools.results_index            # rewrite every generated table in place
+    python -m tools.results_index --check    # exit 1 if a committed table differs from what this would write
+
+A markdown file holds a generated table between `<!-- table:NAME -->` and `<!-- /table -->`; this tool
+rewrites what lies between them from `TABLES[NAME]` and leaves the rest of the file alone. The files it
+reads are README.md, results/README.md and results/<study>/README.md. Our numbers come only from the JSON
+files that eval.py, tools/paper_tables.py and the benchmarks wrote; the paper's numbers come from the
+`PAPER_*` tables below, each citing the paper's table or section (Schubert et al., "Learning Reach-Avoid
+Task with Reinforcement Learning: Vectorized Simulation and Benchmark").
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import glob
+import json
+import os
+import re
+import sys
+from typing import Callable
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+# ------------------------------------------------------------------------------------------------
+# The paper's numbers (percentages unless noted). Nothing of ours is typed in here.
+
+PAPER_ROWS = {
+    # Section "Results", first paragraph (the abstract repeats the PPO ones): (reached, self, obstacle).
+    "ur5e-reach-ppo": (96.1, 2.2, None),
+    "panda-reach-ppo": (98.8, 0.3, None),
+    "ur5e-reach-sac": (61.6, 17.3, None),
+    "panda-reach-sac": (87.9, 2.7, None),
+    "ur5e-reach-sac-limited-init": (84.8, 3.5, None),
+    # Section "Results", subsection "Reach-Avoid Task" (2 cm target, 0.1 m obstacle).
+    "ur5e-reach-avoid-ppo": (86.8, 2.7, 4.8),
+    "panda-reach-avoid-ppo": (95.2, 0.1, 2.5),
+}
+
+PAPER_THROUGHPUT = {"ur5e-reach": 185_000, "ur5e-reach-avoid": 125_000}
+"""Section "Simulation performance": env steps/s of the UR5e envs at 8,192 envs on an RTX 3090 Ti."""
+
+PAPER_BASELINES = {
+    # Table "reaching baselines" (tab:reaching_baselines): (agent, target radius) -> (reached, self collision,
+    # distance mean, distance std), rates in [0, 1], distances in m. The robot is the UR5e.
+    ("random", 0.01): (0.000, 0.300, 0.929, 0.328),
+    ("standstill", 0.01): (0.000, 0.000, 0.855, 0.318),
+    ("pseudo_ik", 0.01): (0.369, 0.222, 0.033, 0.035),
+    ("random", 0.02): (0.001, 0.300, 0.929, 0.328),
+    ("standstill", 0.02): (0.000, 0.000, 0.855, 0.318),
+    ("pseudo_ik", 0.02): (0.510, 0.222, 0.033, 0.035),
+}
+
+PAPER_WORKSPACE = {
+    # Table "workspace generalization" (tab:reaching_workspace_generalization), UR5e, PPO:
+    # (trained, evaluated) -> (reached, std, self collision, std, distance in m), rates in [0, 1].
+    ("pandagym", "pandagym"): (1.000, 0.000, 0.000, 0.000, 0.001),
+    ("front", "front"): (0.993, 0.001, 0.007, 0.001, 0.002),
+    ("upper", "upper"): (0.988, 0.002, 0.010, 0.002, 0.002),
+    ("full", "full"): (0.989, 0.001, 0.010, 0.002, 0.002),
+    ("full-range", "full-range"): (0.959, 0.003, 0.025, 0.003, 0.005),
+    ("pandagym", "front"): (0.139, 0.035, 0.143, 0.066, 0.211),
+    ("pandagym", "full"): (0.040, 0.016, 0.632, 0.069, 0.356),
+    ("front", "full"): (0.645, 0.021, 0.186, 0.019, 0.082),
+    ("upper", "full"): (0.945, 0.012, 0.024, 0.006, 0.007),
+    ("front", "pandagym"): (1.000, 0.000, 0.000, 0.000, 0.001),
+    ("full", "pandagym"): (1.000, 0.000, 0.000, 0.000, 0.002),
+    ("full", "upper"): (0.988, 0.002, 0.011, 0.002, 0.002),
+    ("full", "full-range"): (0.601, 0.023, 0.178, 0.027, 0.161),
+}
+WORKSPACE_NAMES = {"pandagym": "PandaGym", "front": "Front", "upper": "Upper", "full": "Full", "full-range": "Full Range"}
+
+PAPER_OBSTACLE = {
+    # Table "obstacle size" (tab:static_obst_size): (trained, evaluated radius in m) -> (reached, std, self
+    # collision, std, obstacle collision, std), rates in [0, 1]; "reach" is a reach agent.
+    ("0.025", 0.025): (0.880, 0.016, 0.037, 0.007, 0.037, 0.002),
+    ("0.05", 0.05): (0.860, 0.014, 0.038, 0.005, 0.040, 0.002),
+    ("0.1", 0.1): (0.826, 0.027, 0.043, 0.005, 0.041, 0.002),
+    ("0.2", 0.2): (0.796, 0.015, 0.047, 0.006, 0.040, 0.007),
+    ("0.3", 0.3): (0.781, 0.017, 0.049, 0.004, 0.042, 0.002),
+    ("0.025", 0.1): (0.844, 0.015, 0.038, 0.008, 0.066, 0.002),
+    ("0.05", 0.1): (0.842, 0.014, 0.040, 0.006, 0.052, 0.002),
+    ("0.2", 0.1): (0.814, 0.017, 0.046, 0.006, 0.037, 0.004),
+    ("0.3", 0.1): (0.803, 0.022, 0.047, 0.004, 0.033, 0.002),
+    ("reach", 0.025): (0.844, 0.007, 0.021, 0.002, 0.125, 0.005),
+    ("reach", 0.05): (0.813, 0.009, 0.020, 0.002, 0.156, 0.006),
+    ("reach", 0.1): (0.758, 0.009, 0.019, 0.001, 0.213, 0.007),
+    ("reach", 0.2): (0.673, 0.006, 0.018, 0.001, 0.301, 0.006),
+    ("reach", 0.3): (0.603, 0.006, 0.016, 0.002, 0.373, 0.006),
+}
+
+PAPER_ACTION_SPACE = "absolute: 0.012 m, 41.5 steps in target, 21.7 exits; relative: 0.005 m, 99.1, 0.05"
+"""Table "action space" (tab:reaching_actionspace_differences): distance, steps in target, times left target."""
+
+PAPER_OBSERVATION = {"reach": ("joint_pos", "ee_pos", "target_pos", "ee_to_target"),
+                     "reach-avoid": ("joint_pos", "ee_pos", "target_pos", "ee_to_target", "obstacle_pos",
+                                     "link_obstacle_dist")}
+"""The paper's observation parts (section "Observation Space"; our names), to name what a run adds."""
+
+
+# ------------------------------------------------------------------------------------------------
+# Reading the JSON files and formatting cells.
+
+class Context:
+    """Reads JSON files under `<root>/results` once; `md_dir` is the directory of the file being written
+    (links are relative to it)."""
+
+    def __init__(self, root: str):
+        self.root, self.results = root, os.path.join(root, "results")
+        self.md_dir = self.results
+        self._cache: dict[str, dict] = {}
+
+    def json(self, file: str) -> dict:
+        if file not in self._cache:
+            with open(os.path.join(self.results, file), encoding="utf-8") as f:
+                self._cache[file] = json.load(f)
+        return self._cache[file]
+
+    def evaluation(self, file: str) -> dict:
+        """The first evaluation of an eval.py JSON file."""
+        return self.json(file)["evaluations"][0]
+
+    def link(self, file: str) -> str:
+        path = os.path.relpath(os.path.join(self.results, file), self.md_dir).replace(os.sep, "/")
+        return f"[{os.path.basename(file)}]({path})"
+
+
+def pct(stats: dict | None) -> str:
+    """'95.7 ± 0.4 %' (mean ± std over trained seeds); one seed: '95.7 %'."""
+    if not stats:
+        return ""
+    if stats.get("units", 2) < 2:
+        return f"{100 * stats['mean']:.1f} %"
+    return f"{100 * stats['mean']:.1f} ± {100 * stats['std_units']:.1f} %"
+
+
+def rate(mean: float, std: float) -> str:
+    return f"{100 * mean:.1f} ± {100 * std:.1f} %"
+
+
+def millions(steps: int) -> str:
+    return f"{steps / 1e6:.1f}M"
+
+
+def thousands(rate_per_s: float) -> str:
+    return f"{rate_per_s:,.0f}"
+
+
+def paper_pct(value: float | None) -> str:
+    return "" if value is None else f"{value:.1f} %"
+
+
+def has_obstacle(ev: dict) -> bool:
+    return "avoid" in ev["env_name"]
+
+
+def collisions(ev: dict) -> str:
+    s = ev["summary"]
+    out = [pct(s["self_collision"]) + " self"]
+    if has_obstacle(ev):
+        out.append(pct(s["obstacle_collision"]) + " obstacle")
+    return ", ".join(out)
+
+
+def paper_collisions(key: str) -> str:
+    _, self_c, obstacle = PAPER_ROWS[key]
+    return ", ".join([f"{self_c:.1f} % self"] + ([f"{obstacle:.1f} % obstacle"] if obstacle is not None else []))
+
+
+def added_observation(ev: dict) -> str:
+    parts = ev["env_config"]["observation"]
+    base = PAPER_OBSERVATION["reach-avoid" if has_obstacle(ev) else "reach"]
+    extra = [p for p in parts if p not in base]
+    return "the paper's" if not extra else "+ " + " + ".join(extra)
+
+
+def _train_config(ev: dict) -> dict:
+    return ev["policy"].get("train_config") or {}
+
+
+# ------------------------------------------------------------------------------------------------
+# Tables of eval.py runs: one row per JSON file, columns picked from COLUMNS.
+
+@dataclasses.dataclass(frozen=True)
+class Run:
+    label: str
+    """The row's first cell: what this run is."""
+    file: str
+    """eval.py JSON, relative to results/."""
+    paper: str = ""
+    """Key of PAPER_ROWS for the paper's numbers of this row ("" if the paper has none)."""
+    preset: str = ""
+    """The preset that trains it today, where that is not the one its JSON names (trained before it existed)."""
+
+
+Cell = Callable[[dict, Run, Context], str]
+COLUMNS: dict[str, tuple[str, str, Cell]] = {  # key -> (header, alignment, cell)
+    "run": ("run", "---", lambda ev, run, ctx: run.label),
+    "preset": ("preset", "---", lambda ev, run, ctx: f"`{run.preset or _train_config(ev).get('preset', '')}`"),
+    "paper_reached": ("paper: reached", "---:", lambda ev, run, ctx: paper_pct(PAPER_ROWS[run.paper][0]) if run.paper else ""),
+    "paper_collisions": ("paper: collisions", "---:", lambda ev, run, ctx: paper_collisions(run.paper) if run.paper else ""),
+    "reached": ("reached", "---:", lambda ev, run, ctx: pct(ev["summary"]["target_reached"])),
+    "self": ("self collision", "---:", lambda ev, run, ctx: pct(ev["summary"]["self_collision"])),
+    "obstacle": ("obstacle collision", "---:",
+                 lambda ev, run, ctx: pct(ev["summary"]["obstacle_collision"]) if has_obstacle(ev) else ""),
+    "collisions": ("collisions", "---:", lambda ev, run, ctx: collisions(ev)),
+    "distance": ("distance (m)", "---:", lambda ev, run, ctx: f"{ev['summary']['distance']['mean']:.3f}"),
+    "steps_in_target": ("steps in target", "---:", lambda ev, run, ctx: f"{ev['summary']['steps_in_target']['mean']:.1f}"),
+    "times_left": ("times left target", "---:", lambda ev, run, ctx: f"{ev['summary']['times_left_target']['mean']:.2f}"),
+    "env_steps": ("env steps per seed", "---:", lambda ev, run, ctx: millions(ev["policy"]["env_steps"])),
+    "schedule": ("schedule (`--num-timesteps`)", "---:", lambda ev, run, ctx: millions(_train_config(ev)["num_timesteps"])),
+    "discount": ("discount", "---:", lambda ev, run, ctx: f"{_train_config(ev)['algo']['discount']:g}"),
+    "action_scale": ("action scale", "---:", lambda ev, run, ctx: f"{ev['env_config']['action_scale']:g}"),
+    "w_joint_limit": ("`w_joint_limit`", "---:", lambda ev, run, ctx: f"{ev['env_config'].get('w_joint_limit', 0.0):g}"),
+    "grad_steps": ("gradient steps per env step", "---:",
+                   lambda ev, run, ctx: str(_train_config(ev)["algo"]["grad_updates_per_step"])),
+    "observation": ("observation", "---", lambda ev, run, ctx: added_observation(ev)),
+    "actions": ("actions", "---", lambda ev, run, ctx: ev.get("actions", "deterministic")),
+    "episodes": ("seeds x episodes", "---:", lambda ev, run, ctx: f"{ev['summary']['target_reached']['units']} x {ev['num_envs']}"),
+    "file": ("file", "---", lambda ev, run, ctx: ctx.link(run.file)),
+}
+
+
+@dataclasses.dataclass(frozen=True)
+class EvalTable:
+    columns: tuple[str, ...]
+    runs: tuple[Run, ...]
+
+    def __call__(self, ctx: Context) -> list[list[str]]:
+        rows = [[COLUMNS[c][0] for c in self.columns], [COLUMNS[c][1] for c in self.columns]]
+        for run in self.runs:
+            ev = ctx.evaluation(run.file)
+            rows.append([COLUMNS[c][2](ev, run, ctx) for c in self.columns])
+        return rows
+
+
+def markdown(rows: list[list[str]]) -> str:
+    """Header, alignment row and body rows as a markdown table."""
+    return "\n".join("| " + " | ".join(r) + " |" if i != 1 else "|" + "|".join(r) + "|" for i, r in enumerate(rows))
+
+
+# ------------------------------------------------------------------------------------------------
+# The studies.
+
+HEADLINE = (
+    Run("UR5e reach, PPO, 1 cm target", "headline/ur5e_reach_ppo_eval.json", "ur5e-reach-ppo"),
+    Run("Panda reach, PPO, 1 cm target", "headline/panda_reach_ppo_eval.json", "panda-reach-ppo"),
+    Run("UR5e reach-avoid, PPO, 2 cm target, 0.1 m obstacle", "headline/ur5e_reach_avoid_ppo_eval.json", "ur5e-reach-avoid-ppo"),
+    Run("Panda reach-avoid, PPO, 2 cm target, 0.1 m obstacle", "headline/panda_reach_avoid_ppo_eval.json", "panda-reach-avoid-ppo"),
+    Run("UR5e reach, SAC", "headline/ur5e_reach_sac_eval.json", "ur5e-reach-sac"),
+    Run("UR5e reach, PPO, plus observations (not in the paper)", "headline/ur5e_reach_ppo_plus_eval.json", "ur5e-reach-ppo"),
+    Run("UR5e reach-avoid, PPO, plus observations (not in the paper)", "headline/ur5e_reach_avoid_ppo_plus_eval.json",
+        "ur5e-reach-avoid-ppo"),
+    Run("Panda reach, PPO, plus observations (not in the paper)", "headline/panda_reach_ppo_plus_eval.json", "panda-reach-ppo",
+        "panda-reach-ppo-plus"),
+    Run("UR5e reach, SAC, plus observations (not in the paper)", "headline/ur5e_reach_sac_plus_eval.json", "ur5e-reach-sac"),
+)
+
+DISCOUNT = EvalTable(("run", "discount", "env_steps", "reached", "self", "obstacle", "file"), (
+    Run("`ur5e-reach-ppo` (no joint-limit penalty)", "discount/ur5e_reach_ppo_gamma0.97_eval.json"),
+    Run("`ur5e-reach-ppo` (no joint-limit penalty)", "joint_limit/ur5e_reach_ppo_no_joint_limit_eval.json"),
+    Run("`ur5e-reach-ppo-plus`", "discount/ur5e_reach_ppo_plus_gamma0.97_eval.json"),
+    Run("`ur5e-reach-ppo-plus`", "headline/ur5e_reach_ppo_plus_eval.json"),
+    Run("`panda-reach-ppo`", "discount/panda_reach_ppo_gamma0.97_eval.json"),
+    Run("`panda-reach-ppo`", "headline/panda_reach_ppo_eval.json"),
+    Run("`ur5e-reach-avoid-ppo` (no joint-limit penalty)", "joint_limit/ur5e_reach_avoid_ppo_no_joint_limit_eval.json"),
+    Run("`ur5e-reach-avoid-ppo` (no joint-limit penalty)", "discount/ur5e_reach_avoid_ppo_gamma0.99_eval.json"),
+    Run("`ur5e-reach-avoid-ppo-plus`", "headline/ur5e_reach_avoid_ppo_plus_eval.json"),
+    Run("`ur5e-reach-avoid-ppo-plus`", "discount/ur5e_reach_avoid_ppo_plus_gamma0.99_eval.json"),
+    Run("`panda-reach-avoid-ppo`", "discount/panda_reach_avoid_ppo_gamma0.97_eval.json"),
+    Run("`panda-reach-avoid-ppo`", "discount/panda_reach_avoid_ppo_gamma0.99_eval.json"),
+    Run("`panda-reach-avoid-ppo`, 2 GPUs", "discount/panda_reach_avoid_ppo_gamma0.97_100m_eval.json"),
+    Run("`panda-reach-avoid-ppo`, 2 GPUs (the headline row)", "headline/panda_reach_avoid_ppo_eval.json"),
+    Run("`panda-reach-avoid-ppo`, 1 GPU", "discount/panda_reach_avoid_ppo_gamma0.98_1gpu_eval.json"),
+    Run("`panda-reach-avoid-ppo`", "discount/panda_reach_avoid_ppo_gamma0.99_100m_eval.json"),
+))
+
+JOINT_LIMIT = EvalTable(("run", "w_joint_limit", "env_steps", "schedule", "reached", "self", "obstacle", "distance", "file"), (
+    Run("`ur5e-reach-ppo`", "joint_limit/ur5e_reach_ppo_no_joint_limit_eval.json"),
+    Run("`ur5e-reach-ppo` (the headline row)", "headline/ur5e_reach_ppo_eval.json"),
+    Run("`ur5e-reach-ppo`", "joint_limit/ur5e_reach_ppo_joint_limit0.2_eval.json"),
+    Run("`ur5e-reach-avoid-ppo`", "joint_limit/ur5e_reach_avoid_ppo_no_joint_limit_eval.json"),
+    Run("`ur5e-reach-avoid-ppo`", "joint_limit/ur5e_reach_avoid_ppo_joint_limit0.1_eval.json"),
+    Run("`ur5e-reach-avoid-ppo`", "joint_limit/ur5e_reach_avoid_ppo_joint_limit0.3_eval.json"),
+    Run("`ur5e-reach-avoid-ppo`, 2 GPUs, stopped", "joint_limit/ur5e_reach_avoid_ppo_joint_limit0.6_151m_eval.json"),
+    Run("`ur5e-reach-avoid-ppo`, 2 GPUs, stopped", "joint_limit/ur5e_reach_avoid_ppo_joint_limit1.0_151m_eval.json"),
+    Run("the same resumed to its schedule's end (the headline row)", "headline/ur5e_reach_avoid_ppo_eval.json"),
+))
+
+OBSERVATIONS = EvalTable(("run", "observation", "discount", "env_steps", "reached", "self", "obstacle", "distance",
+                          "steps_in_target", "file"), (
+    Run("`ur5e-reach-ppo`, action scale 0.3", "observations/ur5e_reach_ppo_75m_eval.json"),
+    Run("`ur5e-reach-ppo`, action scale 0.3", "observations/ur5e_reach_ppo_75m_sincos_eval.json"),
+    Run("`ur5e-reach-ppo`, action scale 0.3", "observations/ur5e_reach_ppo_75m_selfdist_eval.json"),
+    Run("`ur5e-reach-ppo`, action scale 0.3 (= `ur5e-reach-ppo-plus`)", "observations/ur5e_reach_ppo_75m_sincos_selfdist_eval.json"),
+    Run("`ur5e-reach-ppo-plus`", "discount/ur5e_reach_ppo_plus_gamma0.97_eval.json"),
+    Run("`ur5e-reach-ppo-plus`, the 150M run resumed with a 230M schedule", "observations/ur5e_reach_ppo_plus_230m_eval.json"),
+    Run("`ur5e-reach-ppo-plus`, 4x256 networks, stopped", "observations/ur5e_reach_ppo_plus_4x256_101m_eval.json"),
+    Run("`ur5e-reach-ppo-plus`, 4x256 networks", "observations/ur5e_reach_ppo_plus_4x256_eval.json"),
+    Run("`panda-reach-avoid-ppo` with the plus parts (no preset)", "observations/panda_reach_avoid_ppo_plus_eval.json"),
+))
+
+ACTION_SCALE = EvalTable(("run", "action_scale", "env_steps", "schedule", "reached", "self", "obstacle", "distance", "file"), (
+    Run("`ur5e-reach-ppo`, discount 0.97, no joint-limit penalty", "action_scale/ur5e_reach_ppo_scale0.1_eval.json"),
+    Run("`ur5e-reach-ppo`, discount 0.97, no joint-limit penalty", "action_scale/ur5e_reach_ppo_scale0.2_eval.json"),
+    Run("`ur5e-reach-ppo`, discount 0.97, no joint-limit penalty", "discount/ur5e_reach_ppo_gamma0.97_eval.json"),
+    Run("`ur5e-reach-avoid-ppo`, no joint-limit penalty, one run resumed", "action_scale/ur5e_reach_avoid_ppo_62m_eval.json"),
+    Run("", "action_scale/ur5e_reach_avoid_ppo_137m_eval.json"),
+    Run("", "action_scale/ur5e_reach_avoid_ppo_210m_eval.json"),
+    Run("", "action_scale/ur5e_reach_avoid_ppo_scale0.2_eval.json"),
+    Run("`ur5e-reach-avoid-ppo`, no joint-limit penalty, stopped", "action_scale/ur5e_reach_avoid_ppo_scale0.3_121m_eval.json"),
+    Run("the same resumed with a 192M schedule", "joint_limit/ur5e_reach_avoid_ppo_no_joint_limit_eval.json"),
+))
+
+OTHER_LEVERS = EvalTable(("run", "env_steps", "schedule", "reached", "self", "obstacle", "distance", "file"), (
+    Run("`ur5e-reach-ppo`, action scale 0.3, discount 0.97, no joint-limit penalty", "observations/ur5e_reach_ppo_75m_eval.json"),
+    Run("the same with `--env.collision-penalty 10`", "other_levers/ur5e_reach_ppo_75m_collision_penalty10_eval.json"),
+    Run("the same with 4x256 networks", "other_levers/ur5e_reach_ppo_75m_4x256_eval.json"),
+    Run("`ur5e-reach-ppo` (the headline row)", "headline/ur5e_reach_ppo_eval.json"),
+    Run("the same with 4x256 networks", "other_levers/ur5e_reach_ppo_4x256_eval.json"),
+    Run("the same with `--env.collision-penalty 3`", "other_levers/ur5e_reach_ppo_collision_penalty3_eval.json"),
+    Run("the same with a 250M schedule on 4 GPUs, stopped", "other_levers/ur5e_reach_ppo_250m_schedule_184m_eval.json"),
+    Run("`ur5e-reach-avoid-ppo` (the headline row)", "headline/ur5e_reach_avoid_ppo_eval.json"),
+    Run("the same with `--env.collision-penalty 10`", "other_levers/ur5e_reach_avoid_ppo_collision_penalty10_eval.json"),
+    Run("`panda-reach-avoid-ppo` (the headline row)", "headline/panda_reach_avoid_ppo_eval.json"),
+    Run("the same with `--env.w-joint-limit 0.3`", "other_levers/panda_reach_avoid_ppo_joint_limit0.3_eval.json"),
+))
+
+LR_SCHEDULE = EvalTable(("run", "env_steps", "schedule", "reached", "self", "obstacle", "steps_in_target", "times_left",
+                         "file"), (
+    Run("`panda-reach-ppo`, discount 0.97, stopped", "lr_schedule/panda_reach_ppo_49m_eval.json"),
+    Run("`panda-reach-ppo`, discount 0.97, stopped", "lr_schedule/panda_reach_ppo_52m_eval.json"),
+    Run("`panda-reach-ppo`, discount 0.97", "lr_schedule/panda_reach_ppo_40m_eval.json"),
+    Run("`panda-reach-ppo`, discount 0.97", "discount/panda_reach_ppo_gamma0.97_eval.json"),
+    Run("`panda-reach-avoid-ppo`, discount 0.97, stopped", "lr_schedule/panda_reach_avoid_ppo_46m_eval.json"),
+    Run("`panda-reach-avoid-ppo`, discount 0.97", "discount/panda_reach_avoid_ppo_gamma0.97_eval.json"),
+    Run("`panda-reach-avoid-ppo`, discount 0.97, stopped", "lr_schedule/panda_reach_avoid_ppo_66m_eval.json"),
+))
+
+SAC_GRAD_STEPS = EvalTable(("run", "grad_steps", "env_steps", "reached", "self", "file"), (
+    Run("`ur5e-reach-sac`", "sac/ur5e_reach_sac_g1_eval.json"),
+    Run("`ur5e-reach-sac`", "sac/ur5e_reach_sac_8m_eval.json"),
+    Run("`ur5e-reach-sac`, resumed", "sac/ur5e_reach_sac_16m_eval.json"),
+    Run("`ur5e-reach-sac`, resumed again (the headline row)", "headline/ur5e_reach_sac_eval.json"),
+    Run("`ur5e-reach-sac`", "sac/ur5e_reach_sac_g32_4m_eval.json"),
+    Run("`ur5e-reach-sac-plus`", "sac/ur5e_reach_sac_plus_g1_eval.json"),
+    Run("`ur5e-reach-sac-plus`", "sac/ur5e_reach_sac_plus_8m_eval.json"),
+    Run("`ur5e-reach-sac-plus`, resumed (the headline row)", "headline/ur5e_reach_sac_plus_eval.json"),
+))
+
+SAC_ENTROPY = EvalTable(("run", "grad_steps", "env_steps", "actions", "reached", "self", "file"), (
+    Run("`ur5e-reach-sac`, target entropy -3", "sac/ur5e_reach_sac_brax_entropy_8m_eval.json"),
+    Run("", "sac/ur5e_reach_sac_brax_entropy_16m_eval.json"),
+    Run("", "sac/ur5e_reach_sac_brax_entropy_25m_eval.json"),
+    Run("", "sac/ur5e_reach_sac_brax_entropy_25m_stochastic_eval.json"),
+    Run("`ur5e-reach-sac-plus`, target entropy -3", "sac/ur5e_reach_sac_plus_brax_entropy_8m_eval.json"),
+    Run("", "sac/ur5e_reach_sac_plus_brax_entropy_16m_eval.json"),
+    Run("", "sac/ur5e_reach_sac_plus_brax_entropy_25m_eval.json"),
+    Run("", "sac/ur5e_reach_sac_plus_brax_entropy_25m_stochastic_eval.json"),
+    Run("`ur5e-reach-sac-plus`, target entropy -3", "sac/ur5e_reach_sac_plus_brax_entropy_g16_6m_eval.json"),
+    Run("", "sac/ur5e_reach_sac_plus_brax_entropy_g16_12m_eval.json"),
+    Run("", "sac/ur5e_reach_sac_plus_brax_entropy_g16_18m_eval.json"),
+    Run("", "sac/ur5e_reach_sac_plus_brax_entropy_g16_18m_stochastic_eval.json"),
+    Run("`ur5e-reach-sac`, target entropy -3", "sac/ur5e_reach_sac_brax_entropy_g16_6m_stochastic_eval.json"),
+))
+
+SAC_CPU = EvalTable(("run", "env_steps", "episodes", "actions", "reached", "self", "times_left", "file"), (
+    Run("shipped `ur5e-reach-sac-plus` seed, 2-core CPU", "sac/ur5e_reach_sac_plus_cpu_deterministic_eval.json"),
+    Run("the same, sampled actions", "sac/ur5e_reach_sac_plus_cpu_stochastic_eval.json"),
+))
+
+SAMPLED = (  # label, deterministic evaluation, the same policy with sampled actions
+    ("UR5e reach, discount 0.97, no joint-limit penalty", "discount/ur5e_reach_ppo_gamma0.97_eval.json",
+     "sampled_actions/ur5e_reach_ppo_gamma0.97_stochastic_eval.json"),
+    ("UR5e reach, discount 0.99, no joint-limit penalty", "joint_limit/ur5e_reach_ppo_no_joint_limit_eval.json",
+     "sampled_actions/ur5e_reach_ppo_no_joint_limit_stochastic_eval.json"),
+    ("Panda reach, discount 0.97", "discount/panda_reach_ppo_gamma0.97_eval.json",
+     "sampled_actions/panda_reach_ppo_gamma0.97_stochastic_eval.json"),
+    ("Panda reach (headline row)", "headline/panda_reach_ppo_eval.json", "sampled_actions/panda_reach_ppo_stochastic_eval.json"),
+    ("UR5e reach-avoid, no joint-limit penalty", "joint_limit/ur5e_reach_avoid_ppo_no_joint_limit_eval.json",
+     "sampled_actions/ur5e_reach_avoid_ppo_no_joint_limit_stochastic_eval.json"),
+    ("UR5e reach-avoid (headline row)", "headline/ur5e_reach_avoid_ppo_eval.json",
+     "sampled_actions/ur5e_reach_avoid_ppo_stochastic_eval.json"),
+    ("Panda reach-avoid, discount 0.97, 58M", "discount/panda_reach_avoid_ppo_gamma0.97_eval.json",
+     "sampled_actions/panda_reach_avoid_ppo_gamma0.97_stochastic_eval.json"),
+    ("UR5e reach, SAC (headline row)", "headline/ur5e_reach_sac_eval.json", "sampled_actions/ur5e_reach_sac_stochastic_eval.json"),
+    ("UR5e reach plus, discount 0.97", "discount/ur5e_reach_ppo_plus_gamma0.97_eval.json",
+     "sampled_actions/ur5e_reach_ppo_plus_gamma0.97_stochastic_eval.json"),
+    ("UR5e reach plus (headline row)", "headline/ur5e_reach_ppo_plus_eval.json",
+     "sampled_actions/ur5e_reach_ppo_plus_stochastic_eval.json"),
+    ("UR5e reach-avoid plus (headline row)", "headline/ur5e_reach_avoid_ppo_plus_eval.json",
+     "sampled_actions/ur5e_reach_avoid_ppo_plus_stochastic_eval.json"),
+    ("Panda reach plus (headline row)", "headline/panda_reach_ppo_plus_eval.json",
+     "sampled_actions/panda_reach_ppo_plus_stochastic_eval.json"),
+    ("UR5e reach, SAC, plus (headline row)", "headline/ur5e_reach_sac_plus_eval.json",
+     "sampled_actions/ur5e_reach_sac_plus_stochastic_eval.json"),
+)
+
+
+def sampled_table(ctx: Context) -> list[list[str]]:
+    rows = [["policy", "deterministic: reached", "sampled: reached", "deterministic: collisions", "sampled: collisions",
+             "files"], ["---", "---:", "---:", "---:", "---:", "---"]]
+    for label, det, sto in SAMPLED:
+        d, s = ctx.evaluation(det), ctx.evaluation(sto)
+        rows.append([label, pct(d["summary"]["target_reached"]), pct(s["summary"]["target_reached"]), collisions(d),
+                     collisions(s), f"{ctx.link(det)}, {ctx.link(sto)}"])
+    return rows
+
+
+def headline_table(ctx: Context) -> list[list[str]]:
+    return EvalTable(("run", "paper_reached", "paper_collisions", "reached", "collisions", "env_steps", "preset", "file"),
+                     HEADLINE)(ctx)
+
+
+def readme_table(ctx: Context) -> list[list[str]]:
+    """README.md's short table: the headline rows, the pseudo-IK baseline and the speeds."""
+    rows = [["", "paper (RTX 3090 Ti)", "ours (H200)"], ["---", "---:", "---:"]]
+    for run in HEADLINE:
+        ev = ctx.evaluation(run.file)
+        paper = PAPER_ROWS[run.paper]
+        rows.append([run.label + ": reached / collisions",
+                     " / ".join([paper_pct(paper[0]), paper_collisions(run.paper)]),
+                     f"{pct(ev['summary']['target_reached'])} / {collisions(ev)} at {millions(ev['policy']['env_steps'])} steps"])
+    b = _baseline_rows(ctx)
+    ik = [b[("ur5e", "pseudo_ik", "absolute", r)]["summary"]["target_reached"] for r in (0.01, 0.02)]
+    rows.append(["baseline: pseudo-IK, UR5e, absolute control: reached, 1 cm / 2 cm",
+                 " / ".join(f"{100 * PAPER_BASELINES[('pseudo_ik', r)][0]:.1f} %" for r in (0.01, 0.02)),
+                 " / ".join(pct(s) for s in ik)])
+    env = {r["env"]: r for r in ctx.json("throughput/env_throughput.json")["rows"] if r["num_envs"] == 8192}
+    meta = ctx.json("throughput/env_throughput.json")["meta"]
+    rows.append([f"UR5e reach / reach-avoid env steps/s, 8,192 envs (env only, {meta['date']})",
+                 f"{thousands(PAPER_THROUGHPUT['ur5e-reach'])} / {thousands(PAPER_THROUGHPUT['ur5e-reach-avoid'])}",
+                 f"{thousands(env['ur5e-reach']['steps_per_s'])} / {thousands(env['ur5e-reach-avoid']['steps_per_s'])}"])
+    train = ctx.json("throughput/train_throughput.json")
+    one = [r for r in train["rows"] if r["devices"] == 1][0]
+    rows.append([f"UR5e reach PPO training env steps/s, 1 seed, 8,192 envs per GPU ({train['meta']['date']})", "",
+                 f"{thousands(one['train_steps_per_s'])} on 1 GPU"
+                 + "".join(f", {thousands(r['train_steps_per_s'])} on {r['devices']}" for r in train["rows"] if r["devices"] > 1)])
+    return rows
+
+
+def _baseline_rows(ctx: Context) -> dict:
+    return {(r["robot"], r["agent"], r["action"], r["target_radius"]): r
+            for r in ctx.json("baselines/baselines.json")["rows"]}
+
+
+def baselines_table(ctx: Context) -> list[list[str]]:
+    rows = [["robot", "agent", "action mode", "target radius", "paper: reached", "reached", "paper: self collision",
+             "self collision", "distance (m)"], ["---", "---", "---", "---:", "---:", "---:", "---:", "---:", "---:"]]
+    for r in ctx.json("baselines/baselines.json")["rows"]:
+        s = r["summary"]
+        paper = PAPER_BASELINES.get((r["agent"], r["target_radius"])) if (r["robot"], r["action"]) == ("ur5e", "absolute") else None
+        rows.append([r["robot"], r["agent"], r["action"], f"{r['target_radius']:g} m",
+                     f"{100 * paper[0]:.1f} %" if paper else "", pct(s["target_reached"]),
+                     f"{100 * paper[1]:.1f} %" if paper else "", pct(s["self_collision"]),
+                     f"{s['distance']['mean']:.3f}"])
+    return rows
+
+
+def workspace_table(ctx: Context) -> list[list[str]]:
+    rows = [["training workspace", "evaluation workspace", "paper: reached", "reached", "paper: self collision",
+             "self collision", "paper: distance (m)", "distance (m)"], ["---", "---", "---:", "---:", "---:", "---:", "---:", "---:"]]
+    for r in ctx.json("workspaces/workspace_generalization.json")["rows"]:
+        s, p = r["summary"], PAPER_WORKSPACE[(r["trained"], r["evaluated"])]
+        rows.append([WORKSPACE_NAMES[r["trained"]], WORKSPACE_NAMES[r["evaluated"]], rate(p[0], p[1]), pct(s["target_reached"]),
+                     rate(p[2], p[3]), pct(s["self_collision"]), f"{p[4]:.3f}", f"{s['distance']['mean']:.3f}"])
+    return rows
+
+
+def obstacle_table(ctx: Context) -> list[list[str]]:
+    rows = [["trained radius (m)", "evaluated radius (m)", "paper: reached / self / obstacle", "reached", "self collision",
+             "obstacle collision"], ["---", "---", "---:", "---:", "---:", "---:"]]
+    for r in ctx.json("obstacle_size/obstacle_size.json")["rows"]:
+        s, p = r["summary"], PAPER_OBSTACLE[(r["trained"], r["evaluated"])]
+        rows.append([r["trained"], f"{r['evaluated']:g}", f"{100 * p[0]:.1f} / {100 * p[2]:.1f} / {100 * p[4]:.1f} %",
+                     pct(s["target_reached"]), pct(s["self_collision"]), pct(s["obstacle_collision"])])
+    return rows
+
+
+def env_throughput_table(ctx: Context) -> list[list[str]]:
+    rows = [["env", "envs", "env steps/s", "bare MJX ceiling", "fraction", "paper (RTX 3090 Ti)"],
+            ["---", "---:", "---:", "---:", "---:", "---:"]]
+    for r in ctx.json("throughput/env_throughput.json")["rows"]:
+        paper = PAPER_THROUGHPUT.get(r["env"]) if r["num_envs"] == 8192 else None
+        rows.append([r["env"], f"{r['num_envs']:,}", thousands(r["steps_per_s"]), thousands(r["ceiling_steps_per_s"]),
+                     f"{100 * r['fraction_of_ceiling']:.0f} %", thousands(paper) if paper else ""])
+    return rows
+
+
+def train_throughput_table(ctx: Context) -> list[list[str]]:
+    rows = [["GPUs", "envs", "batch", "training env steps/s", "env only", "fraction of env only", "speed-up"],
+            ["---:", "---:", "---:", "---:", "---:", "---:", "---:"]]
+    for r in ctx.json("throughput/train_throughput.json")["rows"]:
+        env_only = r.get("env_only_steps_per_s")
+        rows.append([str(r["devices"]), f"{r['num_envs']:,}", f"{r['batch_size']:,}", thousands(r["train_steps_per_s"]),
+                     thousands(env_only) if env_only else "", f"{100 * r['fraction_of_env_only']:.1f} %" if env_only else "",
+                     f"{r['speedup_vs_1_device']:.2f}x"])
+    return rows
+
+
+def brax_table(ctx: Context) -> list[list[str]]:
+    d = ctx.json("throughput/brax_reference.json")
+    rows = [["env steps", "ours: reached", "ours: self collision", "Brax: reached", "Brax: self collision"],
+            ["---:", "---:", "---:", "---:", "---:"]]
+    for ours, brax in zip(d["ours"]["evals"], d["brax"]["evals"]):
+        rows.append([f"{ours['env_steps']:,}", f"{100 * ours['target_reached']:.1f} %", f"{100 * ours['self_collision']:.1f} %",
+                     f"{100 * brax['target_reached']:.1f} %", f"{100 * brax['self_collision']:.1f} %"])
+    rows.append(["training env steps/s", thousands(d["ours"]["steps_per_s"]), "", thousands(d["brax"]["steps_per_s"]),
+                 f"ours {d['speedup']:.2f}x"])
+    return rows
+
+
+FAILURES = (  # label, file
+    ("UR5e reach, discount 0.97, action scale 0.2", "failures/failures_ur5e_reach_ppo_scale0.2.json"),
+    ("UR5e reach, discount 0.97", "failures/failures_ur5e_reach_ppo_gamma0.97.json"),
+    ("UR5e reach, discount 0.99, no joint-limit penalty", "failures/failures_ur5e_reach_ppo_no_joint_limit.json"),
+    ("UR5e reach (shipped)", "failures/failures_ur5e_reach_ppo.json"),
+    ("UR5e reach plus, discount 0.97", "failures/failures_ur5e_reach_ppo_plus_gamma0.97.json"),
+    ("UR5e reach plus (shipped)", "failures/failures_ur5e_reach_ppo_plus.json"),
+    ("UR5e reach-avoid, no joint-limit penalty", "failures/failures_ur5e_reach_avoid_ppo_no_joint_limit.json"),
+    ("UR5e reach-avoid, joint-limit penalty 1.0, seed 0 at 150.7M", "failures/failures_ur5e_reach_avoid_ppo_151m.json"),
+    ("UR5e reach-avoid (shipped)", "failures/failures_ur5e_reach_avoid_ppo.json"),
+)
+
+
+def failures_table(ctx: Context) -> list[list[str]]:
+    rows = [["policy", "episodes", "reached", "self collision", "obstacle collision", "missed", "file"],
+            ["---", "---:", "---:", "---:", "---:", "---:", "---"]]
+    for label, file in FAILURES:
+        s = ctx.json(file)["summary"]
+        o = s["outcomes"]
+        cell = lambda k: f"{100 * o[k]:.1f} %" if k in o else ""  # noqa: E731
+        rows.append([label, str(s["episodes"]), cell("reached"), cell("self collision"), cell("obstacle collision"),
+                     cell("missed"), ctx.link(file)])
+    return rows
+
+
+# ------------------------------------------------------------------------------------------------
+# The index: every paper table, figure and headline row beside ours.
+
+def _eval_cell(ctx: Context, file: str) -> str:
+    ev = ctx.evaluation(file)
+    return f"{pct(ev['summary']['target_reached'])} / {collisions(ev)}"
+
+
+def index_table(ctx: Context) -> list[list[str]]:
+    rows = [["paper", "paper's number", "ours", "command", "file"], ["---", "---:", "---:", "---", "---"]]
+    for run in HEADLINE:
+        ev = ctx.evaluation(run.file)
+        command = f"python train.py {run.preset or _train_config(ev)['preset']} --seeds 5"
+        if ev["policy"]["env_steps"] < 0.98 * _train_config(ev)["num_timesteps"]:  # stopped before its schedule's end
+            command += f" --stop-after-steps {ev['policy']['env_steps']}"
+        paper = PAPER_ROWS[run.paper]
+        rows.append([f"Results: {run.label}", f"{paper_pct(paper[0])} / {paper_collisions(run.paper)}",
+                     _eval_cell(ctx, run.file), f"`{command}`", ctx.link(run.file)])
+    for key, label in (("panda-reach-sac", "Results: Panda reach, SAC"),
+                       ("ur5e-reach-sac-limited-init", "Results: UR5e reach, SAC, 360° initial range")):
+        paper = PAPER_ROWS[key]
+        command = ("`python train.py panda-reach-sac --seeds 5`" if key == "panda-reach-sac"
+                   else "`python train.py ur5e-reach-sac --seeds 5 --env.init-range limited`")
+        rows.append([label, f"{paper_pct(paper[0])} / {paper_collisions(key)}", "not run", command, ""])
+    b = _baseline_rows(ctx)
+    for radius in (0.01, 0.02):
+        s = b[("ur5e", "pseudo_ik", "absolute", radius)]["summary"]
+        rows.append([f"Table \"reaching baselines\": pseudo-IK, {radius * 100:g} cm target (UR5e, absolute control)",
+                     f"{100 * PAPER_BASELINES[('pseudo_ik', radius)][0]:.1f} % reached", pct(s["target_reached"]) + " reached",
+                     "`python -m tools.paper_tables --tables baselines --num-envs 4096 --seeds 5`",
+                     ctx.link("baselines/baselines.json")])
+    rows.append(["Table \"action space\": precision of absolute vs relative control", PAPER_ACTION_SPACE, "not run",
+                 "`python -m tools.paper_tables --tables action --action relative=RUN absolute=RUN`", ""])
+    ws = {(r["trained"], r["evaluated"]): r["summary"] for r in ctx.json("workspaces/workspace_generalization.json")["rows"]}
+    p = PAPER_WORKSPACE[("full", "full-range")]
+    rows.append(["Table \"workspace generalization\" (13 pairs), e.g. Full on Full Range",
+                 f"{100 * p[0]:.1f} % reached", pct(ws[("full", "full-range")]["target_reached"]) + " reached",
+                 "`python -m tools.paper_tables --tables workspace --workspace ...`", ctx.link("workspaces/README.md")])
+    ob = {(r["trained"], r["evaluated"]): r["summary"] for r in ctx.json("obstacle_size/obstacle_size.json")["rows"]}
+    p = PAPER_OBSTACLE[("reach", 0.3)]
+    rows.append(["Table \"obstacle size\" (14 pairs), e.g. a reach agent on a 0.3 m obstacle",
+                 f"{100 * p[0]:.1f} % reached, {100 * p[4]:.1f} % obstacle",
+                 f"{pct(ob[('reach', 0.3)]['target_reached'])} reached, {pct(ob[('reach', 0.3)]['obstacle_collision'])} obstacle",
+                 "`python -m tools.paper_tables --tables obstacle --obstacle ...`", ctx.link("obstacle_size/README.md")])
+    env = {r["env"]: r for r in ctx.json("throughput/env_throughput.json")["rows"] if r["num_envs"] == 8192}
+    for name in ("ur5e-reach", "ur5e-reach-avoid"):
+        rows.append([f"Simulation performance: {name} env steps/s, 8,192 envs", thousands(PAPER_THROUGHPUT[name]),
+                     thousands(env[name]["steps_per_s"]), "`python -m benchmarks.env_throughput --sizes 8192`",
+                     ctx.link("throughput/env_throughput.json")])
+    figures = (
+        ("Figure 1: a sampled initial state of the reach-avoid task", "figures/initial_state_reach_avoid.png",
+         "`python -m tools.plots env --out results/figures`"),
+        ("Figures: target distribution and the four workspaces", "figures/targets_ur5e.png",
+         "`python -m tools.plots env --out results/figures`"),
+        ("Figure: UR5e PPO training curves by workspace", "figures/curves_ur5e_workspaces.png",
+         "`python -m tools.plots curves RUN ... --out FILE`"),
+        ("Figure: reach-avoid training curves by obstacle size (ours: Panda)", "figures/curves_panda_obstacle_sizes.png",
+         "`python -m tools.plots curves RUN ... --out FILE`"),
+    )
+    for label, file, command in figures:
+        rows.append([label, "(figure)", "(figure)", command, ctx.link(file)])
+    for label in ("Figure: reward formulations", "Figure: network sizes (absolute control)",
+                  "Figure: UR5e SAC training curves by workspace", "Figure: reach-avoid observation spaces"):
+        rows.append([label, "(figure)", "not run", "", ""])
+    return rows
+
+
+# ------------------------------------------------------------------------------------------------
+
+TABLES: dict[str, Callable[[Context], list[list[str]]]] = {
+    "index": index_table,
+    "readme": readme_table,
+    "headline": headline_table,
+    "baselines": baselines_table,
+    "discount": DISCOUNT,
+    "joint_limit": JOINT_LIMIT,
+    "observations": OBSERVATIONS,
+    "action_scale": ACTION_SCALE,
+    "other_levers": OTHER_LEVERS,
+    "lr_schedule": LR_SCHEDULE,
+    "sac_grad_steps": SAC_GRAD_STEPS,
+    "sac_entropy": SAC_ENTROPY,
+    "sac_cpu": SAC_CPU,
+    "sampled_actions": sampled_table,
+    "workspaces": workspace_table,
+    "obstacle_size": obstacle_table,
+    "env_throughput": env_throughput_table,
+    "train_throughput": train_throughput_table,
+    "brax_reference": brax_table,
+    "failures": failures_table,
+}
+
+MARKER = re.compile(r"(<!-- table:([\w-]+) -->\n)(.*?)(<!-- /table -->)", re.S)
+
+
+def fill(text: str, ctx: Context, tables=TABLES) -> str:
+    """`text` with every marked table regenerated."""
+    def replace(m: re.Match) -> str:
+        name = m.group(2)
+        if name not in tables:
+            raise ValueError(f"table {name!r} is unknown: allowed are {', '.join(sorted(tables))}.")
+        return m.group(1) + markdown(tables[name](ctx)) + "\n" + m.group(4)
+    return MARKER.sub(replace, text)
+
+
+def markdown_files(root: str) -> list[str]:
+    """The files that may hold generated tables."""
+    files = [os.path.join(root, "README.md"), os.path.join(root, "results", "README.md")]
+    files += sorted(glob.glob(os.path.join(root, "results", "*", "README.md")))
+    return [f for f in files if os.path.exists(f)]
+
+
+def update(root: str = ROOT, tables=TABLES, check: bool = False) -> list[str]:
+    """Regenerates the tables of every file under `root`; returns the files that changed (with
+    `check`, the files that would change, written nowhere)."""
+    ctx, changed = Context(root), []
+    for path in markdown_files(root):
+        with open(path, encoding="utf-8") as f:
+            old = f.read()
+        ctx.md_dir = os.path.dirname(path)
+        new = fill(old, ctx, tables)
+        if new != old:
+            changed.append(os.path.relpath(path, root))
+            if not check:
+                with open(path, "w", encoding="utf-8") as f:
+                    f.write(new)
+    return changed
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(prog="python -m tools.results_index", description=__doc__.split("\n\n")[0])
+    p.add_argument("--check", action="store_true", help="write nothing; exit 1 if a table differs from its JSON files")
+    p.add_argument("--root", default=ROOT, help="repository root (default: this checkout)")
+    args = p.parse_args(argv)
+    changed = update(args.root, check=args.check)
+    for path in changed:
+        print(f"{'out of date' if args.check else 'rewrote'}: {path}", file=sys.stderr)
+    return 1 if args.check and changed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
