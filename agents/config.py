@@ -116,7 +116,7 @@ def validate(config: TrainConfig) -> None:
     expected = type(envs.default_config(config.env_name))
     if type(config.env) is not expected:
         raise ValueError(f"env={type(config.env).__name__} does not fit env_name={config.env_name!r}: allowed is {expected.__name__}.")
-    config.env.validate()
+    envs.registry.check_config(config.env_name, config.env)
     available = jax.local_device_count()
     if not 0 <= config.devices <= available:
         raise ValueError(f"devices={config.devices} is invalid: allowed are 0 (all) to {available} (local devices).")
