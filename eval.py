@@ -20,7 +20,9 @@ Env options: the env is `--env` (default: the checkpoint's); its config starts f
 checkpoint's stored env config (a baseline: the env's defaults) and `--env.<field> VALUE` replaces
 fields, exactly as in train.py. A reach checkpoint may run on its robot's reach-avoid env (the
 fields both tasks have come from the checkpoint, the obstacle's from the reach-avoid defaults). An
-observation the network was not trained on is refused, naming both shapes.
+observation the network was not trained on is refused, naming both shapes; so are the trained parts
+in another order and another action mode (relative / absolute), unless `--allow-env-mismatch`
+(then a warning).
 
 Checkpoints: eval.py loads the small policy export (`agents.export`: policy parameters, observation
 statistics, config) that the training driver writes next to each checkpoint; it never builds the
@@ -94,6 +96,9 @@ class EvalConfig(Generic[EnvConfigT]):
     """First evaluation seed; the default is the training driver's eval seed."""
     stochastic: bool = False
     """Sample a checkpoint's actions from its policy's distribution instead of taking the mode."""
+    allow_env_mismatch: bool = False
+    """Evaluate a checkpoint with another observation layout (the same parts reordered) or action
+    mode than it was trained with, warning instead of refusing (its network reads and acts as trained)."""
     last_steps: int = 10
     """Steps the final distance is averaged over."""
     json: Annotated[str | None, tyro.conf.arg(metavar="PATH")] = None
@@ -168,14 +173,15 @@ def main(argv: list[str] | None = None) -> list:
     eval_seeds = [args.seed + i for i in range(args.seeds)]
 
     for policy, config in zip(policies, configs):  # every bad combination refused before anything runs
-        evaluation.check(policy, env_name, config)
+        evaluation.check(policy, env_name, config, args.allow_env_mismatch)
     results = []
     for i, (policy, config) in enumerate(zip(policies, configs)):
         trained = f"{len(policy.units)} trained seed(s) x " if policy.export else ""
         _progress(f"[{i + 1}/{len(policies)}] {policy.name} on {env_name}: {trained}{len(eval_seeds)} eval seed(s) x "
                   f"{args.num_envs} episodes")
         results.append(evaluation.run(policy, env_name, config, args.num_envs, eval_seeds, args.last_steps,
-                                      stochastic=args.stochastic, progress=lambda line: _progress("  " + line)))
+                                      stochastic=args.stochastic, progress=lambda line: _progress("  " + line),
+                                      allow_env_mismatch=args.allow_env_mismatch))
 
     command = "python eval.py " + " ".join(shlex.quote(a) for a in argv)
     print(evaluation.markdown(results))
@@ -200,7 +206,7 @@ def main(argv: list[str] | None = None) -> list:
     if args.video:
         _progress(f"rendering the first episode of {args.video_envs} env(s) to {args.video} ...")
         write_video(args.video, policies[0], env_name, configs[0], args.video_envs, args.seed, args.video_size,
-                    stochastic=args.stochastic)
+                    stochastic=args.stochastic, allow_env_mismatch=args.allow_env_mismatch)
         _progress(f"video: {args.video}")
     return results
 
@@ -239,14 +245,15 @@ def _video_size(size: str) -> tuple[int, int]:
 
 
 def write_video(path: str, policy, env_name: str, env_config, num_envs: int, seed: int, size: str = "480x360",
-                stochastic: bool = False) -> None:
+                stochastic: bool = False, allow_env_mismatch: bool = False) -> None:
     """Renders each of `num_envs` envs' first episode (a grid of views) to an mp4 or gif, with the
     actions the evaluation took (sampled with `stochastic`)."""
     from envs import render
 
     width, height = _video_size(size)
     env = envs.from_config(env_name, env_config)
-    records = evaluation.rollout(policy, env_name, env_config, num_envs, seed, stochastic=stochastic)
+    records = evaluation.rollout(policy, env_name, env_config, num_envs, seed, stochastic=stochastic,
+                                 allow_env_mismatch=allow_env_mismatch)
     frames = render.rollout_frames(env, records, width=width, height=height)
     _makedirs_for(path)
     render.write_video(path, frames, fps=round(1.0 / env.dt))

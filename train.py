@@ -4,11 +4,15 @@
     python train.py point-mass-ppo --seeds 5 --num-timesteps 300000 --env.goal-radius 0.05
     python train.py ur5e-reach-ppo --algo.learning-rate 3e-4 --logdir runs/lr3e-4
     python train.py ur5e-reach-ppo --logdir runs/lr3e-4 --resume          # continue a run
+    python train.py ur5e-reach-ppo --logdir runs/lr3e-4 --overwrite       # delete that run, start afresh
     python train.py point-mass-sac --help                                 # every option
 
 Every option comes from the config dataclasses (`agents.config.TrainConfig`, the algorithm's
 config and the environment's config), so `--help` lists each with its docstring. The presets are
 in `agents/presets.py`.
+
+Exit codes: 0 done (or stopped by --stop-after-steps), 1 a non-finite learner metric or a failed
+write, 2 bad input (a one-line `error:` message), 130 stopped by Ctrl-C (after its checkpoint).
 """
 
 from __future__ import annotations
@@ -50,12 +54,28 @@ def main(argv: list[str] | None = None):
     return result
 
 
-if __name__ == "__main__":
+INTERRUPTED = 130
+"""Exit code of a run stopped by Ctrl-C (the shell's 128 + SIGINT), so scripts can tell it from a finished one."""
+
+
+def cli(argv: list[str] | None = None) -> int:
+    """`main` with the exit code: one-line `error:` messages instead of tracebacks."""
     try:
-        main()
+        result = main(argv)
     except ValueError as error:
         print(f"error: {error}", file=sys.stderr)
-        raise SystemExit(2)
+        return 2
     except NonFiniteLossError as error:
         print(f"error: {error}", file=sys.stderr)
-        raise SystemExit(1)
+        return 1
+    except OSError as error:  # a write that failed mid-run (disk full, permissions changed)
+        print(f"error: {error}", file=sys.stderr)
+        return 1
+    if result.status == "interrupted":
+        print(f"interrupted: continue with --resume --logdir {result.logdir}", file=sys.stderr)
+        return INTERRUPTED
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(cli())

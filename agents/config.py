@@ -53,7 +53,10 @@ class TrainConfig(Generic[EnvConfigT, AlgoConfigT]):
     logdir: str = ""
     """Output directory ("" = runs/<preset>/<date-time>)."""
     resume: bool = False
-    """Continue from the newest checkpoint in logdir (with the config stored there)."""
+    """Continue from the newest intact checkpoint in logdir (with the config stored there)."""
+    overwrite: bool = False
+    """Start afresh in a logdir that holds an earlier run, removing that run's files first (checkpoints,
+    config.json, metrics.csv, eval.json, tb/). Without it (or --resume) such a logdir is refused."""
     checkpoint_every: int = 0
     """Save a checkpoint every this many env steps (0 = only at the end)."""
     keep_checkpoints: int = 3
@@ -88,7 +91,7 @@ class TrainConfig(Generic[EnvConfigT, AlgoConfigT]):
         return registry.of_config(self.algo).name
 
 
-RUN_FIELDS = ("num_timesteps", "devices", "multi_device", "logdir", "resume", "checkpoint_every", "keep_checkpoints",
+RUN_FIELDS = ("num_timesteps", "devices", "multi_device", "logdir", "resume", "overwrite", "checkpoint_every", "keep_checkpoints",
               "checkpoint_envs", "log_every", "stop_after_steps", "eval_envs", "eval_seed", "eval_last_steps",
               "tensorboard", "progress")
 """Fields that may differ between a checkpoint's config and a resuming command line."""
@@ -113,7 +116,7 @@ def validate(config: TrainConfig) -> None:
     expected = type(envs.default_config(config.env_name))
     if type(config.env) is not expected:
         raise ValueError(f"env={type(config.env).__name__} does not fit env_name={config.env_name!r}: allowed is {expected.__name__}.")
-    config.env.validate()
+    envs.registry.check_config(config.env_name, config.env)
     available = jax.local_device_count()
     if not 0 <= config.devices <= available:
         raise ValueError(f"devices={config.devices} is invalid: allowed are 0 (all) to {available} (local devices).")
@@ -128,6 +131,9 @@ def validate(config: TrainConfig) -> None:
         raise ValueError(f"matmul_precision={config.matmul_precision!r} is unknown: allowed are {', '.join(PRECISIONS)}.")
     if config.resume and not config.logdir:
         raise ValueError("logdir='' is invalid with resume=True: allowed is the directory of the run to continue.")
+    if config.resume and config.overwrite:
+        raise ValueError("overwrite=True is invalid with resume=True: allowed is one of them (--resume continues the "
+                         "run in logdir, --overwrite deletes it and starts afresh).")
 
 
 # ----------------------------------------------------------------------------------------------
@@ -183,9 +189,14 @@ def config_from_json(data: dict) -> TrainConfig:
     return dataclass_from_dict(TrainConfig, data)
 
 
-def merge_resume_config(config: TrainConfig, saved: TrainConfig) -> TrainConfig:
+def merge_resume_config(config: TrainConfig, saved: TrainConfig, done_steps: int = 0) -> TrainConfig:
     """The saved config, with only the run-control fields (`RUN_FIELDS`) taken from `config`;
-    ValueError naming the first other field that differs."""
+    ValueError naming the first other field that differs, or a num_timesteps below the `done_steps`
+    env steps the checkpoint has done. A changed num_timesteps is stored with a warning saying so."""
+    if config.num_timesteps < done_steps:
+        raise ValueError(f"num_timesteps={config.num_timesteps} is below the checkpoint's {done_steps} env steps (the "
+                         f"stored run's num_timesteps is {saved.num_timesteps}): allowed on --resume is "
+                         f"num_timesteps >= {done_steps}.")
     for field in dataclasses.fields(TrainConfig):
         if field.name in RUN_FIELDS or field.name == "preset":
             continue
@@ -198,6 +209,9 @@ def merge_resume_config(config: TrainConfig, saved: TrainConfig) -> TrainConfig:
                             f"{field.name}.{sub.name}={getattr(mine, sub.name)!r} differs from the checkpoint's "
                             f"{getattr(theirs, sub.name)!r}: allowed on --resume is only the checkpoint's value.")
             raise ValueError(f"{field.name}={mine!r} differs from the checkpoint's {theirs!r}: allowed on --resume is only the checkpoint's value.")
-    if config.num_timesteps != saved.num_timesteps and saved.algo.schedule_spans_run:
-        warnings.warn("num_timesteps changed on resume: the learning-rate schedule is stretched to the new length.")
+    if config.num_timesteps != saved.num_timesteps:
+        stretched = " The learning-rate schedule is stretched to the new length." if saved.algo.schedule_spans_run else ""
+        warnings.warn(f"num_timesteps={config.num_timesteps} differs from the checkpoint's {saved.num_timesteps}: the "
+                      f"run continues to {config.num_timesteps} env steps and its config.json now stores that.{stretched}",
+                      stacklevel=2)
     return dataclasses.replace(saved, **{f: getattr(config, f) for f in RUN_FIELDS})

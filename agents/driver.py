@@ -1,8 +1,10 @@
 """The training run: compiled programs, the chunk loop, checkpoints and Ctrl-C.
 
-`train(config)` runs compiled chunks (`agents.loop`) and, between them, logs (`agents.logger`),
+`train(config)` checks the logdir (an earlier run there is refused unless `resume` or `overwrite`),
+runs compiled chunks (`agents.loop`) and, between them, logs (`agents.logger`),
 checkpoints (`agents.checkpoint`, plus the policy export of `agents.export`), honours Ctrl-C
-(checkpoint, then exit) and stops on a non-finite loss (keeping the last good checkpoint). At the
+(checkpoint, then exit) and stops on a non-finite learner metric (keeping the last good checkpoint;
+a resume skips damaged checkpoints, moving them aside). At the
 end it evaluates the deterministic policy and stores the metrics as JSON next to the final
 checkpoint. The config and its validation live in `agents.config`; the algorithm comes from
 `agents.registry`.
@@ -17,9 +19,12 @@ import functools
 import json
 import math
 import os
+import shutil
 import signal
 import sys
+import tempfile
 import time
+import warnings
 
 import jax
 import jax.numpy as jnp
@@ -35,7 +40,8 @@ from agents.loop import Programs
 
 
 class NonFiniteLossError(RuntimeError):
-    """A loss became NaN or infinite; the run stopped without saving the broken state."""
+    """A learner metric (a loss, the gradient norm, the KL, ...) became NaN or infinite; the run stopped
+    without saving the broken state."""
 
 
 @functools.lru_cache(maxsize=8)
@@ -100,26 +106,24 @@ def _train(config: TrainConfig, learner_cls: type | None = None) -> TrainResult:
     logdir = config.logdir or os.path.join("runs", config.preset or config.env_name,
                                            datetime.datetime.now().strftime("%Y%m%d-%H%M%S"))
     config = dataclasses.replace(config, logdir=logdir)
+    created = prepare_logdir(config)  # refuses an earlier run's logdir before anything is written
     ckpt = Checkpointer(os.path.join(logdir, "checkpoints"), keep=config.keep_checkpoints)
     start_step = None
-    if config.resume:
-        start_step = ckpt.latest_step()
-        if start_step is None:
-            raise ValueError(f"resume=True but logdir={logdir!r} holds no checkpoint: allowed is the directory of an earlier run.")
-        saved = config_from_json(ckpt.restore_config(start_step))
-        config = merge_resume_config(config, saved)
-        validate(config)
-    os.makedirs(logdir, exist_ok=True)
-    with open(os.path.join(logdir, "config.json"), "w") as f:
-        json.dump(config_json(config), f, indent=2)
-
-    programs = programs_for(config, learner_cls)
+    try:
+        if config.resume:
+            ckpt, start_step, config, programs, state = _resume(ckpt, config, learner_cls)
+        else:
+            programs = programs_for(config, learner_cls)
+            state = programs.init(seed_keys(config))
+        with open(os.path.join(logdir, "config.json"), "w") as f:
+            json.dump(config_json(config), f, indent=2)
+    except BaseException:
+        ckpt.close()
+        if created:
+            remove_run_files(logdir, remove_dir=True)
+        raise
     spu = env_steps_per_update(config)
     updates_total = total_updates(config)
-    if start_step is None:
-        state = programs.init(seed_keys(config))
-    else:
-        state = restore_state(ckpt, start_step, programs, config, with_envs=saved.checkpoint_envs)
     updates_done = int(jax.device_get(state.updates[0]))
 
     log_every = config.log_every or max(spu, config.num_timesteps // 50)
@@ -147,11 +151,10 @@ def _train(config: TrainConfig, learner_cls: type | None = None) -> TrainResult:
             seconds = time.perf_counter() - t0
             updates_done += n
             step = updates_done * spu
-            bad = [k for k in metrics if k.startswith("loss/") and not np.all(np.isfinite(metrics[k]))]
+            bad = nonfinite_learner_metrics(metrics)
             if bad:
-                raise NonFiniteLossError(
-                    f"{bad[0]} became {metrics[bad[0]].tolist()} (per seed) in the updates ending at env step {step}; "
-                    f"training stopped. The last good checkpoint ({last_saved}) is kept in {ckpt.directory}.")
+                raise NonFiniteLossError(_nonfinite_message(bad, metrics, step, last_saved, ckpt.directory, logdir,
+                                                            removed=created and last_saved is None))
             rate = n * spu * config.seeds / seconds
             logger.log(step, metrics, {"steps_per_second": rate, "wall_seconds": seconds})
             logger.progress(step, updates_total * spu, rate / config.seeds, metrics)
@@ -181,12 +184,142 @@ def _train(config: TrainConfig, learner_cls: type | None = None) -> TrainResult:
             for path in (os.path.join(ckpt.step_dir(step), "eval.json"), os.path.join(logdir, "eval.json")):
                 with open(path, "w") as f:
                     f.write(text)
+    except NonFiniteLossError:
+        if created and last_saved is None:  # nothing worth keeping: leave no half-made run directory
+            logger.close()
+            ckpt.close()
+            remove_run_files(logdir, remove_dir=True)
+        raise
     finally:
         logger.close()
         ckpt.close()
         _restore_sigint(previous_handler)
     note = programs.learner.progress_note(updates_done)
     return TrainResult(state, updates_done * spu, status, logdir, config, eval_metrics, last_metrics, note)
+
+
+RUN_FILES = ("checkpoints", "corrupt_checkpoints", "config.json", "metrics.csv", "eval.json", "tb")
+"""What a run writes into its logdir (`--overwrite` removes these, and only these)."""
+
+
+def prepare_logdir(config: TrainConfig) -> bool:
+    """Checks `config.logdir` before anything is written or compiled and makes it ready; returns
+    whether this call created it. ValueError (naming the directory) for a file in the way, a
+    directory that cannot be created or written, an earlier run without `resume` or `overwrite`
+    (with `overwrite`: that run's `RUN_FILES` are removed), or `resume` without a checkpoint (then
+    nothing is created)."""
+    logdir = config.logdir
+    if os.path.exists(logdir) and not os.path.isdir(logdir):
+        raise ValueError(f"logdir={logdir!r} is a file: allowed is a directory (a new one, or an earlier run's with "
+                         "--resume).")
+    if config.resume:
+        if not os.path.isdir(os.path.join(logdir, "checkpoints")):
+            raise ValueError(f"resume=True but logdir={logdir!r} holds no checkpoint: allowed is the directory of an "
+                             "earlier run.")
+        _check_writable(logdir)
+        return False
+    earlier = [name for name in RUN_FILES if os.path.exists(os.path.join(logdir, name))
+               and not (os.path.isdir(os.path.join(logdir, name)) and not os.listdir(os.path.join(logdir, name)))]
+    if earlier and not config.overwrite:
+        raise ValueError(f"logdir={logdir!r} holds an earlier run ({', '.join(earlier)}): allowed are --resume to "
+                         "continue it, a new --logdir, or --overwrite to delete the earlier run's files first.")
+    created = not os.path.exists(logdir)
+    try:
+        os.makedirs(logdir, exist_ok=True)
+    except OSError as error:
+        raise ValueError(f"logdir={logdir!r} cannot be created ({error.strerror or error}): allowed is a directory "
+                         "you can write to.") from None
+    _check_writable(logdir)
+    if earlier:
+        remove_run_files(logdir)
+    return created
+
+
+def _check_writable(logdir: str) -> None:
+    # A real write: os.access says yes to root even on file systems that refuse writes.
+    try:
+        with tempfile.TemporaryFile(dir=logdir):
+            pass
+    except OSError as error:
+        raise ValueError(f"logdir={logdir!r} is not writable ({error.strerror or error}): allowed is a directory you "
+                         "can write to.") from None
+
+
+def remove_run_files(logdir: str, remove_dir: bool = False) -> None:
+    """Removes what a run wrote into `logdir` (`RUN_FILES`); with `remove_dir`, also `logdir` itself
+    if nothing else is left in it."""
+    for name in RUN_FILES:
+        path = os.path.join(logdir, name)
+        if os.path.isdir(path) and not os.path.islink(path):
+            shutil.rmtree(path)
+        elif os.path.lexists(path):
+            os.remove(path)
+    if remove_dir and os.path.isdir(logdir) and not os.listdir(logdir):
+        os.rmdir(logdir)
+
+
+def _resume(ckpt: Checkpointer, config: TrainConfig, learner_cls):
+    """(checkpointer, step, merged config, programs, state) of the newest intact checkpoint. A
+    checkpoint that cannot be read is moved to `<logdir>/corrupt_checkpoints/` with a warning naming
+    it (so the resumed run can save that step again); ValueError if none is intact."""
+    bad = []
+    for step in sorted(ckpt.manager.all_steps(), reverse=True):
+        try:
+            saved = config_from_json(ckpt.restore_config(step))
+        except Exception as error:  # orbax / tensorstore / json raise many types on a damaged file
+            bad.append((step, error))
+            continue
+        merged = merge_resume_config(config, saved, done_steps=step)  # a refused option is not damage
+        validate(merged)
+        programs = programs_for(merged, learner_cls)
+        try:
+            state = restore_state(ckpt, step, programs, merged, with_envs=saved.checkpoint_envs)
+        except Exception as error:
+            bad.append((step, error))
+            continue
+        break
+    else:
+        what = "; ".join(f"{ckpt.step_dir(s)}: {_first_line(e)}" for s, e in bad) or "none found"
+        raise ValueError(f"resume=True but logdir={config.logdir!r} holds no intact checkpoint ({what}): allowed is "
+                         "the directory of an earlier run with at least one readable checkpoint.")
+    if bad:
+        aside = os.path.join(config.logdir, "corrupt_checkpoints")
+        os.makedirs(aside, exist_ok=True)
+        for s, error in bad:
+            target = os.path.join(aside, str(s))
+            if os.path.exists(target):
+                shutil.rmtree(target)
+            shutil.move(ckpt.step_dir(s), target)
+            warnings.warn(f"checkpoint {ckpt.step_dir(s)} is damaged ({_first_line(error)}); moved to {target}. "
+                          f"Resuming from the newest intact one, env step {step}.", stacklevel=3)
+        ckpt.close()  # the manager lists the steps it found when it was made
+        ckpt = Checkpointer(ckpt.directory, keep=config.keep_checkpoints)
+    return ckpt, step, merged, programs, state
+
+
+def _first_line(error: BaseException) -> str:
+    text = str(error).strip().splitlines()
+    first = text[0].split(" See full TensorStore details")[0] if text else ""  # the rest is a C++ repr
+    return f"{type(error).__name__}: {first}"
+
+
+def nonfinite_learner_metrics(metrics: dict) -> list[str]:
+    """The learner metrics (every one but the `episode/` averages, which are NaN in a chunk in which
+    no episode ended) holding a NaN or infinity."""
+    return [k for k in sorted(metrics) if not k.startswith("episode/") and not np.all(np.isfinite(metrics[k]))]
+
+
+def _nonfinite_message(bad, metrics, step, last_saved, directory, logdir, removed) -> str:
+    what = f"{bad[0]} became {np.asarray(metrics[bad[0]]).tolist()} (per seed)"
+    if len(bad) > 1:
+        what += f" (also non-finite: {', '.join(bad[1:])})"
+    if last_saved is not None:
+        kept = f"The last good checkpoint (env step {last_saved}) is kept in {directory}."
+    elif removed:
+        kept = f"No checkpoint had been saved yet, so none is kept; the run directory {logdir} was removed."
+    else:
+        kept = f"No checkpoint had been saved yet, so none is kept in {directory}."
+    return f"{what} in the updates ending at env step {step}; training stopped. {kept}"
 
 
 def _transient_fields(learner) -> tuple[str, ...]:

@@ -98,22 +98,39 @@ def checkpoint_policy(path: str) -> Policy:
         loaded = export.load(path)
     except export.MissingExport as missing:
         print(f"note: {missing.step_dir} has no policy export; writing one from the full checkpoint.", file=sys.stderr)
-        try:
-            driver.export_checkpoint(missing.step_dir)
-        except Exception as error:  # orbax / tensorstore raise many types on a broken checkpoint
-            raise ValueError(f"checkpoint {missing.step_dir!r} is corrupt or unreadable: {type(error).__name__}: "
-                             f"{str(error).splitlines()[0] if str(error) else ''}") from None
-        loaded = export.load(missing.step_dir)
+        loaded = _rebuild_export(missing.step_dir)
+    except export.CorruptExport as corrupt:
+        if corrupt.step_dir is None:  # an export without its checkpoint (e.g. one copied elsewhere)
+            raise
+        print(f"note: {corrupt}; rebuilding it from the full checkpoint.", file=sys.stderr)
+        loaded = _rebuild_export(corrupt.step_dir, because=str(corrupt))
     return Policy("checkpoint", path, list(loaded.seeds), loaded)
 
 
-def check(policy: Policy, env_name: str, env_config) -> None:
+def _rebuild_export(step_dir: str, because: str = "") -> export.PolicyExport:
+    """The policy export written anew from the full checkpoint in `step_dir`."""
+    try:
+        driver.export_checkpoint(step_dir)
+    except Exception as error:  # orbax / tensorstore raise many types on a broken checkpoint
+        raise ValueError((f"{because}; and " if because else "") + f"checkpoint {step_dir!r} is corrupt or unreadable: "
+                         f"{type(error).__name__}: {str(error).splitlines()[0] if str(error) else ''}") from None
+    return export.load(step_dir)
+
+
+def check(policy: Policy, env_name: str, env_config, allow_env_mismatch: bool = False) -> None:
     """`check_compatible` on the env built from `env_config` (cheap: nothing is compiled)."""
-    check_compatible(policy, env_name, envs.from_config(env_name, env_config))
+    check_compatible(policy, env_name, envs.from_config(env_name, env_config), allow_env_mismatch)
 
 
-def check_compatible(policy: Policy, env_name: str, env) -> None:
-    """ValueError unless `policy` can act in `env` (same robot, matching observation and action)."""
+LAYOUT_FIELDS = ("observation", "action")
+"""Env options a network is tied to beyond the sizes: the order of the observation's parts and the
+meaning of its action (relative steps or absolute joint targets)."""
+
+
+def check_compatible(policy: Policy, env_name: str, env, allow_env_mismatch: bool = False) -> None:
+    """ValueError unless `policy` can act in `env` (same robot, matching observation and action
+    sizes, and the trained observation layout and action mode; with `allow_env_mismatch` a different
+    layout or mode is only warned about)."""
     if policy.export is None:
         baselines.check(policy.name, env)
         return
@@ -123,14 +140,30 @@ def check_compatible(policy: Policy, env_name: str, env) -> None:
         allowed = f"the envs of robot {trained}" if trained else "the envs without a robot"
         raise ValueError(f"checkpoint {policy.name!r} was trained on {e.env_name!r} (robot {trained or 'none'}): "
                          f"env={env_name!r} is another robot; allowed are {allowed}.")
+    config = getattr(env.unwrapped, "config", None)
     if env.observation_size != e.observation_size:
-        observation = getattr(getattr(env.unwrapped, "config", None), "observation", None)
+        observation = getattr(config, "observation", None)
+        shown = f" with observation={observation!r}" if observation is not None else ""
+        trained_obs = getattr(e.config.env, "observation", None)
+        allowed = (f"the trained observation {trained_obs!r}" if trained_obs is not None
+                   else f"observations of shape ({e.observation_size},), as trained")
         raise ValueError(f"the network of checkpoint {policy.name!r} takes observations of shape ({e.observation_size},) but "
-                         f"env {env_name!r} with observation={observation!r} gives shape ({env.observation_size},): "
-                         f"allowed are env options giving the trained observation {e.config.env.observation!r}.")
+                         f"env {env_name!r}{shown} gives shape ({env.observation_size},): allowed are env options giving "
+                         f"{allowed}.")
     if env.action_size != e.action_size:
         raise ValueError(f"the network of checkpoint {policy.name!r} outputs actions of shape ({e.action_size},) but env "
                          f"{env_name!r} takes shape ({env.action_size},).")
+    differ = [f"{name}={getattr(config, name)!r} (trained: {getattr(e.config.env, name)!r})" for name in LAYOUT_FIELDS
+              if hasattr(config, name) and hasattr(e.config.env, name)
+              and getattr(config, name) != getattr(e.config.env, name)]
+    if differ and allow_env_mismatch:
+        warnings.warn(f"checkpoint {policy.name!r} is evaluated with {'; '.join(differ)}: its network reads and acts "
+                      "as trained, so the numbers describe a mismatched policy (allowed by allow_env_mismatch).",
+                      stacklevel=3)
+    elif differ:
+        raise ValueError(f"checkpoint {policy.name!r} cannot run with {'; '.join(differ)}: its network reads the "
+                         "observation's parts in the trained order and its actions in the trained mode; allowed are "
+                         "the trained values (or --allow-env-mismatch to evaluate anyway, with a warning).")
 
 
 # ------------------------------------------------------------------------------------------------
@@ -168,7 +201,8 @@ def _evaluator(env_name: str, env_config, algo_config, obs_size: int, act_size: 
     return _Program(env, jax.jit(jax.vmap(fn, in_axes=(0, None))))
 
 
-def _program(policy: Policy, env_name: str, env_config, num_envs: int, last_steps: int, stochastic: bool) -> _Program:
+def _program(policy: Policy, env_name: str, env_config, num_envs: int, last_steps: int, stochastic: bool,
+             allow_env_mismatch: bool = False) -> _Program:
     """The cached evaluation program (`_evaluator`) for `policy`'s network on this env, after checking
     that the env fits the policy and that a stochastic evaluation has a distribution to sample."""
     if stochastic and policy.export is None:
@@ -177,7 +211,7 @@ def _program(policy: Policy, env_name: str, env_config, num_envs: int, last_step
     e = policy.export
     program = _evaluator(env_name, env_config, e.config.algo if e else None, e.observation_size if e else 0,
                          e.action_size if e else 0, int(num_envs), int(last_steps), bool(stochastic))
-    check_compatible(policy, env_name, program.env)
+    check_compatible(policy, env_name, program.env, allow_env_mismatch)
     return program
 
 
@@ -252,15 +286,18 @@ def _metric_names(per_step: dict, last_steps: int) -> dict:
 
 
 def run(policy: Policy, env_name: str, env_config, num_envs: int = 4096, eval_seeds=(DEFAULT_EVAL_SEED,),
-        last_steps: int = 10, stochastic: bool = False, progress: Callable[[str], None] | None = None) -> Result:
+        last_steps: int = 10, stochastic: bool = False, progress: Callable[[str], None] | None = None,
+        allow_env_mismatch: bool = False) -> Result:
     """Evaluates `policy` on `num_envs` episodes per unit and evaluation seed (see module doc);
-    `stochastic=True` samples a checkpoint's actions instead of taking its deterministic mode.
+    `stochastic=True` samples a checkpoint's actions instead of taking its deterministic mode;
+    `allow_env_mismatch` evaluates a checkpoint on another observation layout or action mode
+    (`check_compatible`) with a warning instead of an error.
     `progress(line)` is told when the program compiles and what each evaluation seed gave."""
     if int(num_envs) < 1:
         raise ValueError(f"num_envs={num_envs!r} is invalid: allowed is an integer >= 1.")
     if not eval_seeds:
         raise ValueError("eval_seeds=[] is invalid: allowed is at least one seed.")
-    program = _program(policy, env_name, env_config, num_envs, last_steps, stochastic)
+    program = _program(policy, env_name, env_config, num_envs, last_steps, stochastic, allow_env_mismatch)
     params = policy.export.state if policy.export else baselines.index(policy.name)
     batch = len(policy.units) if policy.export else 0
     t0 = time.perf_counter()
@@ -424,12 +461,12 @@ def device_description() -> str:
 
 
 def rollout(policy: Policy, env_name: str, env_config, num_envs: int = 1, eval_seed: int = DEFAULT_EVAL_SEED,
-            unit: int = 0, stochastic: bool = False) -> dict:
+            unit: int = 0, stochastic: bool = False, allow_env_mismatch: bool = False) -> dict:
     """Joint positions, target and obstacle of each env's first episode (for `envs.render`):
     {"qpos": (T + 1, n, nq), "target_pos": ..., ["obstacle_pos": ...], "length": (n,), "metrics": {...}}
     with the policy's unit `unit` (a trained seed's index); the episodes that `run` evaluates with as
     many envs, the same seed and the same `stochastic`."""
-    program = _program(policy, env_name, env_config, num_envs, 10, stochastic)
+    program = _program(policy, env_name, env_config, num_envs, 10, stochastic, allow_env_mismatch)
     if policy.export:
         params = jax.tree.map(lambda x: x[unit:unit + 1], policy.export.state)
         out, records = jax.device_get(program.evaluate(params, jax.random.PRNGKey(int(eval_seed))))

@@ -128,6 +128,11 @@ def find(path: str) -> str:
     if not os.path.exists(path):
         raise ValueError(f"checkpoint {path!r} does not exist: allowed is a train.py logdir, a checkpoint step "
                          "directory or a policy export directory.")
+    if os.path.isfile(path):
+        if os.path.basename(path) in ("policy.json", "policy.npz"):
+            return os.path.dirname(path)
+        raise ValueError(f"checkpoint {path!r} is a file: allowed is a train.py logdir, a checkpoint step directory or a "
+                         "policy export directory.")
     if os.path.isfile(os.path.join(path, "policy.json")):
         return path
     if os.path.isfile(os.path.join(path, DIRNAME, "policy.json")):
@@ -154,22 +159,39 @@ class MissingExport(ValueError):
         self.step_dir = step_dir
 
 
+class CorruptExport(ValueError):
+    """A policy export whose file cannot be read; `step_dir` is its checkpoint's step directory if
+    that holds a full checkpoint to rebuild it from (else None)."""
+
+    def __init__(self, directory: str, name: str, error: BaseException):
+        super().__init__(f"policy export {directory!r} is corrupt or unreadable: {name}: {type(error).__name__}: "
+                         f"{str(error).splitlines()[0] if str(error) else ''}")
+        parent = os.path.dirname(directory)
+        full = os.path.basename(directory) == DIRNAME and all(
+            os.path.isdir(os.path.join(parent, d)) for d in ("state", "config"))
+        self.step_dir = parent if full else None
+
+
 def load(path: str) -> PolicyExport:
-    """Loads the export that `path` names (see `find`). ValueError if it is missing or corrupt."""
+    """Loads the export that `path` names (see `find`). ValueError if it is missing or corrupt
+    (`CorruptExport` naming the file)."""
     directory = find(path)
+    name = "policy.json"
     try:
-        with open(os.path.join(directory, "policy.json")) as f:
+        with open(os.path.join(directory, name)) as f:
             meta = json.load(f)
-        with np.load(os.path.join(directory, "policy.npz")) as data:
-            flat = {k: np.asarray(data[k]) for k in data.files}
         if meta.get("format") != FORMAT:
             raise ValueError(f"format {meta.get('format')!r} is unsupported (allowed: {FORMAT})")
         config = config_from_json(meta["config"])
+        name = "policy.npz"
+        with np.load(os.path.join(directory, name)) as data:
+            flat = {k: np.asarray(data[k]) for k in data.files}
         tree = _unflatten(flat)
         stats = normalizer.RunningStats(tree["obs_stats"]["count"], tree["obs_stats"]["mean"], tree["obs_stats"]["var"])
         params = tree["policy"]
-    except (OSError, KeyError, TypeError, ValueError, json.JSONDecodeError, zipfile.BadZipFile, EOFError) as error:
-        raise ValueError(f"policy export {directory!r} is corrupt or unreadable: {type(error).__name__}: {error}") from None
+    except (OSError, KeyError, TypeError, ValueError, AttributeError, json.JSONDecodeError, zipfile.BadZipFile,
+            EOFError) as error:
+        raise CorruptExport(directory, name, error) from None
     learner = registry.make_learner(config.algo, int(meta["observation_size"]), int(meta["action_size"]))
     _check_shapes(directory, learner, params, stats, meta)
     return PolicyExport(directory, meta, config, learner, learner.policy_state(params, stats))

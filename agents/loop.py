@@ -138,7 +138,7 @@ class Learner(Protocol):
 
     def update(self, state: Any, batch: Transition, key: jax.Array, par: Parallel) -> tuple[Any, dict]:
         """One update from `(steps_per_update, local_envs)` transitions; metrics are scalars
-        already averaged over devices. Keys starting with "loss/" are checked for NaN."""
+        already averaged over devices. Every key is checked for NaN and infinity (`agents.driver`)."""
 
     def policy(self, state: Any, obs: jax.Array) -> jax.Array:
         """Deterministic actions for evaluation."""

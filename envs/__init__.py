@@ -24,6 +24,7 @@ from envs.wrappers import wrap  # noqa: E402
 from envs.config import ReachAvoidConfig, ReachConfig  # noqa: E402
 from envs.point_mass import PointMass, PointMassConfig  # noqa: E402
 from envs.robots import ROBOTS  # noqa: E402
+from envs.robots.base import bounds as robot_bounds  # noqa: E402
 from envs.tasks import Reach, ReachAvoid  # noqa: E402
 
 
@@ -33,7 +34,10 @@ def _arm_spec(robot: str, task: str) -> EnvSpec:
     def build(config):
         return env_cls(ROBOTS[robot](gravity_compensation=config.gravity_compensation), config)
 
-    return EnvSpec(config_cls, build, f"{ROBOTS[robot].__name__} {task}", robot=robot)
+    def check(config):
+        config.validate_for_robot(robot, *robot_bounds(ROBOTS[robot]))
+
+    return EnvSpec(config_cls, build, f"{ROBOTS[robot].__name__} {task}", robot=robot, check=check)
 
 
 for _robot in ROBOTS:

@@ -17,7 +17,7 @@ import numpy as np
 from mujoco import mjx
 
 from envs import fast_mjx, rewards, workspaces
-from envs.base import Env, State
+from envs.base import Env, State, check_action
 from envs.config import ReachConfig
 from envs.robots import Robot, first_valid
 
@@ -39,7 +39,7 @@ class ArmEnv(Env):
     """A robot arm that must bring its end effector to a target. See `ReachConfig`."""
 
     def __init__(self, robot: Robot, config: ReachConfig):
-        config.validate()
+        config.validate_for_robot(robot.name, robot.reach, float(np.max(robot.joint_high - robot.joint_low)))
         if config.target_sampling == "reachable" and config.workspace == "pandagym":
             raise ValueError(
                 "target_sampling='reachable' is invalid with workspace='pandagym': random poses rarely put "
@@ -71,6 +71,7 @@ class ArmEnv(Env):
     def step(self, state: State, action: jax.Array) -> State:
         # GPU-friendly replacements of MJX's Cholesky calls and line-search loop (`envs.fast_mjx`):
         # the same numbers with far fewer kernel and graph launches per step.
+        check_action(action, (self.action_size,), f"one {self.robot.name} env (one action per joint)")
         with jax.default_matmul_precision("highest"), fast_mjx.fast_mjx():
             return self._step(state, action)
 
@@ -138,7 +139,8 @@ class ArmEnv(Env):
 
         info = dict(state.info)
         ee = data.site_xpos[robot.ee_site]
-        distance = jnp.linalg.norm(ee - info["target_pos"])
+        # A NaN step (e.g. a NaN action) keeps the last finite distance, so averages over episodes stay finite.
+        distance = jnp.where(nan, info["recent_distances"][0], jnp.linalg.norm(ee - info["target_pos"]))
         in_target = (distance < cfg.target_radius) & ~failed
         reached = jnp.maximum(info["reached"], in_target)
         left = (info["in_target"] > 0) & ~in_target & ~failed

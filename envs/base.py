@@ -11,6 +11,7 @@ import abc
 from typing import Any
 
 import jax
+import jax.numpy as jnp
 from flax import struct
 
 
@@ -34,6 +35,14 @@ class State:
     info: dict[str, Any] = struct.field(default_factory=dict)
     """Task bookkeeping (target, obstacle, counters, RNG). Wrappers add `steps`, `truncation`,
     `final_obs`."""
+
+
+def check_action(action, expected: tuple[int, ...], what: str) -> None:
+    """ValueError at trace time unless `action` has shape `expected`: JAX would broadcast a (4,) or
+    () action over every joint, or fail with a broadcasting error naming no argument."""
+    shape = tuple(jnp.shape(action))
+    if shape != tuple(expected):
+        raise ValueError(f"action of shape {shape} is invalid for {what}: allowed is shape {tuple(expected)}.")
 
 
 class Env(abc.ABC):

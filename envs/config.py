@@ -10,7 +10,7 @@ from __future__ import annotations
 import dataclasses
 from typing import Literal, Optional
 
-from envs.validation import choice, integer, positive
+from envs.validation import choice, integer, positive, below
 
 ACTIONS = ("relative", "absolute")
 REWARDS = ("sparse", "semi_sparse", "dense")
@@ -106,7 +106,7 @@ class ReachConfig:
         choice("workspace", self.workspace, WORKSPACES)
         choice("target_sampling", self.target_sampling, TARGET_SAMPLINGS)
         choice("init_range", self.init_range, INIT_RANGES)
-        if isinstance(self.observation, str) or not isinstance(self.observation, (tuple, list)) or not self.observation:
+        if not isinstance(self.observation, tuple) or not self.observation:  # a list would not hash (jit caches)
             raise ValueError(f"observation={self.observation!r} is invalid: allowed is a non-empty tuple of "
                              f"{', '.join(self.allowed_observations())}.")
         for part in self.observation:
@@ -127,6 +127,15 @@ class ReachConfig:
         integer("sampling_candidates", self.sampling_candidates, 1)
         if not isinstance(self.gravity_compensation, bool):
             raise ValueError(f"gravity_compensation={self.gravity_compensation!r} is invalid: allowed are True, False.")
+
+    def validate_for_robot(self, robot: str, reach: float, joint_range_width: float) -> None:
+        """`validate` plus bounds from the robot's workspace (`envs.robots.base.bounds`): a target
+        radius below its reach, a relative step at most its widest joint range. Finite absurd values
+        (a 1e6 m target) otherwise train and evaluate without an error but mean nothing."""
+        self.validate()
+        below("target_radius", self.target_radius, reach, f"below the {robot}'s reach, m")
+        below("action_scale", self.action_scale, joint_range_width, f"at most the {robot}'s widest joint range, rad",
+              inclusive=True)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -168,3 +177,12 @@ class ReachAvoidConfig(ReachConfig):
         positive("w_obst", self.w_obst, strict=False)
         positive("obstacle_tau", self.obstacle_tau)
         choice("link_distance", self.link_distance, LINK_DISTANCES)
+
+    def validate_for_robot(self, robot: str, reach: float, joint_range_width: float) -> None:
+        """ReachConfig's bounds plus the obstacle's: a radius below the robot's reach (a larger one
+        leaves no clear start, every reset falls back), a sampling cube within twice the reach (the
+        obstacle farther out never meets the arm)."""
+        super().validate_for_robot(robot, reach, joint_range_width)
+        below("obstacle_radius", self.obstacle_radius, reach, f"below the {robot}'s reach, m")
+        below("obstacle_region", self.obstacle_region, 2 * reach, f"at most twice the {robot}'s reach, m",
+              inclusive=True)

@@ -3,7 +3,8 @@
 It compiles in about a second and runs thousands of steps per second on a CPU, so algorithm
 changes can be checked in seconds (tests, `notebooks/02_edit_an_algorithm.ipynb`) before spending
 GPU time on the arms. It has the arm tasks' shape: reach a sampled target, a dense reward, a real
-termination (leaving the arena) next to time-out truncation.
+termination (leaving the arena, or a non-finite action as the arms' `physics_nan`) next to
+time-out truncation.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ import jax
 import jax.numpy as jnp
 
 from envs import validation
-from envs.base import Env, State
+from envs.base import Env, State, check_action
 
 
 @dataclasses.dataclass(frozen=True)
@@ -61,9 +62,9 @@ class PointMass(Env):
     def _obs(self, pos, goal):
         return jnp.concatenate([pos, goal, goal - pos])
 
-    def _metrics(self, dist, reached):
+    def _metrics(self, dist, reached, nonfinite):
         return {"distance": dist, "in_target": (dist < self.config.goal_radius).astype(jnp.float32),
-                "target_reached": reached}
+                "target_reached": reached, "physics_nan": nonfinite.astype(jnp.float32)}
 
     def reset(self, rng: jax.Array) -> State:
         k_pos, k_goal = jax.random.split(rng)
@@ -76,23 +77,29 @@ class PointMass(Env):
             obs=self._obs(pos, goal),
             reward=jnp.zeros(()),
             done=jnp.zeros(()),
-            metrics=self._metrics(dist, reached),
+            metrics=self._metrics(dist, reached, jnp.array(False)),
             info={"goal": goal, "reached": reached},
         )
 
     def step(self, state: State, action: jax.Array) -> State:
         cfg = self.config
+        check_action(action, (self.action_size,), "one point-mass env")
         goal = state.info["goal"]
-        pos = state.pipeline_state["pos"] + cfg.dt * cfg.max_speed * jnp.clip(action, -1.0, 1.0)
+        # A non-finite action ends the episode where the point was (as the arms' physics_nan):
+        # NaN never reaches a position, observation or metric.
+        nonfinite = ~jnp.all(jnp.isfinite(action))
+        moved = state.pipeline_state["pos"] + cfg.dt * cfg.max_speed * jnp.clip(action, -1.0, 1.0)
+        pos = jnp.where(nonfinite, state.pipeline_state["pos"], moved)
         dist = jnp.linalg.norm(goal - pos)
         outside = jnp.any(jnp.abs(pos) > cfg.arena)
-        reached = jnp.maximum(state.info["reached"], (dist < cfg.goal_radius) & ~outside)
-        reward = jnp.where(outside, 0.0, jnp.exp(-cfg.alpha * dist))
+        failed = outside | nonfinite
+        reached = jnp.maximum(state.info["reached"], (dist < cfg.goal_radius) & ~failed)
+        reward = jnp.where(failed, 0.0, jnp.exp(-cfg.alpha * dist))
         return state.replace(
             pipeline_state={"pos": pos},
             obs=self._obs(pos, goal),
             reward=reward,
-            done=outside.astype(jnp.float32),
-            metrics={**state.metrics, **self._metrics(dist, reached)},
+            done=failed.astype(jnp.float32),
+            metrics={**state.metrics, **self._metrics(dist, reached, nonfinite)},
             info={**state.info, "reached": reached},
         )

@@ -26,6 +26,9 @@ class EnvSpec:
     robot: str | None = None
     """The arm's name (a key of `envs.robots.ROBOTS`), None for envs without one (the point mass):
     a policy moves only the robot it was trained on, and only arms can be rendered."""
+    check: Callable[[object], None] | None = None
+    """Validates a config for this env beyond its own `validate` (e.g. bounds from the robot); None:
+    `config.validate()` alone."""
 
 
 _REGISTRY: dict[str, EnvSpec] = {}
@@ -43,7 +46,7 @@ def names() -> list[str]:
 
 def spec(name: str) -> EnvSpec:
     """The registry entry of `name`; a `ValueError` lists the valid names otherwise."""
-    if name not in _REGISTRY:
+    if not isinstance(name, str) or name not in _REGISTRY:
         raise ValueError(f"env={name!r} is unknown: allowed are {', '.join(names())}.")
     return _REGISTRY[name]
 
@@ -71,8 +74,18 @@ def make_config(name: str, base=None, /, **options):
             f"option {unknown[0]!r} does not exist for env {name!r}: allowed are {', '.join(sorted(fields))}."
         )
     config = dataclasses.replace(config, **options)
-    config.validate()
+    check_config(name, config)
     return config
+
+
+def check_config(name: str, config) -> None:
+    """ValueError naming the field, the value and what is allowed, for `config` as the config of env
+    `name` (its `validate` plus the env's own `check`); nothing is built or traced."""
+    entry = spec(name)
+    if entry.check is None:
+        config.validate()
+    else:
+        entry.check(config)
 
 
 def make(name: str, **options) -> Env:
@@ -85,5 +98,5 @@ def make(name: str, **options) -> Env:
 
 def from_config(name: str, config) -> Env:
     """Builds environment `name` from a complete config (for example one stored in a checkpoint)."""
-    config.validate()
+    check_config(name, config)
     return spec(name).build(config)

@@ -33,3 +33,10 @@ def in_range(name: str, value, low: float, high: float) -> None:
     """A real number in [low, high]."""
     if not (_is_real(value) and low <= float(value) <= high):
         raise ValueError(f"{name}={value!r} is invalid: allowed is a number in [{float(low)}, {float(high)}].")
+
+
+def below(name: str, value, bound: float, why: str, inclusive: bool = False) -> None:
+    """A positive number < bound (<= with inclusive); `why` says where the bound comes from."""
+    if not (_is_real(value) and 0 < float(value) and (float(value) <= bound if inclusive else float(value) < bound)):
+        raise ValueError(f"{name}={value!r} is invalid: allowed is a number in (0, {bound:g}{']' if inclusive else ')'} "
+                         f"({why}).")

@@ -16,7 +16,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from envs.base import Env, State
+from envs.base import Env, State, check_action
 
 
 class Wrapper(Env):
@@ -151,6 +151,8 @@ class VmapWrapper(Wrapper):
         return jax.vmap(self.env.reset)(rng)
 
     def step(self, state: State, action: jax.Array) -> State:
+        n = jnp.shape(state.done)[0]
+        check_action(action, (n, self.env.action_size), f"a batch of {n} envs (one action per env)")
         return jax.vmap(self.env.step)(state, action)
 
 

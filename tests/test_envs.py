@@ -6,6 +6,7 @@ step takes ~20 s on a 2-core CPU.
 """
 
 import dataclasses
+import re
 
 import jax
 import jax.numpy as jnp
@@ -306,6 +307,37 @@ def test_nan_physics_ends_episode_and_never_reaches_obs(compiled):
     assert float(after.metrics["physics_nan"][1:].max()) == 0
     assert np.isfinite(after.obs).all() and np.isfinite(after.info["final_obs"]).all()
     assert np.isfinite(after.pipeline_state.qpos).all()  # auto-reset replaced the broken state
+
+
+def test_nan_action_ends_episode_with_the_last_finite_distance(compiled):
+    """Issue 27: the NaN step's distance metrics were NaN, so every average over episodes was NaN."""
+    c = compiled("ur5e-reach")
+    state = c.start(seed=18)
+    actions = standstill(c.env).at[0].set(jnp.nan)
+    after = c.step(state, actions)
+    assert float(after.metrics["physics_nan"][0]) == 1 and float(after.done[0]) == 1
+    np.testing.assert_allclose(after.metrics["distance"][0], state.metrics["distance"][0])  # the last finite value
+    np.testing.assert_allclose(after.metrics["distance_last10"][0], state.metrics["distance"][0], rtol=1e-6)
+    assert np.isfinite(after.reward).all() and np.isfinite(after.info["final_obs"]).all()
+
+
+@pytest.mark.parametrize("name", ["ur5e-reach", "point-mass"])
+def test_wrong_action_shapes_are_refused_at_trace_time(name):
+    """Issue 27: (n,) or (n, 1) actions for n envs, and () or (1,) for one, were broadcast over every joint."""
+    env = envs.make(name, **({} if name == "point-mass" else {"substeps": 2}))
+    a = env.action_size
+    one = jax.eval_shape(env.reset, jax.random.PRNGKey(0))
+    for shape in ((), (1,), (a + 1,), (1, a)):
+        with pytest.raises(ValueError, match=rf"action of shape {re.escape(str(shape))} is invalid for one .* env.*"
+                                             rf"allowed is shape \({a},\)"):
+            jax.eval_shape(env.step, one, jax.ShapeDtypeStruct(shape, jnp.float32))
+    batched = envs.wrap(env)
+    many = jax.eval_shape(batched.reset, jax.random.split(jax.random.PRNGKey(0), 4))
+    for shape in ((4,), (4, 1), (4, a + 1), (3, a), (a,)):
+        with pytest.raises(ValueError, match=rf"action of shape {re.escape(str(shape))} is invalid for a batch of 4 "
+                                             rf"envs .*allowed is shape \(4, {a}\)"):
+            jax.eval_shape(batched.step, many, jax.ShapeDtypeStruct(shape, jnp.float32))
+    jax.eval_shape(batched.step, many, jax.ShapeDtypeStruct((4, a), jnp.float32))  # the right shape traces
 
 
 def test_actions_clipped_to_joint_range():

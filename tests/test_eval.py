@@ -473,7 +473,7 @@ BAD = [
     (lambda d, t: ["--checkpoint", str(t / "nowhere")], r"does not exist"),
     (lambda d, t: ["--checkpoint", str(t)], r"holds no checkpoint and no policy export"),
     (lambda d, t: ["--checkpoint", str(_corrupt(d["arm"], t, "npz"))], r"corrupt or unreadable"),
-    (lambda d, t: ["--checkpoint", str(_corrupt(d["arm"], t, "json"))], r"corrupt or unreadable: JSONDecodeError"),
+    (lambda d, t: ["--checkpoint", str(_corrupt(d["arm"], t, "json"))], r"corrupt or unreadable: policy.json: JSONDecodeError"),
     (lambda d, t: ["--checkpoint", str(_corrupt(d["arm"], t, "shapes"))], r"do not match the network of its config"),
     (lambda d, t: ["--checkpoint", str(_corrupt(d["point"], t, "orbax"))], r"corrupt or unreadable"),
     (lambda d, t: ["--checkpoint", str(d["arm"]), "--env", "panda-reach"],
@@ -485,6 +485,17 @@ BAD = [
      None),
     (lambda d, t: ["--checkpoint", str(d["arm"]), "--env", "ur5e-reach-avoid", "--env.observation", "joint_pos",
                    "ee_pos", "target_pos", "ee_to_target", "obstacle_pos"], r"shape \(15,\) .* gives shape \(18,\)"),
+    # issue 27: the trained parts reordered, or another action mode, ran without a word
+    (lambda d, t: ["--checkpoint", str(d["arm"]), "--env.observation", "ee_pos", "joint_pos", "target_pos", "ee_to_target"],
+     r"cannot run with observation=\('ee_pos', 'joint_pos', 'target_pos', 'ee_to_target'\) \(trained: \('joint_pos', "
+     r"'ee_pos', 'target_pos', 'ee_to_target'\)\): .*\(or --allow-env-mismatch"),
+    (lambda d, t: ["--checkpoint", str(d["arm"]), "--env.action", "absolute"],
+     r"cannot run with action='absolute' \(trained: 'relative'\)"),
+    (lambda d, t: ["--checkpoint", str(d["arm"]), "--env.action", "absolute", "--allow-env-mismatch"], None),
+    (lambda d, t: ["--checkpoint", str(d["point"] / "metrics.csv")], r"checkpoint '.*metrics.csv' is a file: allowed is"),
+    (lambda d, t: ["--checkpoint", str(d["point"]), "--env.dim", "3"],
+     r"takes observations of shape \(6,\) but env 'point-mass' gives shape \(9,\): allowed are env options giving "
+     r"observations of shape \(6,\)"),
     (lambda d, t: ["--env", "ur5e-reach", "--policy", "ik"], r"policy='ik' is unknown: allowed are random, standstill, pseudo_ik"),
     (lambda d, t: ["--env", "ur5e-reach", "--policy", "pseudo_ik", "--env.target-sampling", "uniform"],
      r"pseudo_ik' is undefined with target_sampling='uniform'"),
@@ -514,6 +525,25 @@ def test_bad_input_is_refused_with_a_clear_message(make, message, arm_export, po
     with pytest.raises(ValueError, match=message) as info:
         eval_cli.main(args)
     assert "\n" not in str(info.value)
+
+
+def test_mismatch_allowed_with_a_warning_naming_both(arm_export, no_compile):
+    with pytest.warns(UserWarning, match=r"evaluated with action='absolute' \(trained: 'relative'\)"):
+        with pytest.raises(pytest.fail.Exception, match="evaluated despite bad input"):
+            eval_cli.main(["--checkpoint", str(arm_export), "--env.action", "absolute", "--allow-env-mismatch",
+                           "--num-envs", "2"])
+
+
+def test_damaged_export_is_rebuilt_from_the_full_checkpoint(point_run, tmp_path, capsys):
+    """Issue 27: a damaged policy export with its full checkpoint beside it is written anew."""
+    run = _corrupt(point_run, tmp_path, "npz")
+    policy = evaluation.checkpoint_policy(str(run))
+    err = capsys.readouterr().err
+    assert "policy.npz: " in err and "rebuilding it from the full checkpoint" in err, err
+    original = export.load(str(point_run))
+    for a, b in zip(jax.tree.leaves(original.state), jax.tree.leaves(policy.export.state)):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    export.load(str(run))  # readable again
 
 
 def test_help_lists_the_env_options_once_the_env_is_known(arm_export, capsys):

@@ -209,7 +209,7 @@ def test_gymnasium_env_checker_passes_on_the_single_env():
         assert type(reward) is float and type(terminated) is bool and type(truncated) is bool
         assert truncated == (t == LIMIT) and not terminated
     np.testing.assert_array_equal(next_obs, obs)  # the terminal observation, not the next episode's
-    assert set(info) == {"distance", "in_target", "target_reached"}
+    assert set(info) == {"distance", "in_target", "target_reached", "physics_nan"}
     with pytest.raises(RuntimeError, match="reset"):
         env.step(np.zeros(2))
 
@@ -254,6 +254,25 @@ def test_ur5e_reach_avoid_through_the_bridge():
             assert terminations[i] == (failed > 0)
         ended |= done
     assert ended.all()
+    # A NaN action ends the episodes with finite metrics (issue 27: averages over episodes were NaN).
+    obs, rewards, terminations, _, infos = vec.step(np.full((2, nq), np.nan, np.float32))
+    assert terminations.all() and (infos["final_info"]["physics_nan"] == 1).all()
+    for key in ("distance", "distance_last10"):
+        assert np.isfinite(infos["final_info"][key]).all() and (infos["final_info"][key] > 0).all(), key
+    assert np.isfinite(obs).all() and np.isfinite(rewards).all()
+
+
+def test_nan_action_ends_the_point_mass_episode_like_the_arms():
+    vec = eg.make_vec("point-mass", 3)
+    obs, _ = vec.reset(seed=0)
+    actions = np.zeros((3, 2), np.float32)
+    actions[1, 0] = np.nan
+    new, rewards, terminations, truncations, infos = vec.step(actions)
+    assert terminations.tolist() == [False, True, False] and not truncations.any()
+    final = {k: v[1] for k, v in infos["final_info"].items()}
+    assert final["physics_nan"] == 1 and np.isfinite(final["distance"]) and rewards[1] == 0
+    np.testing.assert_array_equal(infos["final_obs"][1], obs[1])  # the point stayed where it was
+    assert np.isfinite(new).all() and (infos["physics_nan"] == 0).all()
 
 
 def test_sb3_vec_env_adapter_reports_terminal_obs_and_time_limits():

@@ -176,7 +176,7 @@ class _PoisonedPPO(PPO):
 def test_nan_loss_stops_the_run_and_keeps_the_last_good_checkpoint(tmp_path):
     config = presets.make_config("point-mass-ppo", num_timesteps=6 * 5120, checkpoint_every=2 * 5120,
                                    log_every=5120, eval_envs=0, logdir=str(tmp_path / "nan"), **QUIET)
-    with pytest.raises(driver.NonFiniteLossError, match=r"loss/total .*env step 20480.*last good checkpoint \(10240\)"):
+    with pytest.raises(driver.NonFiniteLossError, match=r"loss/total .*env step 20480.*last good checkpoint \(env step 10240\)"):
         driver.train(config, learner_cls=_PoisonedPPO)  # the user's learner class (notebooks/02)
     ckpt = Checkpointer(str(tmp_path / "nan" / "checkpoints"))
     assert ckpt.latest_step() == 10240

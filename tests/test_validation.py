@@ -30,3 +30,35 @@ def test_numpy_scalars_count_as_numbers():
         validation.in_range("x", float("nan"), 0.0, 1.0)
     with pytest.raises(ValueError, match=r"n=np.int32\(0\) is invalid|n=0 is invalid"):
         validation.integer("n", np.int32(0), 1)
+
+
+@pytest.mark.parametrize("name, options, message", [
+    ("ur5e-reach-avoid", dict(obstacle_radius=1e6), r"obstacle_radius=1000000.0 is invalid: allowed is a number in "
+                                                    r"\(0, 0.97\) \(below the ur5e's reach, m\)"),
+    ("panda-reach-avoid", dict(obstacle_radius=0.945), r"obstacle_radius=0.945 is invalid: .*\(0, 0.945\)"),
+    ("ur5e-reach", dict(target_radius=1e6), r"target_radius=1000000.0 is invalid: allowed is a number in \(0, 0.97\)"),
+    ("ur5e-reach-avoid", dict(obstacle_region=1e6), r"obstacle_region=1000000.0 is invalid: allowed is a number in "
+                                                    r"\(0, 1.94\] \(at most twice the ur5e's reach, m\)"),
+    ("ur5e-reach", dict(action_scale=1e9), r"action_scale=1000000000.0 is invalid: allowed is a number in "
+                                           r"\(0, 12.5664\] \(at most the ur5e's widest joint range, rad\)"),
+    ("panda-reach", dict(action_scale=6.0), r"action_scale=6.0 is invalid: .*\(0, 5.79\d*\]"),
+    ("ur5e-reach", dict(observation=["joint_pos", "ee_pos"]), r"observation=\['joint_pos', 'ee_pos'\] is invalid: "
+                                                               r"allowed is a non-empty tuple"),
+])
+def test_arm_options_are_bounded_by_the_robot(name, options, message):
+    """Issue 27: absurd finite values trained without an error (every episode ending at step 1)."""
+    with pytest.raises(ValueError, match=message):
+        envs.make_config(name, **options)
+    with pytest.raises(ValueError, match=message):  # the env itself checks too
+        envs.from_config(name, envs.registry.dataclasses.replace(envs.default_config(name), **options))
+
+
+def test_bounds_leave_the_papers_values_alone():
+    envs.make_config("ur5e-reach-avoid", obstacle_radius=0.3, obstacle_region=0.6, target_radius=0.05, action_scale=0.3)
+    envs.make_config("panda-reach", action="absolute", action_scale=np.float32(0.2))
+
+
+@pytest.mark.parametrize("name", [["ur5e-reach"], None, 3])
+def test_env_name_of_the_wrong_kind_is_a_value_error(name):
+    with pytest.raises(ValueError, match=r"env=.* is unknown: allowed are .*ur5e-reach"):
+        envs.make(name)

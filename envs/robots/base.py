@@ -39,6 +39,14 @@ class Kinematics(NamedTuple):
     """End-effector site position, `[..., 3]`."""
 
 
+@functools.lru_cache(maxsize=None)
+def bounds(robot_cls: type) -> tuple[float, float]:
+    """(reach, widest joint range in rad) of a robot class, for config checks before an env is built
+    (the robot is built once per process)."""
+    robot = robot_cls()
+    return float(robot.reach), float(np.max(robot.joint_high - robot.joint_low))
+
+
 class Robot(abc.ABC):
     """Shared robot logic. Subclasses name the MJCF file and give the official limits."""
 

@@ -1,0 +1,211 @@
+"""What train.py does with a logdir, a damaged checkpoint, a non-finite learner metric and Ctrl-C
+(issue 27: a reused logdir lost runs, a damaged checkpoint bricked --resume, NaN metrics were kept).
+
+Every run is the PPO point-mass probe with the same length, so the tests share one compiled program.
+"""
+
+import dataclasses
+import json
+import os
+import re
+import shutil
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import train as train_cli
+from agents import driver, presets
+from agents.checkpoint import Checkpointer
+from agents.config import merge_resume_config
+from agents.ppo import PPO
+
+SHORT = 30_720  # 6 updates of the PPO probe preset (the program of tests/test_loop_train.py)
+QUIET = dict(tensorboard=False, progress=False, eval_envs=0)
+
+
+def _config(logdir, **options):
+    return presets.make_config("point-mass-ppo", num_timesteps=SHORT, logdir=str(logdir), **{**QUIET, **options})
+
+
+def _snapshot(directory) -> dict:
+    """{relative path: (size, mtime)} of every file under `directory`."""
+    out = {}
+    for root, _, files in os.walk(directory):
+        for name in files:
+            path = os.path.join(root, name)
+            out[os.path.relpath(path, directory)] = (os.path.getsize(path), os.path.getmtime(path))
+    return out
+
+
+@pytest.fixture(scope="module")
+def earlier_run(tmp_path_factory):
+    """A finished run with checkpoints at 10240, 20480 and 30720 env steps."""
+    logdir = tmp_path_factory.mktemp("earlier") / "run"
+    driver.train(_config(logdir, checkpoint_every=2 * 5120, log_every=5120))
+    return logdir
+
+
+@pytest.fixture
+def no_compile(monkeypatch):
+    monkeypatch.setattr(driver, "build_programs", lambda *a, **k: pytest.fail("compiled despite bad input"))
+
+
+# ------------------------------------------------------------------------------------------------
+# 1. A logdir holding an earlier run
+
+
+def test_logdir_of_an_earlier_run_is_refused_before_anything_is_written(earlier_run, no_compile):
+    before = _snapshot(earlier_run)
+    with pytest.raises(ValueError, match=r"logdir='.*run' holds an earlier run \(checkpoints, config.json, "
+                                         r"metrics.csv\): allowed are --resume .* a new --logdir, or --overwrite"):
+        driver.train(_config(earlier_run))
+    assert _snapshot(earlier_run) == before
+
+
+def test_overwrite_removes_the_earlier_run_first(earlier_run, tmp_path):
+    logdir = tmp_path / "run"
+    shutil.copytree(earlier_run, logdir)
+    (logdir / "notes.txt").write_text("mine")  # not the run's: kept
+    result = driver.train(_config(logdir, overwrite=True, log_every=SHORT))
+    assert result.status == "done"
+    assert Checkpointer(str(logdir / "checkpoints")).manager.all_steps() == [SHORT]  # the old 10240, 20480 are gone
+    assert len((logdir / "metrics.csv").read_text().splitlines()) == 1 + 1  # header + this run's one row
+    assert (logdir / "notes.txt").read_text() == "mine"
+    assert json.loads((logdir / "config.json").read_text())["overwrite"] is True
+
+
+def test_overwrite_and_resume_together_are_refused(tmp_path, no_compile):
+    with pytest.raises(ValueError, match=r"overwrite=True is invalid with resume=True"):
+        train_cli.parse(["point-mass-ppo", "--logdir", str(tmp_path), "--resume", "--overwrite"])
+
+
+def test_resume_of_a_missing_directory_creates_nothing(tmp_path, no_compile):
+    with pytest.raises(ValueError, match=r"resume=True but logdir=.* holds no checkpoint"):
+        driver.train(_config(tmp_path / "missing", resume=True))
+    assert not (tmp_path / "missing").exists()
+
+
+def test_resume_with_fewer_timesteps_than_done_is_refused_and_a_change_is_noted(earlier_run, no_compile):
+    before = _snapshot(earlier_run)
+    with pytest.raises(ValueError, match=rf"num_timesteps=20480 is below the checkpoint's {SHORT} env steps .* "
+                                         rf"allowed on --resume is num_timesteps >= {SHORT}"):
+        driver.train(dataclasses.replace(_config(earlier_run, resume=True), num_timesteps=20480))
+    assert _snapshot(earlier_run) == before
+    saved = _config(earlier_run)
+    with pytest.warns(UserWarning, match=rf"num_timesteps=40960 differs from the checkpoint's {SHORT}: .* config.json"):
+        merged = merge_resume_config(dataclasses.replace(saved, num_timesteps=40960), saved, done_steps=SHORT)
+    assert merged.num_timesteps == 40960
+
+
+@pytest.mark.parametrize("where, message", [
+    ("file", r"logdir='.*' is a file: allowed is a directory"),
+    ("under_file", r"logdir='.*' cannot be created \(.*\): allowed is a directory you can write to"),
+    ("read_only", r"logdir='/sys/.*' cannot be created \(.*\): allowed is a directory you can write to"),
+])
+def test_unusable_logdir_is_a_one_line_error(where, message, tmp_path, no_compile, capsys):
+    (tmp_path / "file").write_text("x")
+    logdir = {"file": tmp_path / "file", "under_file": tmp_path / "file" / "run",
+              "read_only": "/sys/reach_avoid_test_run"}[where]
+    assert train_cli.cli(["point-mass-ppo", "--logdir", str(logdir), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and err.count("\n") == 1, err
+    assert re.search(message, err), err
+
+
+# ------------------------------------------------------------------------------------------------
+# 3. A damaged newest checkpoint
+
+
+def _damage(step_dir, how):
+    if how == "array":  # truncate the largest array file
+        files = [p for p in step_dir.joinpath("state").rglob("*") if p.is_file()]
+        biggest = max(files, key=lambda p: p.stat().st_size)
+        biggest.write_bytes(biggest.read_bytes()[: biggest.stat().st_size // 2])
+    else:  # truncate a metadata file
+        meta = step_dir / "config" / "metadata"
+        meta.write_text(meta.read_text()[:10])
+
+
+@pytest.mark.parametrize("how", ["array", "metadata"])
+def test_resume_falls_back_to_the_newest_intact_checkpoint(earlier_run, tmp_path, how):
+    logdir = tmp_path / "run"
+    shutil.copytree(earlier_run, logdir)
+    _damage(logdir / "checkpoints" / str(SHORT), how)
+    _damage(logdir / "checkpoints" / "20480", how)
+    with pytest.warns(UserWarning, match=rf"checkpoint .*checkpoints/{SHORT} is damaged .* moved to .*corrupt_checkpoints"):
+        result = driver.train(_config(logdir, resume=True, checkpoint_every=2 * 5120, log_every=5120))
+    assert result.status == "done" and result.env_steps == SHORT
+    assert sorted(os.listdir(logdir / "corrupt_checkpoints")) == ["20480", str(SHORT)]
+    assert Checkpointer(str(logdir / "checkpoints")).manager.all_steps() == [10240, 20480, SHORT]  # saved again
+
+
+def test_resume_with_no_intact_checkpoint_names_them(earlier_run, tmp_path, capsys):
+    logdir = tmp_path / "run"
+    shutil.copytree(earlier_run, logdir)
+    for step in (10240, 20480, SHORT):
+        _damage(logdir / "checkpoints" / str(step), "metadata")
+    code = train_cli.cli(["point-mass-ppo", "--logdir", str(logdir), "--resume", "--num-timesteps", str(SHORT),
+                          "--no-progress", "--no-tensorboard"])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and err.startswith("error: "), err
+    assert "holds no intact checkpoint" in err and f"checkpoints/{SHORT}: " in err and "checkpoints/10240: " in err
+
+
+# ------------------------------------------------------------------------------------------------
+# 9. Every learner metric is guarded
+
+
+class _InfGradPPO(PPO):
+    """PPO whose gradient norm becomes infinite from its 4th update on (its losses stay finite)."""
+
+    def update(self, state, batch, key, par):
+        state, metrics = super().update(state, batch, key, par)
+        return state, {**metrics, "optim/grad_norm": jnp.where(state.updates >= 4, jnp.inf, metrics["optim/grad_norm"])}
+
+
+class _NaNKLPPO(PPO):
+    """PPO whose approximate KL is NaN from the first update on."""
+
+    def update(self, state, batch, key, par):
+        state, metrics = super().update(state, batch, key, par)
+        return state, {**metrics, "policy/approx_kl": jnp.full_like(metrics["policy/approx_kl"], jnp.nan)}
+
+
+def test_nonfinite_learner_metric_stops_the_run_before_its_checkpoint(tmp_path):
+    config = _config(tmp_path / "inf", checkpoint_every=2 * 5120, log_every=5120)
+    with pytest.raises(driver.NonFiniteLossError, match=r"optim/grad_norm became \[inf\] .*env step 20480.*"
+                                                        r"last good checkpoint \(env step 10240\)"):
+        driver.train(config, learner_cls=_InfGradPPO)
+    assert Checkpointer(str(tmp_path / "inf" / "checkpoints")).manager.all_steps() == [10240]
+
+
+def test_nonfinite_metric_in_the_first_chunk_leaves_no_run_directory(tmp_path):
+    config = _config(tmp_path / "nan", checkpoint_every=2 * 5120, log_every=5120)
+    with pytest.raises(driver.NonFiniteLossError, match=r"policy/approx_kl became \[nan\] .* No checkpoint had been "
+                                                        r"saved yet, so none is kept; the run directory .* was removed"):
+        driver.train(config, learner_cls=_NaNKLPPO)
+    assert not (tmp_path / "nan").exists()
+
+
+def test_episode_metrics_may_be_nan():
+    """A chunk in which no episode ended reports NaN episode averages: that is not a broken learner."""
+    metrics = {"episode/return": np.array([np.nan]), "episodes": np.array([0.0]), "loss/total": np.array([1.0])}
+    assert driver.nonfinite_learner_metrics(metrics) == []
+    assert driver.nonfinite_learner_metrics({**metrics, "sac/alpha": np.array([np.inf])}) == ["sac/alpha"]
+
+
+# ------------------------------------------------------------------------------------------------
+# 10. Ctrl-C
+
+
+def test_ctrl_c_saves_a_checkpoint_and_exits_130(tmp_path, monkeypatch, capsys):
+    """A Ctrl-C during the first chunk (the handler's flag set at once): checkpoint, then exit 130."""
+    monkeypatch.setattr(driver, "_install_sigint", lambda flag: flag.update(flag=True))
+    logdir = tmp_path / "run"
+    code = train_cli.cli(["point-mass-ppo", "--num-timesteps", str(SHORT), "--log-every", "5120", "--eval-envs", "0",
+                          "--logdir", str(logdir), "--no-progress", "--no-tensorboard"])
+    assert code == train_cli.INTERRUPTED == 130
+    assert "interrupted after 5,120 env steps" in capsys.readouterr().out
+    assert Checkpointer(str(logdir / "checkpoints")).manager.all_steps() == [5120]
