@@ -421,8 +421,11 @@ def train_pending(selection, runs_dir: str, deadline: float | None = None, reser
                 compiled.add(st.key)
                 log(f"[{st.key}] {result.status} at {result.env_steps:,} steps after {time.monotonic() - t0:.0f} s")
                 if result.status == "interrupted":
-                    raise KeyboardInterrupt
-                if result.status != "done" and result.env_steps <= st.steps:
+                    log(f"[{st.key}] interrupted: checkpoint saved at {result.env_steps:,} steps")
+                    return False
+                if result.status == "done":  # evaluated (eval.json) unless the run sets eval_envs=0
+                    break
+                if result.env_steps <= st.steps:
                     return False
     return finished
 
@@ -608,6 +611,9 @@ _AVOID_OBS = _REACH_OBS + ("obstacle_pos", "link_obstacle_dist")
 _DEPARTS = ("Relative control is `ur5e-reach-ppo` (action scale 0.3, discount 0.99, joint-limit penalty 0.05: "
             "results/headline says why); absolute control is `ur5e-reach-absolute-ppo` (the paper's 4x256, 7 epochs, "
             "discount 0.97).")
+_AVOID_DEPARTS = "`ur5e-reach-avoid-ppo` has a joint-limit penalty of 1.0 and action scale 0.3 (not in the paper)."
+_AVOID_METRICS = ("target_reached", "self_collision", "obstacle_collision", "distance")
+_AVOID_CURVES = ("episode/target_reached", "episode/self_collision", "episode/obstacle_collision")
 
 register(Experiment(
     "action-space", "UR5e reach: absolute vs relative joint position control, success and precision",
@@ -698,10 +704,9 @@ register(Experiment(
     (Run("semi-sparse", "ur5e-reach-avoid-ppo", paper=dict(target_reached=0.868, self_collision=0.027,
                                                             obstacle_collision=0.048)),
      Run("dense", "ur5e-reach-avoid-ppo", {"env.reward": "dense"})),
-    metrics=("target_reached", "self_collision", "obstacle_collision", "distance"),
-    curves=("episode/target_reached", "episode/self_collision", "episode/obstacle_collision"),
+    metrics=_AVOID_METRICS, curves=_AVOID_CURVES,
     paper="Semi-sparse learned slightly slower but ended safer: 1.5 % fewer self and 1 % fewer obstacle collisions than dense.",
-    note="`ur5e-reach-avoid-ppo` has a joint-limit penalty of 1.0 and action scale 0.3 (not in the paper)."))
+    note=_AVOID_DEPARTS))
 
 register(Experiment(
     "reach-avoid-observation", "UR5e reach-avoid: link-to-obstacle distances and the obstacle size observed or not",
@@ -711,11 +716,10 @@ register(Experiment(
      Run("link-dist", "ur5e-reach-avoid-ppo", seeds=3, label="link-dist (the preset)", paper=dict(obstacle_collision=0.045)),
      Run("size", "ur5e-reach-avoid-ppo", {"env.observation": _REACH_OBS + ("obstacle_pos", "obstacle_size")}, seeds=3),
      Run("link-dist-size", "ur5e-reach-avoid-ppo", {"env.observation": _AVOID_OBS + ("obstacle_size",)}, seeds=3)),
-    metrics=("target_reached", "self_collision", "obstacle_collision"),
-    curves=("episode/target_reached", "episode/self_collision", "episode/obstacle_collision"),
+    metrics=_AVOID_METRICS, curves=_AVOID_CURVES,
     paper="The link-to-obstacle distances nearly halved obstacle collisions (8 % to 4.5 %); the obstacle size "
           "(fixed in training) brought nothing.",
-    note="`ur5e-reach-avoid-ppo` has a joint-limit penalty of 1.0 and action scale 0.3 (not in the paper)."))
+    note=_AVOID_DEPARTS))
 
 register(Experiment(
     "reach-avoid-front", "Reach-avoid in the Front workspace, UR5e and Panda",
@@ -724,8 +728,7 @@ register(Experiment(
          paper=dict(target_reached=0.935, self_collision=0.011, obstacle_collision=0.030)),
      Run("panda", "panda-reach-avoid-ppo", {"env.workspace": "front"},
          paper=dict(target_reached=0.961, self_collision=0.001, obstacle_collision=0.017))),
-    metrics=("target_reached", "self_collision", "obstacle_collision", "distance"),
-    curves=("episode/target_reached", "episode/self_collision", "episode/obstacle_collision"),
+    metrics=_AVOID_METRICS, curves=_AVOID_CURVES,
     paper="Front: UR5e 93.5 % (1.1 % self, 3.0 % obstacle), Panda 96.1 % (0.1 %, 1.7 %); the Full workspace rows are "
           "the headline ones (results/headline).",
     note="Initial joints from the full range, as in the presets (the paper does not say which range these runs used)."))
