@@ -558,9 +558,8 @@ def index_table(ctx: Context) -> list[list[str]]:
     for key, label in (("panda-reach-sac", "Results: Panda reach, SAC"),
                        ("ur5e-reach-sac-limited-init", "Results: UR5e reach, SAC, 360° initial range")):
         paper = PAPER_ROWS[key]
-        command = ("`python train.py panda-reach-sac --seeds 5`" if key == "panda-reach-sac"
-                   else "`python train.py ur5e-reach-sac --seeds 5 --env.init-range limited`")
-        rows.append([label, f"{paper_pct(paper[0])} / {paper_collisions(key)}", "not run", command, ""])
+        rows.append([label, f"{paper_pct(paper[0])} / {paper_collisions(key)}", _experiment_ours(ctx, "sac-reach"),
+                     "`python -m tools.experiments run sac-reach`", ""])
     b = _baseline_rows(ctx)
     for radius in (0.01, 0.02):
         s = b[("ur5e", "pseudo_ik", "absolute", radius)]["summary"]
@@ -568,8 +567,8 @@ def index_table(ctx: Context) -> list[list[str]]:
                      f"{100 * PAPER_BASELINES[('pseudo_ik', radius)][0]:.1f} % reached", pct(s["target_reached"]) + " reached",
                      "`python -m tools.paper_tables --tables baselines --num-envs 4096 --seeds 5`",
                      ctx.link("baselines/baselines.json")])
-    rows.append(["Table \"action space\": precision of absolute vs relative control", PAPER_ACTION_SPACE, "not run",
-                 "`python -m tools.paper_tables --tables action --action relative=RUN absolute=RUN`", ""])
+    rows.append(["Table \"action space\": precision of absolute vs relative control", PAPER_ACTION_SPACE,
+                 _experiment_ours(ctx, "action-space"), "`python -m tools.experiments run action-space`", ""])
     ws = {(r["trained"], r["evaluated"]): r["summary"] for r in ctx.json("workspaces/workspace_generalization.json")["rows"]}
     p = PAPER_WORKSPACE[("full", "full-range")]
     rows.append(["Table \"workspace generalization\" (13 pairs), e.g. Full on Full Range",
@@ -598,9 +597,44 @@ def index_table(ctx: Context) -> list[list[str]]:
     )
     for label, file, command in figures:
         rows.append([label, "(figure)", "(figure)", command, ctx.link(file)])
-    for label in ("Figure: reward formulations", "Figure: network sizes (absolute control)",
-                  "Figure: UR5e SAC training curves by workspace", "Figure: reach-avoid observation spaces"):
-        rows.append([label, "(figure)", "not run", "", ""])
+    for label, name in (("Figure: reward formulations", "reward"), ("Figure: network sizes (absolute control)", "network-size"),
+                        ("Figure: UR5e SAC training curves by workspace", "sac-workspaces"),
+                        ("Figure: reach-avoid observation spaces", "reach-avoid-observation")):
+        rows.append([label, "(figure)", _experiment_ours(ctx, name), f"`python -m tools.experiments run {name}`", ""])
+    return rows
+
+
+# ------------------------------------------------------------------------------------------------
+# The registered experiments (tools/experiments.py): their budgets, the paper's finding and ours from the
+# table.json each build writes under results/experiments/<name>/.
+
+def _experiment_ours(ctx: Context, name: str) -> str:
+    file = f"experiments/{name}/table.json"
+    if not os.path.exists(os.path.join(ctx.results, file)):
+        return "not run"
+    cells = []
+    for row in ctx.json(file)["rows"]:
+        values = row.get("per_seed", {}).get("target_reached")
+        if values:
+            mean = sum(values) / len(values)
+            std = (sum((v - mean) ** 2 for v in values) / len(values)) ** 0.5
+            cells.append(f"{row['label']}: {rate(mean, std) if len(values) > 1 else f'{100 * mean:.1f} %'}")
+        else:
+            cells.append(f"{row['label']}: not done")
+    return "; ".join(cells) + f" reached ({ctx.link(f'experiments/{name}/table.md')})"
+
+
+def experiments_table(ctx: Context) -> list[list[str]]:
+    from tools import experiments
+
+    rows = [["experiment", "paper", "paper's finding", "runs x seeds, env steps", "ours", "command"],
+            ["---", "---", "---", "---:", "---", "---"]]
+    for name, exp in experiments.EXPERIMENTS.items():
+        seeds = sorted({r.seeds for r in exp.runs})
+        steps = sum(r.seeds * r.budget() for r in exp.runs)
+        rows.append([f"`{name}`", exp.paper_ref, exp.paper,
+                     f"{len(exp.runs)} x {'/'.join(map(str, seeds))}, {steps / 1e9:.2f}B",
+                     _experiment_ours(ctx, name), f"`python -m tools.experiments run {name}`"])
     return rows
 
 
@@ -608,6 +642,7 @@ def index_table(ctx: Context) -> list[list[str]]:
 
 TABLES: dict[str, Callable[[Context], list[list[str]]]] = {
     "index": index_table,
+    "experiments": experiments_table,
     "readme": readme_table,
     "headline": headline_table,
     "baselines": baselines_table,
