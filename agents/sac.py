@@ -26,7 +26,6 @@ double-Q choice made per sample by the two target critics' means.
 from __future__ import annotations
 
 import dataclasses
-import math
 
 import jax
 import jax.numpy as jnp
@@ -132,8 +131,7 @@ class SACConfig:
                              f"allowed is at least n_step * num_envs = {self.n_step * self.num_envs}.")
         validation.integer("algo.num_atoms", self.num_atoms, 2)
         for name in ("v_min", "v_max"):
-            if not (isinstance(getattr(self, name), (int, float)) and math.isfinite(getattr(self, name))):
-                raise ValueError(f"algo.{name}={getattr(self, name)!r} is invalid: allowed is a finite number.")
+            validation.finite("algo." + name, getattr(self, name))
         if not self.v_min < self.v_max:
             raise ValueError(f"algo.v_max={self.v_max!r} is invalid: allowed is a number > algo.v_min={self.v_min!r}.")
         validation.positive("algo.learning_rate", self.learning_rate)

@@ -23,6 +23,12 @@ def positive(name: str, value, strict: bool = True) -> None:
         raise ValueError(f"{name}={value!r} is invalid: allowed is a finite number {'>' if strict else '>='} 0.")
 
 
+def finite(name: str, value) -> None:
+    """A finite real number (numpy scalars count; bools and strings do not)."""
+    if not (_is_real(value) and math.isfinite(float(value))):
+        raise ValueError(f"{name}={value!r} is invalid: allowed is a finite number.")
+
+
 def integer(name: str, value, minimum: int) -> None:
     """An integer >= minimum (numpy integers count; bools, floats and strings do not)."""
     if not isinstance(value, numbers.Integral) or isinstance(value, bool) or value < minimum:
