@@ -381,3 +381,20 @@ def test_action_latency_applies_the_previous_action(sensing):
     first = jax.jit(absolute.reset)(jax.random.PRNGKey(11))
     np.testing.assert_allclose(absolute.action_to_ctrl(first.info["prev_action"], jnp.zeros(6)),
                                first.pipeline_state.qpos, atol=1e-5)
+
+
+def test_render_draws_every_obstacle_at_its_radius():
+    from envs import render
+
+    env = envs.make("ur5e-reach-avoid", num_obstacles=3, obstacle_radius_range=(0.05, 0.2), substeps=2)
+    away = np.tile([0.0, 0.0, -5.0], (3, 1))
+    with render.Scene(env, 160, 120) as scene:
+        q, target = np.zeros(6), np.array([0.3, 0.3, 0.5])
+        empty = scene.draw(q, target, away.ravel()).astype(int)
+        for j in range(3):
+            shown = away.copy()
+            shown[j] = [0.3, -0.4, 0.3]
+            small = scene.draw(q, target, shown.ravel(), np.full(3, 0.05)).astype(int)
+            assert np.abs(small - empty).sum(-1).astype(bool).sum() > 20, f"obstacle {j} not drawn"
+            large = scene.draw(q, target, shown.ravel(), np.full(3, 0.2)).astype(int)
+            assert np.abs(large - empty).sum(-1).astype(bool).sum() > 4 * np.abs(small - empty).sum(-1).astype(bool).sum()
