@@ -98,9 +98,9 @@ class ReachConfig:
     names realistic noise models as future work. Drawn from the episode's reset key and the step count, so
     the same key gives the same noise."""
     action_latency: int = 0
-    """0: a step applies its own action; 1: it applies the action of the step before (prev_action; the
-    first step of an episode holds the initial pose), a one-step actuation delay as on real arms (not in
-    the paper, see joint_noise_std)."""
+    """0: a step applies its own action; 1: it applies the action of the step before (prev_action, so
+    that observation part shows the action the next step applies; the first step of an episode holds
+    the initial pose), a one-step actuation delay as on real arms (not in the paper, see joint_noise_std)."""
 
     @property
     def task(self) -> str:
@@ -182,7 +182,9 @@ class ReachAvoidConfig(ReachConfig):
     obstacle_region cube; sinusoid: oscillation about the sampled centre along a random direction with
     a random phase and period obstacle_period, its amplitude capped to stay in the cube. A closed-form
     function of episode time (`envs.obstacles`): the collision check uses the obstacles' positions at
-    every physics substep, the penalty and the observation those at the end of the step."""
+    every physics substep, the penalty and the observation those at the end of the step. Like the
+    static one, a moving obstacle is checked against the robot geoms of the MJCF's obstacle pairs (not
+    the base and the shoulder capsule, which the policy cannot move out of its way)."""
     obstacle_speed_range: tuple[float, float] = (0.05, 0.2)
     """(min, max) speed (m/s) drawn per obstacle and episode: linear's speed, sinusoid's peak speed
     (amplitude = speed * period / 2 pi before the cap); ignored for static."""
