@@ -182,7 +182,8 @@ class ReachAvoidConfig(ReachConfig):
     obstacle_region cube; sinusoid: oscillation about the sampled centre along a random direction with
     a random phase and period obstacle_period, its amplitude capped to stay in the cube. A closed-form
     function of episode time (`envs.obstacles`): the collision check uses the obstacles' positions at
-    every physics substep, the penalty and the observation those at the end of the step. Like the
+    every physics substep, the penalty and the observation those at the end of the step. A moving
+    obstacle starts clear of the initial pose and the target and may cross both later. Like the
     static one, a moving obstacle is checked against the robot geoms of the MJCF's obstacle pairs (not
     the base and the shoulder capsule, which the policy cannot move out of its way)."""
     obstacle_speed_range: tuple[float, float] = (0.05, 0.2)
