@@ -216,12 +216,13 @@ def _program(policy: Policy, env_name: str, env_config, num_envs: int, last_step
 
 
 def _record(state):
-    """What a video needs of each step: joint positions, target and obstacle (arms only)."""
+    """What a video needs of each step: joint positions, target and obstacles (arms only)."""
     if not hasattr(state.pipeline_state, "qpos"):
         return {}
     out = {"qpos": state.pipeline_state.qpos, "target_pos": state.info["target_pos"]}
-    if "obstacle_pos" in state.info:
-        out["obstacle_pos"] = state.info["obstacle_pos"]
+    for key in ("obstacle_pos", "obstacle_radius"):  # the radius where it is drawn per episode
+        if key in state.info:
+            out[key] = state.info[key]
     return out
 
 
@@ -463,7 +464,8 @@ def device_description() -> str:
 def rollout(policy: Policy, env_name: str, env_config, num_envs: int = 1, eval_seed: int = DEFAULT_EVAL_SEED,
             unit: int = 0, stochastic: bool = False, allow_env_mismatch: bool = False) -> dict:
     """Joint positions, target and obstacle of each env's first episode (for `envs.render`):
-    {"qpos": (T + 1, n, nq), "target_pos": ..., ["obstacle_pos": ...], "length": (n,), "metrics": {...}}
+    {"qpos": (T + 1, n, nq), "target_pos": ..., ["obstacle_pos": ..., "obstacle_radius": ...], "length": (n,),
+    "metrics": {...}}
     with the policy's unit `unit` (a trained seed's index); the episodes that `run` evaluates with as
     many envs, the same seed and the same `stochastic`."""
     program = _program(policy, env_name, env_config, num_envs, 10, stochastic, allow_env_mismatch)

@@ -65,6 +65,12 @@ _UR5E_REACH_AVOID = dict(_UR5E_RELATIVE, w_joint_limit=1.0, joint_limit_margin=0
 _PLUS_REACH = ("joint_pos", "joint_sin_cos", "ee_pos", "target_pos", "ee_to_target", "self_dist")
 _UR5E_PLUS = dict(_UR5E_RELATIVE, observation=_PLUS_REACH)
 _UR5E_PLUS_AVOID = dict(_UR5E_RELATIVE, observation=_PLUS_REACH + ("obstacle_pos", "link_obstacle_dist"))
+# Beyond the paper (issue 29, the future work of its Discussion): 3 obstacles of random radius moving in straight
+# lines that bounce off the sampling cube; their radii and velocities observed.
+MOVING_OBSTACLES_3 = dict(
+    num_obstacles=3, obstacle_motion="linear", obstacle_radius_range=(0.05, 0.1), obstacle_speed_range=(0.05, 0.2),
+    observation=("joint_pos", "ee_pos", "target_pos", "ee_to_target", "obstacle_pos", "obstacle_radius", "obstacle_vel",
+                 "link_obstacle_dist"))
 PPO_CPU = dataclasses.replace(PPO_PAPER, num_envs=16, batch_size=32, num_minibatches=4)
 
 # Small, fast settings of the pure-JAX probe task (CPU: well under a minute).
@@ -116,6 +122,16 @@ PRESETS: dict[str, Preset] = {
                                    PPO_PAPER_REACH_AVOID, env=_UR5E_REACH_AVOID, run=dict(num_timesteps=192_000_000)),
     "panda-reach-avoid-ppo": Preset("Panda reach-avoid, 0.1 m obstacle, semi-sparse reward, 4x256 (paper), discount 0.98",
                                     "panda-reach-avoid", PPO_PANDA_REACH_AVOID, run=dict(num_timesteps=100_000_000)),
+    # Ours beyond the paper: the reach-avoid presets with 3 moving obstacles of random size (not trained yet).
+    "ur5e-reach-avoid-ppo-moving3": Preset("ur5e-reach-avoid-ppo with 3 obstacles of radius 0.05-0.1 m moving at "
+                                           "0.05-0.2 m/s, their radii and velocities observed (not in the paper)",
+                                           "ur5e-reach-avoid", PPO_PAPER_REACH_AVOID,
+                                           env=dict(_UR5E_REACH_AVOID, **MOVING_OBSTACLES_3),
+                                           run=dict(num_timesteps=192_000_000)),
+    "panda-reach-avoid-ppo-moving3": Preset("panda-reach-avoid-ppo with 3 obstacles of radius 0.05-0.1 m moving at "
+                                            "0.05-0.2 m/s, their radii and velocities observed (not in the paper)",
+                                            "panda-reach-avoid", PPO_PANDA_REACH_AVOID, env=MOVING_OBSTACLES_3,
+                                            run=dict(num_timesteps=100_000_000)),
     # Ours beyond the paper: its presets plus the observation parts joint_sin_cos and self_dist.
     "ur5e-reach-ppo-plus": Preset("ur5e-reach-ppo without its joint-limit penalty, + joint sin/cos and self-collision "
                                   "distances observed (not in the paper)",

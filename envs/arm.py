@@ -35,6 +35,11 @@ def _take(tree, index):
     return jax.tree.map(lambda x: x[index], tree)
 
 
+def _raw_key(key):
+    """A key as plain uint32 data: info entries pass through `jnp.where` on auto-reset, typed keys do not."""
+    return jax.random.key_data(key) if jax.dtypes.issubdtype(key.dtype, jax.dtypes.prng_key) else key
+
+
 class ArmEnv(Env):
     """A robot arm that must bring its end effector to a target. See `ReachConfig`."""
 
@@ -48,7 +53,8 @@ class ArmEnv(Env):
         self.robot = robot
         self.config = config
         self.d_max = config.d_max if config.d_max is not None else robot.reach
-        self.dt = float(robot.mj_model.opt.timestep) * config.substeps
+        self.physics_dt = float(robot.mj_model.opt.timestep)
+        self.dt = self.physics_dt * config.substeps
         self._init_low, self._init_high = robot.joint_range(config.init_range)
         self._obs_size = sum(self._observation_sizes()[p] for p in config.observation)
 
@@ -86,8 +92,8 @@ class ArmEnv(Env):
 
         data = robot.data_template
         mocap = data.mocap_pos.at[robot.target_mocap].set(target)
-        if "obstacle_pos" in task_info:
-            mocap = mocap.at[robot.obstacle_mocap].set(task_info["obstacle_pos"])
+        if "obstacle_pos" in task_info:  # the model's one obstacle body shows the first obstacle
+            mocap = mocap.at[robot.obstacle_mocap].set(task_info["obstacle_pos"][:3])
         # Kinematic fields filled in, so the initial state can be rendered or inspected as is.
         data = data.replace(qpos=q0, ctrl=q0, mocap_pos=mocap, xpos=kin0.xpos, geom_xpos=kin0.geom_xpos,
                             geom_xmat=kin0.geom_xmat, site_xpos=kin0.site_xpos)
@@ -96,7 +102,8 @@ class ArmEnv(Env):
         info = {
             "target_pos": target,
             "target_qpos": target_qpos,
-            "prev_action": jnp.zeros(robot.nq),
+            # With latency, the action the first step applies: one that holds the initial pose.
+            "prev_action": self.hold_action(q0) if cfg.action_latency else jnp.zeros(robot.nq),
             "prev_ee_pos": kin0.ee_pos,
             "in_target": jnp.zeros(()),
             "reached": jnp.zeros(()),
@@ -107,6 +114,8 @@ class ArmEnv(Env):
             "reset_fallback": fallback,
             **task_info,
         }
+        if self.noisy:
+            info["noise_key"] = _raw_key(jax.random.fold_in(rng, 1))
         obs = self.observation(data, kin0.xpos, kin0.ee_pos, info)
         zero = jnp.zeros(())
         metrics = {name: zero for name in METRICS}
@@ -116,20 +125,25 @@ class ArmEnv(Env):
     def _step(self, state: State, action: jax.Array) -> State:
         cfg, robot = self.config, self.robot
         action = jnp.clip(action, -1.0, 1.0)
-        data = state.pipeline_state.replace(ctrl=self.action_to_ctrl(action, state.pipeline_state.qpos))
+        # One-step latency applies the action chosen a step earlier (kept in prev_action).
+        applied = state.info["prev_action"] if cfg.action_latency else action
+        data = state.pipeline_state.replace(ctrl=self.action_to_ctrl(applied, state.pipeline_state.qpos))
+        start = state.info["num_steps"] * cfg.substeps  # physics steps of the episode before this one
 
-        def substep(carry, _):
+        def substep(carry, k):
             data, closest = carry
             data = mjx.step(robot.mjx_model, data)
-            # geom poses of the configuration this substep started from
-            closest = jnp.minimum(closest, self.collision_distances(data.geom_xpos, data.geom_xmat, state.info))
+            # geom poses of the configuration this substep started from, the task (moving obstacles) at that time
+            task = self.task_at(state.info, start + k)
+            closest = jnp.minimum(closest, self.collision_distances(data.geom_xpos, data.geom_xmat, task))
             return (data, closest), None
 
-        (data, closest), _ = jax.lax.scan(substep, (data, jnp.full(2, jnp.inf)), length=cfg.substeps)
+        (data, closest), _ = jax.lax.scan(substep, (data, jnp.full(2, jnp.inf)), jnp.arange(cfg.substeps))
         # Poses of the final configuration (mjx.step computed those of the last substep's start).
         kin = robot.kinematics(data.qpos)
         data = data.replace(xpos=kin.xpos, geom_xpos=kin.geom_xpos, geom_xmat=kin.geom_xmat, site_xpos=kin.site_xpos)
-        closest = jnp.minimum(closest, self.collision_distances(data.geom_xpos, data.geom_xmat, state.info))
+        info = self.task_at(dict(state.info), start + cfg.substeps)  # the reward and observation see the step's end
+        closest = jnp.minimum(closest, self.collision_distances(data.geom_xpos, data.geom_xmat, info))
 
         nan = ~(jnp.all(jnp.isfinite(data.qpos)) & jnp.all(jnp.isfinite(data.qvel)))
         self_collision = (closest[0] < 0) & ~nan
@@ -137,7 +151,6 @@ class ArmEnv(Env):
         collided = self_collision | obstacle_collision
         failed = collided | nan
 
-        info = dict(state.info)
         ee = data.site_xpos[robot.ee_site]
         # A NaN step (e.g. a NaN action) keeps the last finite distance, so averages over episodes stay finite.
         distance = jnp.where(nan, info["recent_distances"][0], jnp.linalg.norm(ee - info["target_pos"]))
@@ -184,6 +197,18 @@ class ArmEnv(Env):
     # ----------------------------------------------------------------------------------------
     # Pieces a task or a researcher may change
 
+    @property
+    def noisy(self) -> bool:
+        """Whether observations carry sensor noise (then `info["noise_key"]` seeds it)."""
+        return self.config.joint_noise_std > 0
+
+    def hold_action(self, qpos: jax.Array) -> jax.Array:
+        """The action whose joint targets are `qpos` (within the joint range)."""
+        if self.config.action == "absolute":
+            low, high = self.robot.joint_low, self.robot.joint_high
+            return 2.0 * (qpos - low) / (high - low) - 1.0
+        return jnp.zeros_like(qpos)
+
     def action_to_ctrl(self, action: jax.Array, qpos: jax.Array) -> jax.Array:
         """Joint position targets from an action in [-1, 1], clipped to the joint range."""
         low, high = self.robot.joint_low, self.robot.joint_high
@@ -208,8 +233,6 @@ class ArmEnv(Env):
         n = cfg.sampling_candidates
         if quantity == "target" and cfg.workspace in ("front", "upper"):
             return n * (3 if cfg.target_sampling == "reachable" else 2)
-        if quantity == "obstacle" and getattr(cfg, "obstacle_radius", 0.0) > 0.15:
-            return 2 * n
         return n
 
     def sample_target(self, key):
@@ -229,6 +252,11 @@ class ArmEnv(Env):
     def sample_task(self, key, kin0, target):
         """Task-specific episode data (the reach task has none) and whether sampling succeeded."""
         return {}, jnp.array(True)
+
+    def task_at(self, info: dict, physics_step) -> dict:
+        """`info` with the task's time-dependent entries (moving obstacles) at physics step
+        `physics_step` of the episode; the reach task has none."""
+        return info
 
     def collision_distances(self, geom_xpos, geom_xmat, info) -> jax.Array:
         """Closest signed distance of (self-collision pairs, obstacle pairs); < 0 is a collision."""
@@ -255,6 +283,13 @@ class ArmEnv(Env):
         return {"joint_pos": n, "joint_vel": n, "joint_acc": n, "ee_pos": 3, "ee_vel": 3, "target_pos": 3,
                 "ee_to_target": 3, "prev_action": n, "joint_sin_cos": 2 * n, "self_dist": len(self.robot.self_pairs)}
 
+    def perceived(self, data, info, key):
+        """(data, info) as the sensors report them: joint angles with `joint_noise_std` noise."""
+        std = self.config.joint_noise_std
+        if std > 0:
+            data = data.replace(qpos=data.qpos + std * jax.random.normal(jax.random.fold_in(key, 0), data.qpos.shape))
+        return data, info
+
     def observation_parts(self, data, xpos, ee, info) -> dict:
         """Functions computing each observation part (only the configured ones are called)."""
         return {
@@ -271,5 +306,7 @@ class ArmEnv(Env):
         }
 
     def observation(self, data, xpos, ee, info) -> jax.Array:
+        if self.noisy:  # fresh noise every step of the episode, from its reset key
+            data, info = self.perceived(data, info, jax.random.fold_in(info["noise_key"], info["num_steps"]))
         parts = self.observation_parts(data, xpos, ee, info)
         return jnp.concatenate([jnp.ravel(parts[p]()) for p in self.config.observation]).astype(jnp.float32)

@@ -10,7 +10,8 @@ from __future__ import annotations
 import dataclasses
 from typing import Literal, Optional
 
-from envs.validation import choice, integer, positive, below
+from envs.obstacles import MAX_OBSTACLES, MOTIONS
+from envs.validation import below, choice, integer, interval, positive
 
 ACTIONS = ("relative", "absolute")
 REWARDS = ("sparse", "semi_sparse", "dense")
@@ -23,7 +24,7 @@ REACH_OBSERVATIONS = (
     "joint_pos", "joint_vel", "joint_acc", "ee_pos", "ee_vel", "target_pos", "ee_to_target", "prev_action",
     "joint_sin_cos", "self_dist",
 )
-OBSTACLE_OBSERVATIONS = ("obstacle_pos", "obstacle_size", "link_obstacle_dist")
+OBSTACLE_OBSERVATIONS = ("obstacle_pos", "obstacle_size", "link_obstacle_dist", "obstacle_radius", "obstacle_vel")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -42,7 +43,8 @@ class ReachConfig:
     ee_pos, ee_vel, target_pos, ee_to_target, prev_action, and two not in the paper: joint_sin_cos
     (sin and cos of each joint angle: one value per physical pose, where a UR5e joint's 720 degree
     range gives each pose up to two angles) and self_dist (signed distance of each self-collision
-    pair, < 0 in collision); reach-avoid adds obstacle_pos, obstacle_size, link_obstacle_dist."""
+    pair, < 0 in collision); reach-avoid adds obstacle_pos, obstacle_size, link_obstacle_dist and, beyond
+    the paper, obstacle_radius and obstacle_vel (see ReachAvoidConfig)."""
     reward: Literal["sparse", "semi_sparse", "dense"] = "dense"
     """Reward formulation: sparse (+1 in target), semi_sparse (paper eq. 1), dense (paper eq. 2)."""
     w_reach: float = 1.0
@@ -88,8 +90,17 @@ class ReachConfig:
     """Compensate gravity in the joints as the real arms' controllers do (not in the paper)."""
     sampling_candidates: int = 8
     """Candidates drawn at once per rejection-sampled quantity; targets in the front/upper
-    workspaces and obstacles over 0.15 m use more (see `ArmEnv.candidates`). A reset that finds
-    none valid is counted in the `reset_fallback` metric (expected rate about 1e-6)."""
+    workspaces and obstacles over 0.15 m use more (see `ArmEnv.candidates`, `ReachAvoid.candidates`).
+    A reset that finds none valid is counted in the `reset_fallback` metric (expected rate about 1e-6)."""
+    joint_noise_std: float = 0.0
+    """Standard deviation (rad) of Gaussian noise on the observed joint angles (joint_pos and joint_sin_cos;
+    the physics, reward and other parts see the true ones); 0 = off. Not in the paper, whose Discussion
+    names realistic noise models as future work. Drawn from the episode's reset key and the step count, so
+    the same key gives the same noise."""
+    action_latency: int = 0
+    """0: a step applies its own action; 1: it applies the action of the step before (prev_action, so
+    that observation part shows the action the next step applies; the first step of an episode holds
+    the initial pose), a one-step actuation delay as on real arms (not in the paper, see joint_noise_std)."""
 
     @property
     def task(self) -> str:
@@ -127,6 +138,8 @@ class ReachConfig:
         integer("sampling_candidates", self.sampling_candidates, 1)
         if not isinstance(self.gravity_compensation, bool):
             raise ValueError(f"gravity_compensation={self.gravity_compensation!r} is invalid: allowed are True, False.")
+        positive("joint_noise_std", self.joint_noise_std, strict=False)
+        integer("action_latency", self.action_latency, 0, maximum=1)
 
     def validate_for_robot(self, robot: str, reach: float, joint_range_width: float) -> None:
         """`validate` plus bounds from the robot's workspace (`envs.robots.base.bounds`): a target
@@ -140,7 +153,9 @@ class ReachConfig:
 
 @dataclasses.dataclass(frozen=True)
 class ReachAvoidConfig(ReachConfig):
-    """Reach-avoid task: reach the target without touching a static spherical obstacle."""
+    """Reach-avoid task: reach the target without touching spherical obstacles (the paper: one, static,
+    of a fixed size; the options num_obstacles, obstacle_radius_range, obstacle_motion and
+    obstacle_noise_std go beyond it, towards the future work its Discussion names)."""
 
     observation: tuple[str, ...] = ("joint_pos", "ee_pos", "target_pos", "ee_to_target", "obstacle_pos",
                                     "link_obstacle_dist")
@@ -155,13 +170,47 @@ class ReachAvoidConfig(ReachConfig):
     obstacle_region: float = 0.6
     """Obstacles are sampled uniformly in the cube [-obstacle_region, obstacle_region]^3 around the
     robot base (paper: a 1.2 m cube), rejecting ones that touch the initial pose or the target."""
+    num_obstacles: int = 1
+    """Spheres per episode (the paper: 1), each sampled as the one obstacle is, clear of the initial pose
+    and the target (obstacles may overlap each other). The collision check and the proximity penalty
+    cover all of them; obstacle_pos, obstacle_size, obstacle_radius and obstacle_vel list them all."""
+    obstacle_radius_range: Optional[tuple[float, float]] = None
+    """(min, max): each obstacle's radius is drawn uniformly from it per episode (observed by the
+    obstacle_radius part); None: every obstacle has obstacle_radius (the paper's fixed size)."""
+    obstacle_motion: Literal["static", "linear", "sinusoid"] = "static"
+    """static (paper); linear: constant velocity from the sampled centre, reflected at the faces of the
+    obstacle_region cube; sinusoid: oscillation about the sampled centre along a random direction with
+    a random phase and period obstacle_period, its amplitude capped to stay in the cube. A closed-form
+    function of episode time (`envs.obstacles`): the collision check uses the obstacles' positions at
+    every physics substep, the penalty and the observation those at the end of the step. A moving
+    obstacle starts clear of the initial pose and the target and may cross both later. Like the
+    static one, a moving obstacle is checked against the robot geoms of the MJCF's obstacle pairs (not
+    the base and the shoulder capsule, which the policy cannot move out of its way)."""
+    obstacle_speed_range: tuple[float, float] = (0.05, 0.2)
+    """(min, max) speed (m/s) drawn per obstacle and episode: linear's speed, sinusoid's peak speed
+    (amplitude = speed * period / 2 pi before the cap); ignored for static."""
+    obstacle_period: float = 2.0
+    """Period (s) of the sinusoid motion."""
+    obstacle_noise_std: float = 0.0
+    """Standard deviation (m) of Gaussian noise on the observed obstacle positions (obstacle_pos and the
+    link_obstacle_dist computed from them; collisions and the penalty use the true ones); 0 = off."""
     w_obst: float = 0.1
     """Weight of the link-proximity penalty w_obst * sum_i max(0, 1 - d_i / obstacle_tau) (eq. 3)."""
     obstacle_tau: float = 0.1
     """Distance (m) under which a link's proximity to the obstacle is penalised."""
     link_distance: Literal["origin", "surface"] = "origin"
     """How d_i is measured: origin (paper: link frame origin to the obstacle centre, minus the
-    radius) or surface (exact distance between the link's capsules and the obstacle)."""
+    radius) or surface (exact distance between the link's capsules and the obstacle). With several
+    obstacles the link_obstacle_dist observation gives each link's distance to the nearest one: one
+    number per link whatever num_obstacles is, and the nearest obstacle is the one to avoid first;
+    the penalty sums eq. (3) over every (link, obstacle) pair."""
+
+    @property
+    def radius_bounds(self) -> tuple[float, float]:
+        """(smallest, largest) obstacle radius an episode can have."""
+        if self.obstacle_radius_range is None:
+            return self.obstacle_radius, self.obstacle_radius
+        return tuple(map(float, self.obstacle_radius_range))
 
     @property
     def task(self) -> str:
@@ -177,6 +226,13 @@ class ReachAvoidConfig(ReachConfig):
         positive("w_obst", self.w_obst, strict=False)
         positive("obstacle_tau", self.obstacle_tau)
         choice("link_distance", self.link_distance, LINK_DISTANCES)
+        integer("num_obstacles", self.num_obstacles, 1, maximum=MAX_OBSTACLES)
+        if self.obstacle_radius_range is not None:
+            interval("obstacle_radius_range", self.obstacle_radius_range)
+        choice("obstacle_motion", self.obstacle_motion, tuple(MOTIONS))
+        interval("obstacle_speed_range", self.obstacle_speed_range, strict=False)
+        positive("obstacle_period", self.obstacle_period)
+        positive("obstacle_noise_std", self.obstacle_noise_std, strict=False)
 
     def validate_for_robot(self, robot: str, reach: float, joint_range_width: float) -> None:
         """ReachConfig's bounds plus the obstacle's: a radius below the robot's reach (a larger one
@@ -184,5 +240,8 @@ class ReachAvoidConfig(ReachConfig):
         obstacle farther out never meets the arm)."""
         super().validate_for_robot(robot, reach, joint_range_width)
         below("obstacle_radius", self.obstacle_radius, reach, f"below the {robot}'s reach, m")
+        if self.radius_bounds[1] >= reach:
+            raise ValueError(f"obstacle_radius_range={self.obstacle_radius_range!r} is invalid: allowed is a max below "
+                             f"the {robot}'s reach ({reach:g} m).")
         below("obstacle_region", self.obstacle_region, 2 * reach, f"at most twice the {robot}'s reach, m",
               inclusive=True)

@@ -7,8 +7,9 @@
     frames = render.rollout_frames(env, evaluation.rollout(...))     # eval.py --video
     render.write_video("out.mp4", frames, fps=25)
 
-The env's MJX state supplies joint positions, target and obstacle; a CPU `MjModel` copy of the
-robot (obstacle radius and target size set from the env config, a backdrop added) and a CPU
+The env's MJX state supplies joint positions, target and obstacles; a CPU `MjModel` copy of the
+robot (obstacle radius and target size set from the env config, a sphere per extra obstacle and a
+backdrop added) and a CPU
 `MjData` turn them into images: `mj_forward` puts the bodies, `mujoco.Renderer` draws them.
 
 Headless OpenGL: MuJoCo picks its GL backend from MUJOCO_GL when `mujoco` is first imported (GLFW,
@@ -95,13 +96,25 @@ def render_model(env, target_marker: float | None = TARGET_MARKER_RADIUS, worksp
         spec.worldbody.add_geom(name="viz_workspace", type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[robot.reach, 0, 0],
                                 pos=list(np.asarray(robot.workspace_center, float)), material=ws.name,
                                 rgba=[0.5, 0.52, 0.55, workspace_alpha], contype=0, conaffinity=0, group=0)
+    # Visual copies of the obstacle for num_obstacles > 1 (`Scene.draw` places and sizes them).
+    obstacle = spec.geom("obstacle")
+    for j in range(1, getattr(cfg, "num_obstacles", 1)):
+        body = spec.worldbody.add_body(name=f"viz_obstacle{j}", mocap=True, pos=[0.5, 0, -5])
+        body.add_geom(name=f"viz_obstacle{j}", type=mujoco.mjtGeom.mjGEOM_SPHERE, size=list(obstacle.size),
+                      rgba=list(obstacle.rgba), group=obstacle.group, contype=0, conaffinity=0)
     model = spec.compile()
-    obstacle_radius = getattr(cfg, "obstacle_radius", None)
-    if obstacle_radius is not None:
-        model.geom_size[model.geom("obstacle").id, 0] = obstacle_radius
+    if hasattr(cfg, "radius_bounds"):
+        for geom in obstacle_geoms(model, cfg.num_obstacles):
+            model.geom_size[geom, 0] = cfg.radius_bounds[1]
+            model.geom_rbound[geom] = cfg.radius_bounds[1]  # culling: the largest radius an episode draws
     marker = cfg.target_radius if target_marker is None else max(target_marker, cfg.target_radius)
     model.geom_size[model.geom("target").id, 0] = marker
     return model
+
+
+def obstacle_geoms(model, num_obstacles: int) -> list[int]:
+    """Geom ids of the obstacles in a `render_model`: the MJCF's and its visual copies."""
+    return [model.geom("obstacle").id] + [model.geom(f"viz_obstacle{j}").id for j in range(1, num_obstacles)]
 
 
 def _xml_path(robot):
@@ -111,7 +124,7 @@ def _xml_path(robot):
 
 
 class Scene:
-    """A renderer for one env: `draw(qpos, target, obstacle)` -> (H, W, 3) uint8."""
+    """A renderer for one env: `draw(qpos, target, obstacle, obstacle_radius)` -> (H, W, 3) uint8."""
 
     def __init__(self, env, width: int = 480, height: int = 360, workspace_alpha: float = 0.0,
                  target_marker: float | None = TARGET_MARKER_RADIUS, distance: float | None = None,
@@ -138,15 +151,20 @@ class Scene:
         self.option = mujoco.MjvOption()
         self.option.geomgroup[:] = [1, 1, 1, 0, 0, 0]
         self._target_mocap = env.robot.target_mocap
-        self._obstacle_mocap = env.robot.obstacle_mocap
+        self._obstacle_geoms = obstacle_geoms(self.model, getattr(env.config, "num_obstacles", 1))
 
-    def draw(self, qpos, target=None, obstacle=None) -> np.ndarray:
+    def draw(self, qpos, target=None, obstacle=None, obstacle_radius=None) -> np.ndarray:
+        """`obstacle`: the obstacles' centres, flat (`info["obstacle_pos"]`); `obstacle_radius`: their
+        radii where they are drawn per episode (`info["obstacle_radius"]`), else the config's."""
         d = self.data
         d.qpos[:] = np.asarray(qpos, float)
         if target is not None:
             d.mocap_pos[self._target_mocap] = np.asarray(target, float)
         if obstacle is not None:
-            d.mocap_pos[self._obstacle_mocap] = np.asarray(obstacle, float)
+            for geom, center in zip(self._obstacle_geoms, np.reshape(np.asarray(obstacle, float), (-1, 3))):
+                d.mocap_pos[self.model.body_mocapid[self.model.geom_bodyid[geom]]] = center
+        if obstacle_radius is not None:
+            self.model.geom_size[self._obstacle_geoms, 0] = np.asarray(obstacle_radius, float)
         mujoco.mj_kinematics(self.model, d)
         self.renderer.update_scene(d, self.camera, self.option)
         return self.renderer.render().copy()
@@ -167,8 +185,9 @@ def render_state(env, state, index: int | None = None, **scene_options) -> np.nd
     qpos = pick(state.pipeline_state.qpos)
     target = pick(state.info["target_pos"])
     obstacle = pick(state.info["obstacle_pos"]) if "obstacle_pos" in state.info else None
+    radius = pick(state.info["obstacle_radius"]) if "obstacle_radius" in state.info else None
     with Scene(env, **scene_options) as scene:
-        return scene.draw(qpos, target, obstacle)
+        return scene.draw(qpos, target, obstacle, radius)
 
 
 def rollout_frames(env, records: dict, width: int = 480, height: int = 360, hold: int = 10, **scene_options) -> np.ndarray:
@@ -176,7 +195,7 @@ def rollout_frames(env, records: dict, width: int = 480, height: int = 360, hold
     tile of a grid; an env whose episode ended early keeps its last pose, tinted red after a
     collision; every episode is held `hold` frames at the end."""
     qpos, target = records["qpos"], records["target_pos"]
-    obstacle = records.get("obstacle_pos")
+    obstacle, radius = records.get("obstacle_pos"), records.get("obstacle_radius")
     lengths = records["length"]
     metrics = records.get("metrics", {})
     collided = np.zeros(len(lengths), bool)
@@ -193,7 +212,8 @@ def rollout_frames(env, records: dict, width: int = 480, height: int = 360, hold
             r, c = divmod(i, cols)
             for t in range(steps):
                 k = min(t, int(lengths[i]))  # records[0]: reset state; records[k]: after step k
-                image = scene.draw(qpos[k, i], target[0, i], None if obstacle is None else obstacle[0, i])
+                image = scene.draw(qpos[k, i], target[0, i], None if obstacle is None else obstacle[k, i],  # moving
+                                   None if radius is None else radius[0, i])
                 if collided[i] and t >= lengths[i]:
                     image = (0.6 * image + 0.4 * np.array([255, 0, 0])).astype(np.uint8)
                 frames[t, r * height:(r + 1) * height, c * width:(c + 1) * width] = image

@@ -29,16 +29,27 @@ def finite(name: str, value) -> None:
         raise ValueError(f"{name}={value!r} is invalid: allowed is a finite number.")
 
 
-def integer(name: str, value, minimum: int) -> None:
-    """An integer >= minimum (numpy integers count; bools, floats and strings do not)."""
-    if not isinstance(value, numbers.Integral) or isinstance(value, bool) or value < minimum:
-        raise ValueError(f"{name}={value!r} is invalid: allowed is an integer >= {minimum}.")
+def integer(name: str, value, minimum: int, maximum: int | None = None) -> None:
+    """An integer >= minimum (and <= maximum if given); numpy integers count, bools, floats and strings do not."""
+    if (not isinstance(value, numbers.Integral) or isinstance(value, bool) or value < minimum
+            or (maximum is not None and value > maximum)):
+        allowed = f"an integer >= {minimum}" if maximum is None else f"an integer in [{minimum}, {maximum}]"
+        raise ValueError(f"{name}={value!r} is invalid: allowed is {allowed}.")
 
 
 def in_range(name: str, value, low: float, high: float) -> None:
     """A real number in [low, high]."""
     if not (_is_real(value) and low <= float(value) <= high):
         raise ValueError(f"{name}={value!r} is invalid: allowed is a number in [{float(low)}, {float(high)}].")
+
+
+def interval(name: str, value, strict: bool = True) -> None:
+    """A (min, max) tuple of finite numbers, min <= max, both > 0 (>= 0 with strict=False)."""
+    ok = (isinstance(value, tuple) and len(value) == 2 and all(_is_real(v) and math.isfinite(float(v)) for v in value)
+          and all(float(v) > 0 if strict else float(v) >= 0 for v in value) and float(value[0]) <= float(value[1]))
+    if not ok:
+        raise ValueError(f"{name}={value!r} is invalid: allowed is a tuple (min, max) of finite numbers "
+                         f"{'>' if strict else '>='} 0 with min <= max.")
 
 
 def below(name: str, value, bound: float, why: str, inclusive: bool = False) -> None:

@@ -257,6 +257,11 @@ def main(argv: list[str] | None = None) -> dict:
         raise ValueError(f"--num-envs {args.num_envs} is invalid: allowed is an integer >= 1.")
     env_name = args.env or policy.train_env_name
     config = envs.make_config(env_name, policy.train_env_config)
+    if getattr(config, "num_obstacles", 1) > 1 or getattr(config, "obstacle_motion", "static") != "static" \
+            or getattr(config, "obstacle_radius_range", None) is not None:
+        raise ValueError(f"env {env_name!r} with num_obstacles={config.num_obstacles}, obstacle_motion="
+                         f"{config.obstacle_motion!r}, obstacle_radius_range={config.obstacle_radius_range!r} is invalid "
+                         "here: allowed is the paper's one static obstacle of a fixed radius (the report's geometry).")
     records = evaluation.rollout(policy, env_name, config, num_envs=args.num_envs, eval_seed=args.seed, unit=args.unit)
     rows = classify(envs.from_config(env_name, config).robot, records, getattr(config, "obstacle_radius", None))
     summary = summarize(rows, getattr(config, "joint_limit_margin", NEAR_LIMIT))

@@ -243,9 +243,9 @@ def _axis_angle(axis: np.ndarray, angle: jax.Array) -> jax.Array:
 
 
 def first_valid(valid: jax.Array) -> tuple[jax.Array, jax.Array]:
-    """Index of the first True entry of `valid` (0 if none) and whether one exists.
+    """Index of the first True entry of `valid` along its last axis (0 if none) and whether one exists.
 
     Rejection sampling with a fixed number of candidates: under `vmap` a `while_loop` runs until
     the unluckiest environment is done, a fixed candidate batch does not.
     """
-    return jnp.argmax(valid), jnp.any(valid)
+    return jnp.argmax(valid, axis=-1), jnp.any(valid, axis=-1)

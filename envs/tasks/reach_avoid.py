@@ -1,55 +1,133 @@
-"""The reach-avoid task: reach the target without touching a static spherical obstacle."""
+"""The reach-avoid task: reach the target without touching spherical obstacles (paper section
+"Reach-Avoid Task": one static sphere of a fixed size; several, moving and random-size spheres and
+noisy obstacle positions are options beyond it, see `ReachAvoidConfig`).
+
+`info["obstacle_pos"]` holds every obstacle's centre at the state's time, flat (`3 * num_obstacles`,
+so one obstacle keeps the paper's shape); a random radius adds `info["obstacle_radius"]`, a motion
+its parameters (`info["obstacle_motion"]`) and `info["obstacle_vel"]`.
+"""
 
 import jax
 import jax.numpy as jnp
 
 from envs import rewards
 from envs.config import ReachAvoidConfig
+from envs.obstacles import MOTIONS
 from envs.robots import first_valid
 from envs.tasks.reach import Reach
 
 
 class ReachAvoid(Reach):
-    """Reach with a sphere obstacle sampled per episode; see `ReachAvoidConfig`."""
+    """Reach with sphere obstacles sampled per episode; see `ReachAvoidConfig`."""
 
     config: ReachAvoidConfig
 
+    def __init__(self, robot, config: ReachAvoidConfig):
+        super().__init__(robot, config)
+        self.motion = MOTIONS[config.obstacle_motion]
+
+    @property
+    def noisy(self) -> bool:
+        return super().noisy or self.config.obstacle_noise_std > 0
+
+    def candidates(self, quantity: str) -> int:
+        n = super().candidates(quantity)
+        return 2 * n if quantity == "obstacle" and self.config.radius_bounds[1] > 0.15 else n
+
     def sample_task(self, key, kin0, target):
-        """Obstacle centre uniform in the cube around the base, clear of the initial pose (every
-        robot geom, the base included) and not swallowing the target."""
+        """Each obstacle's centre uniform in the cube around the base, its position at time 0 clear of
+        the initial pose (every robot geom, the base included) and not swallowing the target; its
+        radius and motion are drawn with the candidate, so the check sees them."""
         cfg, robot = self.config, self.robot
-        centers = jax.random.uniform(key, (self.candidates("obstacle"), 3), minval=-cfg.obstacle_region,
-                                     maxval=cfg.obstacle_region)
-        to_robot = robot.obstacle_distances(kin0.geom_xpos, kin0.geom_xmat, centers, cfg.obstacle_radius,
+        region = cfg.obstacle_region
+        shape = (cfg.num_obstacles, self.candidates("obstacle"))
+        centers = jax.random.uniform(key, shape + (3,), minval=-region, maxval=region)
+        if cfg.obstacle_radius_range is None:
+            radii = jnp.full(shape, cfg.obstacle_radius)
+        else:
+            radii = jax.random.uniform(jax.random.fold_in(key, 1), shape, minval=cfg.radius_bounds[0],
+                                       maxval=cfg.radius_bounds[1])
+        start, params = centers, {}
+        if self.motion.moves:
+            speeds = jax.random.uniform(jax.random.fold_in(key, 2), shape, minval=cfg.obstacle_speed_range[0],
+                                        maxval=cfg.obstacle_speed_range[1])
+            params = self.motion.sample(jax.random.fold_in(key, 3), centers, speeds, cfg.obstacle_period, region)
+            start, _ = self.motion.state(params, 0.0, cfg.obstacle_period, region)
+        to_robot = robot.obstacle_distances(kin0.geom_xpos, kin0.geom_xmat, start, radii[..., None],
                                             geoms=robot.robot_geoms)
-        clear_of_target = jnp.linalg.norm(centers - target, axis=-1) > cfg.obstacle_radius + cfg.target_radius
+        clear_of_target = jnp.linalg.norm(start - target, axis=-1) > radii + cfg.target_radius
         index, ok = first_valid(jnp.all(to_robot > 0.0, axis=-1) & clear_of_target)
-        return {"obstacle_pos": centers[index]}, ok
+        pick = lambda x: x[jnp.arange(cfg.num_obstacles), index]  # noqa: E731  (each obstacle's first valid candidate)
+        info = {"obstacle_pos": jnp.ravel(pick(start))}
+        if cfg.obstacle_radius_range is not None:
+            info["obstacle_radius"] = pick(radii)
+        if self.motion.moves:
+            info["obstacle_motion"] = jax.tree.map(pick, params)
+            info = self.task_at(info, 0)
+        return info, jnp.all(ok)
+
+    def task_at(self, info, physics_step):
+        """Moving obstacles: their positions and velocities at physics step `physics_step`."""
+        if not self.motion.moves:
+            return info
+        cfg = self.config
+        position, velocity = self.motion.state(info["obstacle_motion"], physics_step * self.physics_dt,
+                                               cfg.obstacle_period, cfg.obstacle_region)
+        return {**info, "obstacle_pos": jnp.ravel(position), "obstacle_vel": jnp.ravel(velocity)}
+
+    def obstacles(self, info):
+        """(centres [n, 3], radii [n]) of the obstacles in `info`."""
+        centers = jnp.reshape(info["obstacle_pos"], (-1, 3))
+        if "obstacle_radius" in info:
+            return centers, info["obstacle_radius"]
+        return centers, jnp.full(centers.shape[0], self.config.obstacle_radius)
+
+    def per_obstacle(self, info, fn):
+        """`fn(centre, radius)` of each obstacle, stacked. One obstacle at a time, not batched over an
+        obstacle axis: each is then the single-obstacle program, bit for bit (a batched axis changes
+        XLA's fusion and the last bit of a distance)."""
+        centers, radii = self.obstacles(info)
+        return jnp.stack([fn(centers[j], radii[j]) for j in range(centers.shape[0])])
 
     def collision_distances(self, geom_xpos, geom_xmat, info):
         self_min = jnp.min(self.robot.self_distances(geom_xpos, geom_xmat))
-        obstacle = self.robot.obstacle_distances(geom_xpos, geom_xmat, info["obstacle_pos"], self.config.obstacle_radius)
+        obstacle = self.per_obstacle(info, lambda c, r: self.robot.obstacle_distances(geom_xpos, geom_xmat, c, r))
         return jnp.stack([self_min, jnp.min(obstacle)])
 
     def link_distances(self, data, xpos, info):
-        """The paper's d_i per link (see `ReachAvoidConfig.link_distance`)."""
-        return self.robot.link_obstacle_distances(xpos, data.geom_xpos, data.geom_xmat, info["obstacle_pos"],
-                                                  self.config.obstacle_radius, self.config.link_distance)
+        """The paper's d_i per obstacle and link, `[n, nlinks]` (see `ReachAvoidConfig.link_distance`)."""
+        return self.per_obstacle(info, lambda c, r: self.robot.link_obstacle_distances(
+            xpos, data.geom_xpos, data.geom_xmat, c, r, self.config.link_distance))
 
     def reward(self, data, distance, in_target, info):
+        """The reach reward minus eq. (3)'s penalty summed over the obstacles."""
         cfg = self.config
         penalty = rewards.obstacle_proximity(self.link_distances(data, data.xpos, info), cfg.w_obst, cfg.obstacle_tau)
-        return super().reward(data, distance, in_target, info) - penalty
+        return super().reward(data, distance, in_target, info) - jnp.sum(penalty)
+
+    def perceived(self, data, info, key):
+        """Reach's noisy joints, plus obstacle positions with `obstacle_noise_std` noise."""
+        data, info = super().perceived(data, info, key)
+        std = self.config.obstacle_noise_std
+        if std > 0:
+            noise = std * jax.random.normal(jax.random.fold_in(key, 1), info["obstacle_pos"].shape)
+            info = {**info, "obstacle_pos": info["obstacle_pos"] + noise}
+        return data, info
 
     def _observation_sizes(self):
-        return {**super()._observation_sizes(), "obstacle_pos": 3, "obstacle_size": 3,
-                "link_obstacle_dist": len(self.robot.link_bodies)}
+        n = self.config.num_obstacles
+        return {**super()._observation_sizes(), "obstacle_pos": 3 * n, "obstacle_size": 3 * n, "obstacle_radius": n,
+                "obstacle_vel": 3 * n, "link_obstacle_dist": len(self.robot.link_bodies)}
 
     def observation_parts(self, data, xpos, ee, info):
         parts = super().observation_parts(data, xpos, ee, info)
+        n = self.config.num_obstacles
         parts.update(
             obstacle_pos=lambda: info["obstacle_pos"],
-            obstacle_size=lambda: jnp.full(3, self.config.obstacle_radius),
-            link_obstacle_dist=lambda: self.link_distances(data, xpos, info),
+            obstacle_size=lambda: jnp.repeat(self.obstacles(info)[1], 3),  # the paper's 3D size of a sphere
+            obstacle_radius=lambda: self.obstacles(info)[1],
+            obstacle_vel=lambda: info["obstacle_vel"] if "obstacle_vel" in info else jnp.zeros(3 * n),
+            # Per link, the nearest obstacle: one number per link whatever num_obstacles is.
+            link_obstacle_dist=lambda: jnp.min(self.link_distances(data, xpos, info), axis=0),
         )
         return parts

@@ -1,0 +1,400 @@
+"""The reach-avoid options beyond the paper (issue 29): several obstacles, random radii, moving
+obstacles, observation noise and action latency. Collisions against CPU MuJoCo with the obstacle
+spheres as geoms; trajectories against hand-computed positions and their bounds; bad values.
+
+Two compiled variants, shared by the module (2 physics substeps keep MJX's CPU compile short).
+"""
+
+import typing
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import envs
+from envs import obstacles
+from mujoco_reference import obstacle_contacts, obstacles_model
+
+N = 8
+MOVING = dict(num_obstacles=3, obstacle_motion="linear", obstacle_radius_range=(0.05, 0.15), substeps=2,
+              obstacle_speed_range=(0.05, 0.2),
+              observation=("joint_pos", "ee_pos", "target_pos", "obstacle_pos", "obstacle_size", "obstacle_radius",
+                           "obstacle_vel", "link_obstacle_dist"))
+SENSING = dict(joint_noise_std=0.01, obstacle_noise_std=0.02, action_latency=1, substeps=2)
+BORDERLINE = 1e-4  # closer than this to touching: float32 against float64, skipped
+
+
+class Compiled:
+    def __init__(self, **options):
+        self.env = envs.make("ur5e-reach-avoid", **options)
+        self.reset = jax.jit(jax.vmap(self.env.reset))
+        self.step = jax.jit(jax.vmap(self.env.step))
+
+    def start(self, seed, n=N):
+        return self.reset(jax.random.split(jax.random.PRNGKey(seed), n))
+
+
+@pytest.fixture(scope="module")
+def moving():
+    return Compiled(**MOVING)
+
+
+@pytest.fixture(scope="module")
+def sensing():
+    return Compiled(**SENSING)
+
+
+def split_obs(env, obs):
+    """The observation's parts by name (sizes from the env)."""
+    sizes = env._observation_sizes()
+    out, at = {}, 0
+    for part in env.config.observation:
+        out[part] = np.asarray(obs)[..., at:at + sizes[part]]
+        at += sizes[part]
+    assert at == obs.shape[-1]
+    return out
+
+
+def standstill(env, n=N):
+    return jnp.zeros((n, env.action_size))
+
+
+# ------------------------------------------------------------------------------------------------
+# Config
+
+
+def test_defaults_are_the_paper_and_motion_names_match_the_registry():
+    cfg = envs.default_config("ur5e-reach-avoid")
+    assert (cfg.num_obstacles, cfg.obstacle_radius_range, cfg.obstacle_motion) == (1, None, "static")
+    assert (cfg.joint_noise_std, cfg.obstacle_noise_std, cfg.action_latency) == (0.0, 0.0, 0)
+    assert cfg.radius_bounds == (cfg.obstacle_radius, cfg.obstacle_radius)
+    hint = typing.get_type_hints(type(cfg))["obstacle_motion"]
+    assert typing.get_args(hint) == tuple(obstacles.MOTIONS)
+
+
+@pytest.mark.parametrize("options, field, allowed", [
+    (dict(num_obstacles=0), "num_obstacles", r"integer in \[1, 8\]"),
+    (dict(num_obstacles=9), "num_obstacles", r"integer in \[1, 8\]"),
+    (dict(num_obstacles=2.0), "num_obstacles", r"integer in \[1, 8\]"),
+    (dict(obstacle_radius_range=(0.15, 0.05)), "obstacle_radius_range", "min <= max"),
+    (dict(obstacle_radius_range=(0.0, 0.1)), "obstacle_radius_range", "> 0"),
+    (dict(obstacle_radius_range=(0.05,)), "obstacle_radius_range", r"\(min, max\)"),
+    (dict(obstacle_radius_range=(0.05, 5.0)), "obstacle_radius_range", "reach"),
+    (dict(obstacle_motion="circle"), "obstacle_motion", "'static', 'linear', 'sinusoid'"),
+    (dict(obstacle_speed_range=(-0.1, 0.2)), "obstacle_speed_range", ">= 0"),
+    (dict(obstacle_speed_range=(0.3, 0.1)), "obstacle_speed_range", "min <= max"),
+    (dict(obstacle_speed_range=(0.1, float("inf"))), "obstacle_speed_range", "finite"),
+    (dict(obstacle_period=0.0), "obstacle_period", "> 0"),
+    (dict(joint_noise_std=-0.01), "joint_noise_std", ">= 0"),
+    (dict(obstacle_noise_std=-1.0), "obstacle_noise_std", ">= 0"),
+    (dict(action_latency=2), "action_latency", r"integer in \[0, 1\]"),
+    (dict(action_latency=-1), "action_latency", r"integer in \[0, 1\]"),
+    (dict(action_latency=True), "action_latency", r"integer in \[0, 1\]"),
+])
+def test_bad_values_are_refused_naming_the_field(options, field, allowed):
+    value = repr(next(iter(options.values())))
+    with pytest.raises(ValueError, match=rf"^{field}={value.replace('(', '[(]').replace(')', '[)]')} is invalid: "
+                                         rf"allowed (is|are).*{allowed}"):
+        envs.make_config("ur5e-reach-avoid", **options)
+
+
+def test_reach_task_has_noise_and_latency_but_no_obstacle_options():
+    envs.make_config("ur5e-reach", joint_noise_std=0.01, action_latency=1)
+    with pytest.raises(ValueError, match="num_obstacles"):
+        envs.make_config("ur5e-reach", num_obstacles=2)
+
+
+# ------------------------------------------------------------------------------------------------
+# Trajectories (pure functions of time)
+
+
+def _reflect_by_hand(x, low, high):
+    """Unfold a straight path into [low, high] by walking it bounce by bounce (not the closed form)."""
+    out = []
+    for v in np.ravel(x):
+        while v > high or v < low:
+            v = 2 * high - v if v > high else 2 * low - v
+        out.append(v)
+    return np.reshape(out, np.shape(x))
+
+
+def test_linear_motion_bounces_as_computed_by_hand():
+    params = {"center": jnp.array([[0.5, 0.0, -0.2]]), "velocity": jnp.array([[0.2, 0.0, -0.1]])}
+    state = lambda t: [np.asarray(a)[0] for a in obstacles.MOTIONS["linear"].state(params, t, 2.0, 0.6)]  # noqa: E731
+    # x: 0.5 -> wall at 0.6 (t = 0.5 s) -> back; z: -0.2 -> wall at -0.6 (t = 4 s) -> back.
+    np.testing.assert_allclose(state(0.25)[0], [0.55, 0.0, -0.225], atol=1e-6)
+    pos, vel = state(1.0)
+    np.testing.assert_allclose(pos, [0.5, 0.0, -0.3], atol=1e-6)
+    np.testing.assert_allclose(vel, [-0.2, 0.0, -0.1], atol=1e-6)
+    pos, vel = state(7.0)  # x: 0.6 at 0.5 s, -0.6 at 6.5 s, -0.5 at 7 s; z: -0.6 at 4 s, -0.3 at 7 s
+    np.testing.assert_allclose(pos, [-0.5, 0.0, -0.3], atol=1e-5)
+    np.testing.assert_allclose(vel, [0.2, 0.0, 0.1], atol=1e-6)
+
+
+@pytest.mark.parametrize("motion", ["linear", "sinusoid"])
+def test_trajectories_stay_in_the_cube_over_a_long_horizon(motion):
+    region, period, n = 0.6, 2.0, 256
+    k_center, k_speed, k_motion = jax.random.split(jax.random.PRNGKey(0), 3)
+    centers = jax.random.uniform(k_center, (n, 3), minval=-region, maxval=region).at[:16].set(0.0)
+    speeds = jax.random.uniform(k_speed, (n,), minval=0.05, maxval=0.5)
+    m = obstacles.MOTIONS[motion]
+    params = m.sample(k_motion, centers, speeds, period, region)
+    times = jnp.arange(0.0, 600.0, 0.01)  # 10 minutes of episode time, 60,000 points
+    pos, vel = jax.vmap(lambda t: m.state(params, t, period, region))(times)
+    pos, vel = np.asarray(pos), np.asarray(vel)
+    assert np.abs(pos).max() <= region + 1e-5
+    start = centers if motion == "linear" else centers + params["amplitude"] * jnp.sin(params["phase"])[:, None]
+    np.testing.assert_allclose(pos[0], start, atol=1e-6)
+    speed = np.linalg.norm(vel, axis=-1)
+    if motion == "linear":
+        np.testing.assert_allclose(speed, np.broadcast_to(speeds, speed.shape), rtol=1e-5)  # bounces keep the speed
+        assert (np.abs(pos).max(axis=(0, 2)) > region - 0.01).mean() > 0.95, "obstacles should reach the walls"
+        # Against the bounce-by-bounce unfolding of the straight path, at a few times (float32: the error of
+        # c + v t grows with t, 5e-4 m after 10 minutes; an episode lasts seconds).
+        for t in (3.0, 77.7):
+            free = np.asarray(centers + params["velocity"] * t)
+            np.testing.assert_allclose(pos[int(round(t / 0.01))], _reflect_by_hand(free, -region, region), atol=2e-4)
+    else:
+        np.testing.assert_allclose(pos[200:400], pos[:200], atol=1e-4)  # period 2 s = 200 samples
+        assert speed.max(axis=0)[:16] == pytest.approx(np.asarray(speeds[:16]), rel=1e-3)  # centred: the full amplitude
+        assert (speed.max(axis=0) <= np.asarray(speeds) * (1 + 1e-4)).all()  # capped ones are slower
+        assert (np.ptp(pos, axis=0).max(axis=-1) > 0.01).mean() > 0.9, "obstacles should move"
+    # Velocity is the time derivative of position (central differences over the first minute, away from
+    # bounces: within 0.5 m/s * 0.01 s of a wall a bounce may fall between the samples).
+    pos, vel = pos[:6000], vel[:6000]
+    fd = (pos[2:] - pos[:-2]) / 0.02
+    smooth = np.all(np.abs(pos[1:-1]) < region - 0.006, axis=-1)
+    assert smooth.mean() > 0.5
+    np.testing.assert_allclose(fd[smooth], vel[1:-1][smooth], atol=1e-3)
+
+
+# ------------------------------------------------------------------------------------------------
+# Sampling, collisions and observations of several moving obstacles
+
+
+def test_sampled_obstacles_clear_of_start_pose_and_target(moving):
+    env, cfg = moving.env, moving.env.config
+    state = moving.start(seed=1, n=16)
+    pos = np.asarray(state.info["obstacle_pos"]).reshape(16, 3, 3)
+    radii = np.asarray(state.info["obstacle_radius"])
+    vel = np.asarray(state.info["obstacle_vel"]).reshape(16, 3, 3)
+    assert float(state.metrics["reset_fallback"].max()) == 0.0
+    assert (np.abs(pos) <= cfg.obstacle_region).all()
+    assert (radii >= 0.05).all() and (radii <= 0.15).all() and np.ptp(radii) > 0.05
+    assert np.all((np.linalg.norm(vel, axis=-1) >= 0.05 - 1e-6) & (np.linalg.norm(vel, axis=-1) <= 0.2 + 1e-6))
+    assert len({tuple(np.round(p, 4)) for p in pos.reshape(-1, 3)}) == 48  # every obstacle its own
+    target = np.asarray(state.info["target_pos"])
+    assert (np.linalg.norm(pos - target[:, None], axis=-1) > radii + cfg.target_radius).all()
+    for q, p, r in zip(np.asarray(state.pipeline_state.qpos), pos, radii):
+        contacts, distances, _ = obstacle_contacts(obstacles_model(env.robot, r), q, p)
+        assert not contacts and distances.min() > 0
+
+
+@pytest.mark.parametrize("name", ["ur5e-reach-avoid", "panda-reach-avoid"])
+def test_several_obstacles_collide_as_in_mujoco(name):
+    env = envs.make(name, num_obstacles=3, obstacle_radius_range=(0.03, 0.15), substeps=2)
+    robot = env.robot
+    rng = np.random.default_rng(2)
+    qpos = rng.uniform(robot.joint_low, robot.joint_high, size=(120, robot.nq)).astype(np.float32)
+    kin = jax.jit(robot.kinematics)(qpos)
+    # Three obstacles near random robot geoms, each touching one about a third of the time.
+    geoms = rng.choice(robot.obstacle_geoms, size=(len(qpos), 3))
+    centers = np.asarray(kin.geom_xpos)[np.arange(len(qpos))[:, None], geoms] + rng.normal(scale=0.2, size=(len(qpos), 3, 3))
+    radii = rng.uniform(0.03, 0.15, size=(len(qpos), 3)).astype(np.float32)
+    info = {"obstacle_pos": jnp.asarray(centers.reshape(-1, 9), jnp.float32), "obstacle_radius": jnp.asarray(radii)}
+
+    @jax.jit
+    @jax.vmap
+    def ours(gx, gm, info):
+        per_geom = env.per_obstacle(info, lambda c, r: robot.obstacle_distances(gx, gm, c, r))
+        return per_geom, env.collision_distances(gx, gm, info)[1]
+
+    per_geom, closest = map(np.asarray, ours(kin.geom_xpos, kin.geom_xmat, info))
+    colliding = clear = 0
+    for q, c, r, d, m in zip(qpos, centers.astype(np.float32), radii, per_geom, closest):
+        contacts, reference, robot_geoms = obstacle_contacts(obstacles_model(robot, r), q, c)
+        assert list(robot_geoms) == list(robot.obstacle_geoms)
+        np.testing.assert_allclose(d, reference, atol=1e-4)  # every (obstacle, geom) signed distance
+        np.testing.assert_allclose(m, reference.min(), atol=1e-4)  # the step's check: the closest of all
+        for j in range(3):
+            for geom, value in zip(robot.obstacle_geoms, d[j]):
+                if abs(value) >= BORDERLINE:
+                    assert (value < 0) == ((j, int(geom)) in contacts), (q, j, geom, value)
+        if abs(m) >= BORDERLINE:
+            colliding += m < 0
+            clear += m > 0
+            assert (m < 0) == bool(contacts)
+    assert colliding > 30 and clear > 20, (colliding, clear)
+
+
+def _crossing_direction(robot, q, point, radii, others, rng, reach=0.2, region=0.6):
+    """A direction u such that an obstacle of radius radii[0] at point -+ reach*u is clear of the arm at q
+    (CPU MuJoCo, 1 cm margin) and inside the cube; the other obstacles stay at `others`."""
+    model = obstacles_model(robot, radii)
+    for _ in range(500):
+        u = rng.normal(size=3)
+        u /= np.linalg.norm(u)
+        ends = [point - reach * u, point + reach * u]
+        if any(np.abs(e).max() > region - 0.01 for e in ends):
+            continue
+        if all(obstacle_contacts(model, q, np.vstack([e[None], others]))[1][0].min() > 0.01 for e in ends):
+            return u
+    return None
+
+
+def test_moving_obstacles_checked_at_every_substep_as_in_mujoco(moving):
+    """An obstacle that crosses a link between the step's first and last physics substep collides:
+    clear at substeps 0 and 2 (the step's end), inside a link at substep 1, by our check and MuJoCo's."""
+    env, robot = moving.env, moving.env.robot
+    dt = env.physics_dt
+    state = moving.start(seed=3)
+    q0 = np.asarray(state.pipeline_state.qpos)
+    info = jax.tree.map(np.array, state.info)
+    rng = np.random.default_rng(4)
+    crossing = np.arange(N) < N // 2
+    expected_end = []
+    for e in range(N):
+        motion = info["obstacle_motion"]
+        radii = info["obstacle_radius"][e].copy()
+        radii[0] = 0.05
+        others = info["obstacle_pos"][e].reshape(3, 3)[1:]
+        motion["velocity"][e, 1:] = 0.0  # the other two stand still (they start clear of the arm)
+        gx = np.asarray(state.pipeline_state.geom_xpos)[e]
+        inside = [g for g in robot.obstacle_geoms if np.abs(gx[g]).max() < 0.6 - 0.21]
+        u = None
+        while u is None and inside:
+            point = gx[inside.pop(0)]
+            u = _crossing_direction(robot, q0[e], point, radii, others, rng)
+        assert u is not None, "no link to cross found"
+        speed = 0.2 / dt  # 0.2 m per physics step: at substep 1 the obstacle's centre is on the link's
+        if crossing[e]:
+            motion["center"][e, 0], motion["velocity"][e, 0] = point - 0.2 * u, speed * u
+        else:  # control: the same clear start, standing still
+            motion["center"][e, 0], motion["velocity"][e, 0] = point - 0.2 * u, 0.0
+        info["obstacle_radius"][e] = radii
+        ends = [point - 0.2 * u + k * 0.2 * u * crossing[e] for k in range(3)]
+        model = obstacles_model(robot, radii)
+        verdicts = [bool(obstacle_contacts(model, q0[e], np.vstack([p[None], others]))[0]) for p in ends]
+        assert verdicts == [False, bool(crossing[e]), False], verdicts  # MuJoCo: only substep 1 collides
+        expected_end.append(ends[2])
+    info = jax.vmap(lambda i: env.task_at(i, 0))(jax.tree.map(jnp.asarray, info))  # positions from the new motions
+    after = moving.step(state.replace(info=info), standstill(env))
+    np.testing.assert_array_equal(after.metrics["obstacle_collision"], crossing.astype(np.float32))
+    np.testing.assert_array_equal(after.metrics["self_collision"], 0.0)
+    # The state after the step holds the obstacles where they are at its end (2 substeps).
+    np.testing.assert_allclose(np.asarray(after.info["obstacle_pos"]).reshape(N, 3, 3)[:, 0], expected_end, atol=1e-5)
+
+
+def test_observations_and_penalty_of_several_moving_obstacles(moving):
+    env, cfg, robot = moving.env, moving.env.config, moving.env.robot
+    state = moving.start(seed=5)
+    nlinks = len(robot.link_bodies)
+    assert env.observation_size == 6 + 3 + 3 + 9 + 9 + 3 + 9 + nlinks
+    after = moving.step(state, standstill(env))
+    for s in (state, after):
+        parts = split_obs(env, s.obs)
+        pos = np.asarray(s.info["obstacle_pos"])
+        radii = np.asarray(s.info["obstacle_radius"])
+        np.testing.assert_array_equal(parts["joint_pos"], s.pipeline_state.qpos)  # noise is off by default
+        np.testing.assert_array_equal(parts["obstacle_pos"], pos)
+        np.testing.assert_array_equal(parts["obstacle_size"], np.repeat(radii, 3, axis=-1))
+        np.testing.assert_array_equal(parts["obstacle_radius"], radii)
+        np.testing.assert_array_equal(parts["obstacle_vel"], s.info["obstacle_vel"])
+        # Per link, the distance to the nearest obstacle's surface (paper's d_i: from the link's origin).
+        links = np.asarray(s.pipeline_state.xpos)[:, robot.link_bodies]
+        d = np.linalg.norm(links[:, None] - pos.reshape(N, 3, 1, 3), axis=-1) - radii[..., None]
+        np.testing.assert_allclose(parts["link_obstacle_dist"], d.min(axis=1), atol=1e-5)
+    # The obstacles after one step: the closed form at 2 physics steps, a straight line from the centre here.
+    motion = jax.tree.map(np.asarray, state.info["obstacle_motion"])
+    free = motion["center"] + motion["velocity"] * 2 * env.physics_dt
+    np.testing.assert_allclose(np.asarray(after.info["obstacle_pos"]).reshape(N, 3, 3),
+                               _reflect_by_hand(free, -cfg.obstacle_region, cfg.obstacle_region), atol=1e-6)
+    assert not np.allclose(after.info["obstacle_pos"], state.info["obstacle_pos"])
+    # Penalty, eq. (3) summed over every (link, obstacle) pair: two obstacles 0.05 m and 0.02 m above links 1
+    # and 2, the third on link 2 as well, farther (0.08 m).
+    one = jax.tree.map(lambda x: x[0], state)
+    data = one.pipeline_state
+    links = np.asarray(data.xpos)[robot.link_bodies]
+    radii = np.array([0.1, 0.06, 0.12], np.float32)
+    centers = links[[1, 2, 2]] + np.array([[0, 0, 0.1 + 0.05], [0, 0, 0.06 + 0.02], [0, 0, -0.12 - 0.08]])
+    info = {**one.info, "obstacle_pos": jnp.asarray(centers.ravel(), jnp.float32), "obstacle_radius": jnp.asarray(radii)}
+    d = np.linalg.norm(links[None] - centers[:, None], axis=-1) - radii[:, None]
+    penalty = cfg.w_obst * np.maximum(0, 1 - d / cfg.obstacle_tau).sum()
+    assert penalty > cfg.w_obst * (0.5 + 0.8 + 0.2) - 1e-5
+    reward = env.reward(data, jnp.float32(0.3), jnp.float32(0.0), info)
+    np.testing.assert_allclose(float(reward), (2 * robot.reach - 0.3) - penalty, atol=1e-5)
+
+
+# ------------------------------------------------------------------------------------------------
+# Noise and latency
+
+
+def test_noise_is_seeded_fresh_each_step_and_only_in_the_observation(sensing):
+    env, robot = sensing.env, sensing.env.robot
+    state = sensing.start(seed=6, n=32)
+    again = sensing.start(seed=6, n=32)
+    other = sensing.start(seed=7, n=32)
+    np.testing.assert_array_equal(state.obs, again.obs)  # same key, same noise
+
+    def noise(s):
+        parts = split_obs(env, s.obs)
+        return (parts["joint_pos"] - np.asarray(s.pipeline_state.qpos),
+                parts["obstacle_pos"] - np.asarray(s.info["obstacle_pos"]))
+
+    joint, obstacle = noise(state)
+    assert 0.007 < joint.std() < 0.013 and abs(joint.mean()) < 0.005
+    assert 0.013 < obstacle.std() < 0.027 and abs(obstacle.mean()) < 0.01
+    assert not np.allclose(noise(other)[0], joint)  # another key, other noise
+    # The link distances are those of the perceived (noisy) obstacle; the state keeps the true one.
+    parts = split_obs(env, state.obs)
+    links = np.asarray(state.pipeline_state.xpos)[:, robot.link_bodies]
+    d = np.linalg.norm(links - parts["obstacle_pos"][:, None], axis=-1) - env.config.obstacle_radius
+    np.testing.assert_allclose(parts["link_obstacle_dist"], d, atol=1e-5)
+    actions = jax.random.uniform(jax.random.PRNGKey(8), (32, env.action_size), minval=-1, maxval=1)
+    after = sensing.step(state, actions)
+    np.testing.assert_array_equal(after.obs, sensing.step(again, actions).obs)  # reproducible through a step
+    np.testing.assert_array_equal(after.info["obstacle_pos"], state.info["obstacle_pos"])  # truth untouched
+    step_joint, step_obstacle = noise(after)
+    assert 0.007 < step_joint.std() < 0.013
+    assert not np.allclose(step_joint, joint) and not np.allclose(step_obstacle, obstacle)  # fresh every step
+
+
+def test_action_latency_applies_the_previous_action(sensing):
+    env, robot = sensing.env, sensing.env.robot
+    scale, low, high = env.config.action_scale, robot.joint_low, robot.joint_high
+    s0 = sensing.start(seed=9)
+    a1 = np.asarray(jax.random.uniform(jax.random.PRNGKey(10), (N, env.action_size), minval=-1, maxval=1))
+    a2 = -a1
+    np.testing.assert_array_equal(s0.info["prev_action"], 0.0)  # relative control: the first step holds the pose
+    s1 = sensing.step(s0, jnp.asarray(a1))
+    np.testing.assert_array_equal(s1.pipeline_state.ctrl, s0.pipeline_state.qpos)  # q0 + 0.2 * 0
+    np.testing.assert_array_equal(s1.info["prev_action"], a1)
+    s2 = sensing.step(s1, jnp.asarray(a2))
+    q1 = np.asarray(s1.pipeline_state.qpos)
+    np.testing.assert_allclose(s2.pipeline_state.ctrl, np.clip(q1 + scale * a1, low, high), atol=1e-6)  # a1, not a2
+    assert np.abs(np.asarray(s2.pipeline_state.ctrl) - np.clip(q1 + scale * a2, low, high)).max() > 0.1
+    # Absolute control: the held action maps back onto the pose, so the first step holds it too.
+    absolute = envs.make("ur5e-reach", action="absolute", action_latency=1, substeps=2)
+    q = jnp.asarray(np.asarray(s0.pipeline_state.qpos)[0])
+    np.testing.assert_allclose(absolute.action_to_ctrl(absolute.hold_action(q), jnp.zeros(6)), q, atol=1e-5)
+    first = jax.jit(absolute.reset)(jax.random.PRNGKey(11))
+    np.testing.assert_allclose(absolute.action_to_ctrl(first.info["prev_action"], jnp.zeros(6)),
+                               first.pipeline_state.qpos, atol=1e-5)
+
+
+def test_render_draws_every_obstacle_at_its_radius():
+    from envs import render
+
+    env = envs.make("ur5e-reach-avoid", num_obstacles=3, obstacle_radius_range=(0.05, 0.2), substeps=2)
+    away = np.tile([0.0, 0.0, -5.0], (3, 1))
+    with render.Scene(env, 160, 120) as scene:
+        q, target = np.zeros(6), np.array([0.3, 0.3, 0.5])
+        empty = scene.draw(q, target, away.ravel()).astype(int)
+        for j in range(3):
+            shown = away.copy()
+            shown[j] = [0.3, -0.4, 0.3]
+            small = scene.draw(q, target, shown.ravel(), np.full(3, 0.05)).astype(int)
+            assert np.abs(small - empty).sum(-1).astype(bool).sum() > 20, f"obstacle {j} not drawn"
+            large = scene.draw(q, target, shown.ravel(), np.full(3, 0.2)).astype(int)
+            assert np.abs(large - empty).sum(-1).astype(bool).sum() > 4 * np.abs(small - empty).sum(-1).astype(bool).sum()
