@@ -591,6 +591,24 @@ def test_training_curves_from_train_logs(point_run, tmp_path):
         plots.read_metrics(str(tmp_path))
 
 
+def test_training_curves_against_wall_clock(tmp_path):
+    from tools import plots
+
+    # Two seeds logged over three chunks; the x value is the seeds' mean running sum of chunk times.
+    rows = [(100, 0, 2.0, 0.1), (100, 1, 4.0, 0.3), (200, 0, 1.0, 0.5), (200, 1, 1.0, 0.7),
+            (300, 0, 3.0, 0.9), (300, 1, 1.0, 0.9)]
+    (tmp_path / "metrics.csv").write_text("env_steps,seed,steps_per_second,wall_seconds,episode/target_reached\n"
+                                          + "".join(f"{s},{d},1.0,{w},{v}\n" for s, d, w, v in rows))
+    seconds, mean, _, seeds = plots.curve(str(tmp_path), "episode/target_reached", x="wall_clock")
+    np.testing.assert_allclose(seconds, [3.0, 4.0, 6.0])  # seed 0: 2, 3, 6; seed 1: 4, 5, 6
+    np.testing.assert_allclose(mean, [0.2, 0.6, 0.9])
+    assert seeds == 2
+    fig = plots.training_curves({"run": str(tmp_path)}, ["episode/target_reached"], x="wall_clock")
+    assert fig.axes[0].get_xlabel() == plots.X_AXES["wall_clock"]
+    with pytest.raises(ValueError, match="x='minutes'.*env_steps, wall_clock"):
+        plots.curve(str(tmp_path), "episode/target_reached", x="minutes")
+
+
 def test_paper_tables_from_given_checkpoints_and_skips_the_rest(point_run, tmp_path, capsys):
     from tools import paper_tables
 

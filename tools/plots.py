@@ -58,28 +58,45 @@ def read_metrics(logdir: str) -> dict[str, np.ndarray]:
     return {k: np.array([float(r[k]) if r.get(k) not in ("", None) else np.nan for r in rows]) for k in rows[0]}
 
 
-def curve(logdirs, metric: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
-    """(env steps, mean, std, number of seeds) of `metric` over every seed of every logdir.
+X_AXES = {
+    "env_steps": "env steps",
+    "wall_clock": "training wall-clock (s)",
+}
+"""Horizontal axes of the curves: env steps per seed, or the running sum of the logged chunk times
+(`wall_seconds`: compilation included, start-up, checkpoint saves and the final evaluation not).
+Compare wall-clock curves only between runs made alone on one device of one kind."""
+
+
+def curve(logdirs, metric: str, x: str = "env_steps") -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """(x values, mean, std, number of seeds) of `metric` over every seed of every logdir.
 
     Seeds of one run are the `seed` column; several runs (e.g. one per seed) are pooled. Steps
-    logged by only some seeds are dropped, so every point averages the same seeds."""
+    logged by only some seeds are dropped, so every point averages the same seeds. With
+    x="wall_clock" the x values are the seeds' mean running training time at those steps."""
+    if x not in X_AXES:
+        raise ValueError(f"x={x!r} is not a curve axis: allowed are {', '.join(X_AXES)}.")
     logdirs = [logdirs] if isinstance(logdirs, str) else list(logdirs)
-    series = {}
+    series, clocks = {}, {}
     for i, logdir in enumerate(logdirs):
         m = read_metrics(logdir)
         if metric not in m:
             raise ValueError(f"metric {metric!r} is not in {logdir}/metrics.csv: allowed are "
                              f"{', '.join(k for k in m if k not in ('env_steps', 'seed'))}.")
-        for step, seed, value in zip(m["env_steps"], m["seed"], m[metric]):
+        for step, seed, value, seconds in zip(m["env_steps"], m["seed"], m[metric], m["wall_seconds"]):
             series.setdefault((i, seed), {})[step] = value
+            clock = clocks.setdefault((i, seed), {})
+            clock[step] = (clock[max(clock)] if clock else 0.0) + seconds
     common = sorted(set.intersection(*(set(s) for s in series.values())))
     values = np.array([[s[step] for step in common] for s in series.values()])
-    return np.array(common), np.nanmean(values, 0), np.nanstd(values, 0), len(series)
+    xs = np.array(common) if x == "env_steps" else np.array([[c[step] for step in common] for c in clocks.values()]).mean(0)
+    return xs, np.nanmean(values, 0), np.nanstd(values, 0), len(series)
 
 
-def training_curves(runs: dict, metrics=None, out: str | None = None, title: str | None = None, band: float = 1.0):
+def training_curves(runs: dict, metrics=None, out: str | None = None, title: str | None = None, band: float = 1.0,
+                    x: str = "env_steps"):
     """One panel per metric, one line per run (label -> logdir or list of logdirs): the mean over
-    seeds against env steps, with a band of `band` standard deviations across seeds."""
+    seeds against env steps (or x="wall_clock", see X_AXES), with a band of `band` standard
+    deviations across seeds."""
     plt = _pyplot()
     from matplotlib.ticker import EngFormatter
 
@@ -88,13 +105,14 @@ def training_curves(runs: dict, metrics=None, out: str | None = None, title: str
     fig, axes = plt.subplots(1, len(metrics), figsize=(4.2 * len(metrics), 3.4), squeeze=False)
     for ax, metric in zip(axes[0], metrics):
         for name, logdirs in runs.items():
-            steps, mean, std, n = curve(logdirs, metric)
+            steps, mean, std, n = curve(logdirs, metric, x)
             line, = ax.plot(steps, mean, label=f"{name} ({n} seed{'s' if n > 1 else ''})")
             if n > 1 and band > 0:
                 ax.fill_between(steps, mean - band * std, mean + band * std, color=line.get_color(), alpha=0.2, lw=0)
         ax.set_title(CURVE_METRICS.get(metric, metric))
-        ax.set_xlabel("env steps")
-        ax.xaxis.set_major_formatter(EngFormatter(sep=""))
+        ax.set_xlabel(X_AXES[x])
+        if x == "env_steps":
+            ax.xaxis.set_major_formatter(EngFormatter(sep=""))
         ax.grid(alpha=0.3)
         if metric in ("episode/target_reached", "episode/self_collision", "episode/obstacle_collision"):
             ax.set_ylim(-0.02, 1.02)
@@ -195,6 +213,7 @@ def main(argv=None):
     c.add_argument("logdirs", nargs="+", help="train.py logdirs (one line each; join several with commas to pool them)")
     c.add_argument("--labels", nargs="+", help="one label per logdir argument (default: the paths)")
     c.add_argument("--metrics", nargs="+", help=f"metrics.csv columns (default: {', '.join(CURVE_METRICS)} where present)")
+    c.add_argument("--x", default="env_steps", choices=list(X_AXES), help="horizontal axis (default: env_steps)")
     c.add_argument("--title")
     c.add_argument("--out", required=True)
     e = sub.add_parser("env", help="initial-state renders and target scatter")
@@ -206,7 +225,8 @@ def main(argv=None):
         labels = args.labels or args.logdirs
         if len(labels) != len(args.logdirs):
             raise ValueError(f"--labels has {len(labels)} entries for {len(args.logdirs)} logdirs: allowed is one each.")
-        training_curves({lab: d.split(",") for lab, d in zip(labels, args.logdirs)}, args.metrics, args.out, args.title)
+        training_curves({lab: d.split(",") for lab, d in zip(labels, args.logdirs)}, args.metrics, args.out, args.title,
+                        x=args.x)
     else:
         initial_state({"ur5e-reach-avoid": {}, "panda-reach-avoid": {}}, args.seed,
                       os.path.join(args.out, "initial_state_reach_avoid.png"))
