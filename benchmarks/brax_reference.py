@@ -1,15 +1,18 @@
-"""Brax's PPO and ours on the same environment with the same hyperparameters and budget, in one run.
+"""Brax's PPO or SAC and ours on the same environment with the same hyperparameters and budget, in one run.
 
-    python -m benchmarks.brax_reference --out results/throughput/brax_reference      # on the GPU machine
+    python -m benchmarks.brax_reference --out results/throughput/brax_reference                  # PPO, on the GPU
+    python -m benchmarks.brax_reference --preset ur5e-reach-sac --out results/sac/brax_reference  # SAC (paper settings)
 
 Both train on the preset's env (`--preset`, default `ur5e-reach-ppo`: the paper's configuration)
-with the preset's PPO settings (`agents/presets.py`), which both learners get, observation
-normalisation included. Ours adds its documented stability defaults (learning-rate decay, gradient
+with the preset's settings (`agents/presets.py`), which both learners get, observation
+normalisation included. Ours adds its documented defaults (PPO: learning-rate decay, gradient
 clipping, value normalisation). Brax runs with its own training wrappers, as a Brax user would (its
-auto-reset restores each env's cached first state).
+auto-reset restores each env's cached first state). Brax has neither n-step returns nor a categorical
+critic, so the SAC comparison takes presets without them (the paper's `-sac` presets).
 
 Both are scored by the same evaluator (`agents.loop.make_evaluate`): the deterministic policy on the
-same `--eval-envs` freshly sampled episodes, at the same env-step counts. Training speed excludes
+same `--eval-envs` freshly sampled episodes, at the same env-step counts (Brax's SAC exposes its
+parameters only at the end, so it is scored once, at its last step). Training speed excludes
 evaluation: ours times the compiled training chunks; Brax's is its own `training/sps` (median over
 epochs after the first, which compiles). Results are written after every evaluation, so a cut-off
 run keeps them. Brax is only a reference: this script is the one place outside tests that imports
@@ -19,6 +22,7 @@ it.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import datetime
 import functools
 import json
@@ -31,7 +35,7 @@ import jax
 import jax.numpy as jnp
 
 import envs
-from agents import driver, presets
+from agents import driver, presets, registry
 from agents.loop import make_evaluate
 
 if not hasattr(jax, "device_put_replicated"):
@@ -54,23 +58,99 @@ class BraxPolicy:
 
 def summarize(metrics) -> dict:
     m = jax.device_get(metrics)
-    return {name: float(jnp.mean(m[f"episode/{name}"])) for name in REPORTED}
+    return {name: float(jnp.mean(m[f"episode/{name}"])) for name in REPORTED if f"episode/{name}" in m}
+
+
+def brax_ppo(config, env, total, num_evals, on_params, on_progress):
+    """Brax's PPO with the preset's PPO settings; `on_params` scores every evaluation's parameters."""
+    from brax.training.agents.ppo import networks as brax_networks
+    from brax.training.agents.ppo import train as brax_train
+
+    algo = config.algo
+    brax_train.train(
+        environment=env, num_timesteps=total, num_evals=num_evals, episode_length=config.env.episode_length,
+        num_envs=algo.num_envs, batch_size=algo.batch_size, num_minibatches=algo.num_minibatches,
+        unroll_length=algo.unroll_length, num_updates_per_batch=algo.updates_per_batch,
+        learning_rate=algo.learning_rate, discounting=algo.discount, entropy_cost=algo.entropy_coef,
+        gae_lambda=algo.gae_lambda, clipping_epsilon=algo.clip_epsilon, normalize_observations=True,
+        reward_scaling=algo.reward_scaling, num_eval_envs=128, seed=config.seed,
+        network_factory=functools.partial(brax_networks.make_ppo_networks, policy_hidden_layer_sizes=algo.policy_hidden_sizes,
+                                          value_hidden_layer_sizes=algo.value_hidden_sizes),
+        policy_params_fn=on_params, progress_fn=on_progress,
+    )
+
+
+def brax_sac(config, env, total, num_evals, on_params, on_progress):
+    """Brax's SAC with the preset's SAC settings (one hidden-layer list for actor and critics, as Brax
+    has); its parameters are scored once, at the end."""
+    from brax.envs import training as brax_wrappers
+    from brax.training.agents.sac import networks as brax_networks
+    from brax.training.agents.sac import train as brax_train
+
+    algo = config.algo
+    last = {"step": 0}
+    progress = lambda step, metrics: (last.update(step=step), on_progress(step, metrics))  # noqa: E731
+    make_policy, params, _ = brax_train.train(
+        environment=env, num_timesteps=total, num_evals=num_evals, episode_length=config.env.episode_length,
+        num_envs=algo.num_envs, batch_size=algo.batch_size, learning_rate=algo.learning_rate,
+        discounting=algo.discount, reward_scaling=algo.reward_scaling, tau=algo.tau,
+        min_replay_size=algo.min_replay_size, max_replay_size=algo.max_replay_size,
+        grad_updates_per_step=algo.grad_updates_per_step, normalize_observations=algo.normalize_observations,
+        num_eval_envs=128, seed=config.seed, deterministic_eval=True,
+        wrap_env_fn=brax_wrappers.wrap,  # the wrappers Brax's PPO applies; its SAC checks for a Brax Env class instead
+        network_factory=functools.partial(brax_networks.make_sac_networks, hidden_layer_sizes=algo.q_hidden_sizes,
+                                          activation=getattr(jax.nn, algo.activation),
+                                          q_network_layer_norm=algo.layer_norm),
+        progress_fn=progress,
+    )
+    on_params(last["step"], make_policy, params)
+
+
+BRAX_TRAINERS = {"ppo": brax_ppo, "sac": brax_sac}
+"""Registered algorithm name -> the function that trains Brax's version of it on our env."""
+
+DEFAULT_UPDATES_PER_EVAL = {"ppo": 16, "sac": 8192}
+"""Updates between evaluations when --updates-per-eval is not given (SAC: vector steps of num_envs)."""
+
+UNLIKE_BRAX = {"sac": {"n_step": 1, "distributional": False, "max_grad_norm": 0.0, "init_alpha": 1.0}}
+"""Our options Brax's learner lacks, with the values under which both run the same algorithm."""
+
+
+def brax_comparable(config, algo_name: str, action_size: int):
+    """`config` with ours set as Brax's learner runs (SAC: Brax's target entropy -action_size / 2,
+    where ours defaults to -action_size); a ValueError for options Brax cannot match."""
+    algo = config.algo
+    unlike = [f"algo.{k}={getattr(algo, k)!r}" for k, v in UNLIKE_BRAX.get(algo_name, {}).items() if getattr(algo, k) != v]
+    if algo_name == "sac" and algo.policy_hidden_sizes != algo.q_hidden_sizes:
+        unlike.append(f"algo.q_hidden_sizes={algo.q_hidden_sizes} != algo.policy_hidden_sizes={algo.policy_hidden_sizes}")
+    if unlike:
+        raise ValueError(f"the preset sets {', '.join(unlike)}, which Brax's {algo_name} cannot match: allowed are "
+                         f"{UNLIKE_BRAX.get(algo_name, {})} and (SAC) one hidden-layer list for actor and critics.")
+    if algo_name == "sac":
+        return dataclasses.replace(config, algo=dataclasses.replace(algo, target_entropy=-0.5 * action_size))
+    return config
 
 
 def main():
     parser = argparse.ArgumentParser(prog="python -m benchmarks.brax_reference", description=__doc__.split("\n\n")[0])
     parser.add_argument("--preset", default="ur5e-reach-ppo")
     parser.add_argument("--evals", type=int, default=8, help="evaluations after the initial one")
-    parser.add_argument("--updates-per-eval", type=int, default=16, help="PPO updates between evaluations")
+    parser.add_argument("--updates-per-eval", type=int, default=None,
+                        help="updates between evaluations (default: 16 for PPO, 8,192 vector steps for SAC)")
     parser.add_argument("--eval-envs", type=int, default=4096)
     parser.add_argument("--skip", choices=["ours", "brax"], default=None)
     parser.add_argument("--out", default="results/throughput/brax_reference")
     args = parser.parse_args()
 
     config = presets.make_config(args.preset, eval_envs=args.eval_envs, progress=False, tensorboard=False)
-    algo = config.algo
-    spu = algo.env_steps_per_update
-    total = args.evals * args.updates_per_eval * spu
+    algo_name = registry.of_config(config.algo).name
+    if algo_name not in BRAX_TRAINERS:
+        raise ValueError(f"--preset {args.preset} trains {algo_name}: allowed are presets of {', '.join(BRAX_TRAINERS)}.")
+    env = envs.from_config(config.env_name, config.env)
+    config = brax_comparable(config, algo_name, env.action_size)
+    spu = config.algo.env_steps_per_update
+    updates_per_eval = args.updates_per_eval or DEFAULT_UPDATES_PER_EVAL[algo_name]
+    total = args.evals * updates_per_eval * spu
     config = config.__class__(**{**config.__dict__, "num_timesteps": total})
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -78,13 +158,12 @@ def main():
     command = " ".join(["python", "-m", "benchmarks.brax_reference"] + sys.argv[1:])
     report = {"meta": {"device": device.device_kind, "jax": jax.__version__, "date": datetime.date.today().isoformat(),
                        "command": command, "preset": args.preset, "env_name": config.env_name,
-                       "num_timesteps": total, "eval_envs": args.eval_envs},
+                       "num_timesteps": total, "eval_envs": args.eval_envs, "algo": dataclasses.asdict(config.algo)},
               "ours": {"evals": []}, "brax": {"evals": []}}
 
     def save():
         out.with_suffix(".json").write_text(json.dumps(report, indent=2))
 
-    env = envs.from_config(config.env_name, config.env)
     batched = envs.wrap(env)
     eval_key = jax.random.PRNGKey(config.eval_seed)
 
@@ -100,7 +179,7 @@ def main():
         for i in range(args.evals + 1):
             if i:
                 start = time.perf_counter()
-                state, metrics = programs.chunk(state, jnp.int32(args.updates_per_eval))
+                state, metrics = programs.chunk(state, jnp.int32(updates_per_eval))
                 jax.block_until_ready(metrics)
                 train_seconds += time.perf_counter() - start
             steps = int(jax.device_get(state.updates[0])) * spu
@@ -112,9 +191,6 @@ def main():
         save()
 
     if args.skip != "brax":
-        from brax.training.agents.ppo import networks as brax_networks
-        from brax.training.agents.ppo import train as brax_ppo
-
         evaluate = None
         sps = []
 
@@ -129,23 +205,13 @@ def main():
             save()
 
         def on_progress(step, metrics):
+            report["brax"]["last_step"] = int(step)
             if "training/sps" in metrics:
                 sps.append(float(metrics["training/sps"]))
                 report["brax"]["sps_per_epoch"] = sps
                 save()
 
-        hidden = algo.policy_hidden_sizes
-        brax_ppo.train(
-            environment=env, num_timesteps=total, num_evals=args.evals + 1, episode_length=config.env.episode_length,
-            num_envs=algo.num_envs, batch_size=algo.batch_size, num_minibatches=algo.num_minibatches,
-            unroll_length=algo.unroll_length, num_updates_per_batch=algo.updates_per_batch,
-            learning_rate=algo.learning_rate, discounting=algo.discount, entropy_cost=algo.entropy_coef,
-            gae_lambda=algo.gae_lambda, clipping_epsilon=algo.clip_epsilon, normalize_observations=True,
-            reward_scaling=algo.reward_scaling, num_eval_envs=128, seed=config.seed,
-            network_factory=functools.partial(brax_networks.make_ppo_networks, policy_hidden_layer_sizes=hidden,
-                                              value_hidden_layer_sizes=algo.value_hidden_sizes),
-            policy_params_fn=on_params, progress_fn=on_progress,
-        )
+        BRAX_TRAINERS[algo_name](config, env, total, args.evals + 1, on_params, on_progress)
         report["brax"]["steps_per_s"] = statistics.median(sps[1:]) if len(sps) > 1 else (sps[0] if sps else None)
         save()
 
@@ -153,8 +219,10 @@ def main():
     if ours and brax:
         report["speedup"] = ours / brax
     save()
-    lines = [f"# Brax PPO vs ours on {config.env_name} ({report['meta']['device']}, {report['meta']['date']})", "",
-             f"Command: `{report['meta']['command']}`; jax {jax.__version__}; the preset's hyperparameters; both evaluated by "
+    lines = [f"# Brax {algo_name.upper()} vs ours on {config.env_name} ({report['meta']['device']}, {report['meta']['date']})", "",
+             f"Command: `{report['meta']['command']}`; jax {jax.__version__}; the preset's hyperparameters"
+             + (f" (SAC's target entropy {config.algo.target_entropy:g}, Brax's -|A|/2, for both)" if algo_name == "sac" else "")
+             + "; both evaluated by "
              f"`agents.loop.make_evaluate` on the same {args.eval_envs} fresh episodes (deterministic policy).", "",
              f"Training env steps/s: ours {ours or float('nan'):,.0f}, Brax {brax or float('nan'):,.0f}"
              + (f", ratio {report['speedup']:.2f}x" if "speedup" in report else "") + ".", "",
@@ -168,7 +236,8 @@ def main():
         cells = []
         for who in ("ours", "brax"):
             r = by_step[steps].get(who)
-            cells += [f"{r['target_reached']:.3f}", f"{r['self_collision']:.3f}", f"{r['steps_in_target']:.1f}"] if r else ["", "", ""]
+            cells += [f"{r.get(k, float('nan')):{f}}" for k, f in (("target_reached", ".3f"), ("self_collision", ".3f"),
+                                                                ("steps_in_target", ".1f"))] if r else ["", "", ""]
         lines.append(f"| {steps:,} | " + " | ".join(cells) + " |")
     out.with_suffix(".md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))

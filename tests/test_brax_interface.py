@@ -1,6 +1,8 @@
 """Our environment plugs into Brax's own training pipeline unchanged (Brax is a reference only:
 this test is the one place that imports it)."""
 
+import dataclasses
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -33,3 +35,17 @@ def test_brax_ppo_trains_on_our_env(monkeypatch):
     assert progress and progress[-1][0] >= 160
     # Brax's evaluator reports our env's metrics, so `step` kept every key of `reset`.
     assert "eval/episode_target_reached" in metrics and np.isfinite(metrics["eval/episode_reward"])
+
+
+def test_brax_sac_comparison_takes_brax_settings_or_refuses():
+    from agents import presets
+    from benchmarks.brax_reference import brax_comparable
+
+    paper = presets.make_config("ur5e-reach-sac")
+    same = brax_comparable(paper, "sac", action_size=6)
+    assert same.algo.target_entropy == -3.0 and paper.algo.target_entropy is None  # Brax's -|A|/2
+    assert dataclasses.replace(same.algo, target_entropy=None) == paper.algo
+    with pytest.raises(ValueError, match=r"algo.n_step=3.*algo.distributional=True.*q_hidden_sizes=\(512, 512, 256\)"):
+        brax_comparable(presets.make_config("ur5e-reach-sac-fast"), "sac", action_size=6)
+    ppo = presets.make_config("ur5e-reach-ppo")
+    assert brax_comparable(ppo, "ppo", action_size=6) is ppo
