@@ -10,6 +10,7 @@ Functions for notebooks (each returns the matplotlib Figure, and writes a PNG if
 Command line (the PNGs under results/figures/ were made with these, on a CPU):
 
     python -m tools.plots curves runs/front runs/full --labels front full --out results/figures/curves.png
+    python -m tools.plots curves runs/sac runs/ppo --labels SAC PPO --x wall_clock --out curves_seconds.png
     python -m tools.plots env --out results/figures
 
 A rollout video is `python eval.py ... --video PATH` (envs/render.py).
