@@ -92,7 +92,7 @@ class ArmEnv(Env):
 
         data = robot.data_template
         mocap = data.mocap_pos.at[robot.target_mocap].set(target)
-        if "obstacle_pos" in task_info:  # the model's one obstacle body shows the first obstacle
+        if "obstacle_pos" in task_info:  # the model's one obstacle body: the first obstacle at the episode's start
             mocap = mocap.at[robot.obstacle_mocap].set(task_info["obstacle_pos"][:3])
         # Kinematic fields filled in, so the initial state can be rendered or inspected as is.
         data = data.replace(qpos=q0, ctrl=q0, mocap_pos=mocap, xpos=kin0.xpos, geom_xpos=kin0.geom_xpos,
@@ -115,7 +115,8 @@ class ArmEnv(Env):
             **task_info,
         }
         if self.noisy:
-            info["noise_key"] = _raw_key(jax.random.fold_in(rng, 1))
+            # A fourth key of `rng`, independent of the three above (which stay those of a noise-free env).
+            info["noise_key"] = _raw_key(jax.random.split(rng, 4)[3])
         obs = self.observation(data, kin0.xpos, kin0.ee_pos, info)
         zero = jnp.zeros(())
         metrics = {name: zero for name in METRICS}

@@ -27,6 +27,13 @@ REACH_OBSERVATIONS = (
 OBSTACLE_OBSERVATIONS = ("obstacle_pos", "obstacle_size", "link_obstacle_dist", "obstacle_radius", "obstacle_vel")
 
 
+def _observed_if_set(field: str, std: float, observation: tuple[str, ...], noisy_parts: tuple[str, ...]) -> None:
+    """Sensor noise must reach the observation: a noise level without any part it perturbs is a mistake."""
+    if std > 0 and not set(noisy_parts) & set(observation):
+        raise ValueError(f"{field}={std!r} is invalid: allowed is 0 unless one of {', '.join(noisy_parts)} is "
+                         f"observed (observation={tuple(observation)!r}).")
+
+
 @dataclasses.dataclass(frozen=True)
 class ReachConfig:
     """Reach task: move the end effector to a sampled target and stay there."""
@@ -139,6 +146,7 @@ class ReachConfig:
         if not isinstance(self.gravity_compensation, bool):
             raise ValueError(f"gravity_compensation={self.gravity_compensation!r} is invalid: allowed are True, False.")
         positive("joint_noise_std", self.joint_noise_std, strict=False)
+        _observed_if_set("joint_noise_std", self.joint_noise_std, self.observation, ("joint_pos", "joint_sin_cos"))
         integer("action_latency", self.action_latency, 0, maximum=1)
 
     def validate_for_robot(self, robot: str, reach: float, joint_range_width: float) -> None:
@@ -166,7 +174,8 @@ class ReachAvoidConfig(ReachConfig):
     target_radius: float = 0.02
     """The end effector is in the target when closer than this to its centre (m)."""
     obstacle_radius: float = 0.1
-    """Radius of the spherical obstacle (m); the paper evaluates 0.025 to 0.3."""
+    """Radius of the spherical obstacle (m); the paper evaluates 0.025 to 0.3. Unused when
+    obstacle_radius_range is set."""
     obstacle_region: float = 0.6
     """Obstacles are sampled uniformly in the cube [-obstacle_region, obstacle_region]^3 around the
     robot base (paper: a 1.2 m cube), rejecting ones that touch the initial pose or the target."""
@@ -233,6 +242,8 @@ class ReachAvoidConfig(ReachConfig):
         interval("obstacle_speed_range", self.obstacle_speed_range, strict=False)
         positive("obstacle_period", self.obstacle_period)
         positive("obstacle_noise_std", self.obstacle_noise_std, strict=False)
+        _observed_if_set("obstacle_noise_std", self.obstacle_noise_std, self.observation,
+                         ("obstacle_pos", "link_obstacle_dist"))
 
     def validate_for_robot(self, robot: str, reach: float, joint_range_width: float) -> None:
         """ReachConfig's bounds plus the obstacle's: a radius below the robot's reach (a larger one
