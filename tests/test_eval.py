@@ -607,6 +607,12 @@ def test_training_curves_against_wall_clock(tmp_path):
     assert fig.axes[0].get_xlabel() == plots.X_AXES["wall_clock"]
     with pytest.raises(ValueError, match="x='minutes'.*env_steps, wall_clock"):
         plots.curve(str(tmp_path), "episode/target_reached", x="minutes")
+    # A run resumed from its step-100 checkpoint logs steps 200 and 300 again (4 s each): they replace the first rows.
+    with open(tmp_path / "metrics.csv", "a") as f:
+        f.write("200,0,1.0,4.0,0.5\n300,0,1.0,4.0,0.7\n200,1,1.0,4.0,0.5\n300,1,1.0,4.0,0.7\n")
+    seconds, mean, _, _ = plots.curve(str(tmp_path), "episode/target_reached", x="wall_clock")
+    np.testing.assert_allclose(seconds, [3.0, 7.0, 11.0])  # seed 0: 2, 6, 10; seed 1: 4, 8, 12
+    np.testing.assert_allclose(mean, [0.2, 0.5, 0.7])
 
 
 def test_paper_tables_from_given_checkpoints_and_skips_the_rest(point_run, tmp_path, capsys):

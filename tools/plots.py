@@ -77,19 +77,24 @@ def curve(logdirs, metric: str, x: str = "env_steps") -> tuple[np.ndarray, np.nd
     if x not in X_AXES:
         raise ValueError(f"x={x!r} is not a curve axis: allowed are {', '.join(X_AXES)}.")
     logdirs = [logdirs] if isinstance(logdirs, str) else list(logdirs)
-    series, clocks = {}, {}
+    series, chunks = {}, {}
     for i, logdir in enumerate(logdirs):
         m = read_metrics(logdir)
         if metric not in m:
             raise ValueError(f"metric {metric!r} is not in {logdir}/metrics.csv: allowed are "
                              f"{', '.join(k for k in m if k not in ('env_steps', 'seed'))}.")
-        for step, seed, value, seconds in zip(m["env_steps"], m["seed"], m[metric], m["wall_seconds"]):
+        seconds = m.get("wall_seconds", np.full(len(m["env_steps"]), np.nan))
+        for step, seed, value, chunk in zip(m["env_steps"], m["seed"], m[metric], seconds):
+            # A resumed run logs the steps it redoes again: the last row of a step counts.
             series.setdefault((i, seed), {})[step] = value
-            clock = clocks.setdefault((i, seed), {})
-            clock[step] = (clock[max(clock)] if clock else 0.0) + seconds
+            chunks.setdefault((i, seed), {})[step] = chunk
     common = sorted(set.intersection(*(set(s) for s in series.values())))
     values = np.array([[s[step] for step in common] for s in series.values()])
-    xs = np.array(common) if x == "env_steps" else np.array([[c[step] for step in common] for c in clocks.values()]).mean(0)
+    if x == "env_steps":
+        xs = np.array(common)
+    else:
+        clocks = [dict(zip(sorted(c), np.cumsum([c[step] for step in sorted(c)]))) for c in chunks.values()]
+        xs = np.array([[clock[step] for step in common] for clock in clocks]).mean(0)
     return xs, np.nanmean(values, 0), np.nanstd(values, 0), len(series)
 
 
