@@ -100,7 +100,7 @@ def brax_sac(config, env, total, num_evals, on_params, on_progress):
         wrap_env_fn=brax_wrappers.wrap,  # the wrappers Brax's PPO applies; its SAC checks for a Brax Env class instead
         network_factory=functools.partial(brax_networks.make_sac_networks, hidden_layer_sizes=algo.q_hidden_sizes,
                                           activation=getattr(jax.nn, algo.activation),
-                                          q_network_layer_norm=algo.layer_norm),
+                                          policy_network_layer_norm=algo.layer_norm, q_network_layer_norm=algo.layer_norm),
         progress_fn=progress,
     )
     on_params(last["step"], make_policy, params)
@@ -118,7 +118,8 @@ UNLIKE_BRAX = {"sac": {"n_step": 1, "distributional": False, "max_grad_norm": 0.
 
 def brax_comparable(config, algo_name: str, action_size: int):
     """`config` with ours set as Brax's learner runs (SAC: Brax's target entropy -action_size / 2,
-    where ours defaults to -action_size); a ValueError for options Brax cannot match."""
+    where ours defaults to -action_size, and no clipping of normalised observations); a ValueError for
+    options Brax cannot match."""
     algo = config.algo
     unlike = [f"algo.{k}={getattr(algo, k)!r}" for k, v in UNLIKE_BRAX.get(algo_name, {}).items() if getattr(algo, k) != v]
     if algo_name == "sac" and algo.policy_hidden_sizes != algo.q_hidden_sizes:
@@ -126,8 +127,8 @@ def brax_comparable(config, algo_name: str, action_size: int):
     if unlike:
         raise ValueError(f"the preset sets {', '.join(unlike)}, which Brax's {algo_name} cannot match: allowed are "
                          f"{UNLIKE_BRAX.get(algo_name, {})} and (SAC) one hidden-layer list for actor and critics.")
-    if algo_name == "sac":
-        return dataclasses.replace(config, algo=dataclasses.replace(algo, target_entropy=-0.5 * action_size))
+    if algo_name == "sac":  # Brax's SAC also normalises observations without clipping them
+        return dataclasses.replace(config, algo=dataclasses.replace(algo, target_entropy=-0.5 * action_size, obs_clip=0.0))
     return config
 
 
@@ -221,7 +222,8 @@ def main():
     save()
     lines = [f"# Brax {algo_name.upper()} vs ours on {config.env_name} ({report['meta']['device']}, {report['meta']['date']})", "",
              f"Command: `{report['meta']['command']}`; jax {jax.__version__}; the preset's hyperparameters"
-             + (f" (SAC's target entropy {config.algo.target_entropy:g}, Brax's -|A|/2, for both)" if algo_name == "sac" else "")
+             + (f" (SAC's target entropy {config.algo.target_entropy:g}, Brax's -|A|/2, and no observation clipping, for both)"
+                if algo_name == "sac" else "")
              + "; both evaluated by "
              f"`agents.loop.make_evaluate` on the same {args.eval_envs} fresh episodes (deterministic policy).", "",
              f"Training env steps/s: ours {ours or float('nan'):,.0f}, Brax {brax or float('nan'):,.0f}"

@@ -44,7 +44,8 @@ def test_brax_sac_comparison_takes_brax_settings_or_refuses():
     paper = presets.make_config("ur5e-reach-sac")
     same = brax_comparable(paper, "sac", action_size=6)
     assert same.algo.target_entropy == -3.0 and paper.algo.target_entropy is None  # Brax's -|A|/2
-    assert dataclasses.replace(same.algo, target_entropy=None) == paper.algo
+    assert same.algo.obs_clip == 0.0 and paper.algo.obs_clip == 10.0  # Brax's SAC does not clip
+    assert dataclasses.replace(same.algo, target_entropy=None, obs_clip=10.0) == paper.algo
     with pytest.raises(ValueError, match=r"algo.n_step=3.*algo.distributional=True.*q_hidden_sizes=\(512, 512, 256\)"):
         brax_comparable(presets.make_config("ur5e-reach-sac-fast"), "sac", action_size=6)
     ppo = presets.make_config("ur5e-reach-ppo")
