@@ -122,7 +122,7 @@ PRESETS: dict[str, Preset] = {
                                    PPO_PAPER_REACH_AVOID, env=_UR5E_REACH_AVOID, run=dict(num_timesteps=192_000_000)),
     "panda-reach-avoid-ppo": Preset("Panda reach-avoid, 0.1 m obstacle, semi-sparse reward, 4x256 (paper), discount 0.98",
                                     "panda-reach-avoid", PPO_PANDA_REACH_AVOID, run=dict(num_timesteps=100_000_000)),
-    # Ours beyond the paper: the reach-avoid presets with 3 moving obstacles of random size (not trained yet).
+    # Ours beyond the paper: the reach-avoid presets with 3 moving obstacles of random size (results/obstacles).
     "ur5e-reach-avoid-ppo-moving3": Preset("ur5e-reach-avoid-ppo with 3 obstacles of radius 0.05-0.1 m moving at "
                                            "0.05-0.2 m/s, their radii and velocities observed (not in the paper)",
                                            "ur5e-reach-avoid", PPO_PAPER_REACH_AVOID,

@@ -13,7 +13,7 @@ Writes `<out>.json` (every number plus device, versions, command) and `<out>.md`
 
 `--variants` times each reach-avoid env once per named option set (`VARIANTS`: the paper's one
 static obstacle, 3 static, 3 moving) in the same run, each row with its fraction of the paper
-variant's rate at that size (issue 29 asks for >= 85 % at 8,192 envs):
+variant's rate at that size (list `paper` first; results/obstacles):
 
     python -m benchmarks.env_throughput --envs ur5e-reach-avoid panda-reach-avoid --sizes 8192 \
         --variants paper 3-static 3-moving --out results/throughput/obstacles
