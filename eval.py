@@ -24,6 +24,10 @@ observation the network was not trained on is refused, naming both shapes; so ar
 in another order and another action mode (relative / absolute), unless `--allow-env-mismatch`
 (then a warning).
 
+Physics: on a CPU the arm envs step with MuJoCo's C library (`--env.backend auto`, the default; no
+physics to compile, about a hundred times MJX's CPU speed), on a GPU with MJX; `--env.backend mjx` or
+`mujoco` picks one (docs/environments.md, "Physics backends"). The JSON records which one ran.
+
 Checkpoints: eval.py loads the small policy export (`agents.export`: policy parameters, observation
 statistics, config) that the training driver writes next to each checkpoint; it never builds the
 training programs or reads the optimiser state or replay buffer. `--checkpoint` takes a train.py

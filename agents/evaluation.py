@@ -253,6 +253,7 @@ class Result:
             "policy": self.policy.describe(),
             "env_name": self.env_name,
             "env_config": dataclasses.asdict(self.env_config),
+            "physics": _physics_backend(self.env_config),
             "num_envs": self.num_envs,
             "eval_seeds": list(self.eval_seeds),
             "last_steps": self.last_steps,
@@ -446,6 +447,13 @@ def code_version() -> str:
     except (OSError, subprocess.SubprocessError):
         return "unknown"
     return commit + ("+modified" if dirty else "")
+
+
+def _physics_backend(env_config) -> str | None:
+    """The backend that stepped the physics (an arm config's `backend` resolved; None for envs without one)."""
+    from envs import physics
+    backend = getattr(env_config, "backend", None)
+    return physics.resolve(backend) if backend is not None else None
 
 
 def device_description() -> str:

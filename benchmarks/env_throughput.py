@@ -63,7 +63,10 @@ def env_rollout(name, num_envs, steps, substeps=None, auto_reset=True, config=No
     if config is not None:
         env = envs.from_config(name, config)
     else:
-        env = envs.make(name, **(options or {}), **({} if substeps is None else {"substeps": substeps}))
+        # MJX unless `options` name another backend: the ceiling beside it is MJX's (benchmarks.cpu_backends
+        # compares the backends on a CPU).
+        options = {"backend": "mjx", **(options or {})}
+        env = envs.make(name, **options, **({} if substeps is None else {"substeps": substeps}))
     batched = envs.wrap(env) if auto_reset else envs.wrappers.VmapWrapper(env)
     state = jax.jit(batched.reset)(jax.random.split(jax.random.PRNGKey(0), num_envs))
 

@@ -4,9 +4,10 @@ checks, action mapping, sampling of initial pose and target, observation assembl
 Tasks (`envs.tasks`) subclass `ArmEnv` and add what is theirs (the obstacle of reach-avoid).
 Robots (`envs.robots`) supply model, limits, kinematics and collision geometry.
 
-One environment step = `config.substeps` MJX steps of 2 ms holding one position target per joint.
-MJX contacts are disabled: after every substep the robot's geom poses are checked analytically
-against the model's collision pairs, so a collision anywhere inside the step ends the episode.
+One environment step = `config.substeps` physics steps of 2 ms holding one position target per joint,
+by MJX or by C MuJoCo (`config.backend`, `envs.physics`). Contacts are disabled in the model: after every
+substep the robot's geom poses are checked analytically against the model's collision pairs, so a
+collision anywhere inside the step ends the episode.
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ import jax.numpy as jnp
 import numpy as np
 from mujoco import mjx
 
-from envs import fast_mjx, rewards, workspaces
+from envs import fast_mjx, physics, rewards, workspaces
 from envs.base import Env, State, check_action
 from envs.config import ReachConfig
 from envs.robots import Robot, first_valid
@@ -57,6 +58,8 @@ class ArmEnv(Env):
         self.dt = self.physics_dt * config.substeps
         self._init_low, self._init_high = robot.joint_range(config.init_range)
         self._obs_size = sum(self._observation_sizes()[p] for p in config.observation)
+        self._backend = physics.resolve(config.backend)
+        self.physics = physics.PHYSICS[self._backend](robot, config.substeps)
 
     # ----------------------------------------------------------------------------------------
     # Interface
@@ -68,6 +71,11 @@ class ArmEnv(Env):
     @property
     def action_size(self) -> int:
         return self.robot.nq
+
+    @property
+    def backend(self) -> str:
+        """The physics backend stepping this env, "mjx" or "mujoco" (`config.backend` resolved)."""
+        return self._backend
 
     def reset(self, rng: jax.Array) -> State:
         # Physics and kinematics in full float32: TF32 matmuls on recent GPUs change MJX results.
@@ -131,15 +139,11 @@ class ArmEnv(Env):
         data = state.pipeline_state.replace(ctrl=self.action_to_ctrl(applied, state.pipeline_state.qpos))
         start = state.info["num_steps"] * cfg.substeps  # physics steps of the episode before this one
 
-        def substep(carry, k):
-            data, closest = carry
-            data = mjx.step(robot.mjx_model, data)
-            # geom poses of the configuration this substep started from, the task (moving obstacles) at that time
-            task = self.task_at(state.info, start + k)
-            closest = jnp.minimum(closest, self.collision_distances(data.geom_xpos, data.geom_xmat, task))
-            return (data, closest), None
+        def distances(geom_xpos, geom_xmat, k):
+            # at substep k's start, against the task (moving obstacles) at that time
+            return self.collision_distances(geom_xpos, geom_xmat, self.task_at(state.info, start + k))
 
-        (data, closest), _ = jax.lax.scan(substep, (data, jnp.full(2, jnp.inf)), jnp.arange(cfg.substeps))
+        data, closest = self.physics.run(data, distances)
         # Poses of the final configuration (mjx.step computed those of the last substep's start).
         kin = robot.kinematics(data.qpos)
         data = data.replace(xpos=kin.xpos, geom_xpos=kin.geom_xpos, geom_xmat=kin.geom_xmat, site_xpos=kin.site_xpos)

@@ -24,6 +24,7 @@ REACH_OBSERVATIONS = (
     "joint_pos", "joint_vel", "joint_acc", "ee_pos", "ee_vel", "target_pos", "ee_to_target", "prev_action",
     "joint_sin_cos", "self_dist",
 )
+BACKENDS = ("auto", "mjx", "mujoco")
 OBSTACLE_OBSERVATIONS = ("obstacle_pos", "obstacle_size", "link_obstacle_dist", "obstacle_radius", "obstacle_vel")
 
 
@@ -95,6 +96,11 @@ class ReachConfig:
     """Physics steps of 2 ms per environment step."""
     gravity_compensation: bool = False
     """Compensate gravity in the joints as the real arms' controllers do (not in the paper)."""
+    backend: Literal["auto", "mjx", "mujoco"] = "auto"
+    """Physics backend (`envs.physics`): mjx (MuJoCo MJX inside the jitted step: GPU training), mujoco
+    (MuJoCo's C library on the CPU cores through a callback: evaluation, notebooks and Gymnasium on a CPU,
+    no physics to compile) or auto (mujoco when JAX runs on the CPU, mjx on a GPU). Same model, options
+    and task logic; results agree to float tolerance."""
     sampling_candidates: int = 8
     """Candidates drawn at once per rejection-sampled quantity; targets in the front/upper
     workspaces and obstacles over 0.15 m use more (see `ArmEnv.candidates`, `ReachAvoid.candidates`).
@@ -124,6 +130,7 @@ class ReachConfig:
         choice("workspace", self.workspace, WORKSPACES)
         choice("target_sampling", self.target_sampling, TARGET_SAMPLINGS)
         choice("init_range", self.init_range, INIT_RANGES)
+        choice("backend", self.backend, BACKENDS)
         if not isinstance(self.observation, tuple) or not self.observation:  # a list would not hash (jit caches)
             raise ValueError(f"observation={self.observation!r} is invalid: allowed is a non-empty tuple of "
                              f"{', '.join(self.allowed_observations())}.")

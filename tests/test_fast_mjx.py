@@ -84,7 +84,7 @@ def test_context_restores_what_it_replaced():
 
 
 def test_panda_rollout_into_joint_limits_matches_mjx():
-    base = envs.make("panda-reach", substeps=2)
+    base = envs.make("panda-reach", substeps=2, backend="mjx")  # MJX itself is under test
     env = envs.wrappers.VmapWrapper(base)  # no auto-reset: every step's solver output is kept
     start = jax.jit(env.reset)(jax.random.split(jax.random.PRNGKey(0), 8))
     # Start 0.02 rad beyond a joint limit (upper for half the envs, lower for the others), so the
