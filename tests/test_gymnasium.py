@@ -214,6 +214,22 @@ def test_gymnasium_env_checker_passes_on_the_single_env():
         env.step(np.zeros(2))
 
 
+def test_gymnasium_env_checker_passes_on_the_native_arm_env():
+    """Issue 28: the UR5e reach-avoid env on the native MuJoCo backend through Gymnasium's checker, and a few
+    steps that move the arm (the physics really runs in C)."""
+    env = eg.make("ur5e-reach-avoid", backend="mujoco", episode_length=5, sampling_candidates=4)
+    assert env.vector_env.env.backend == "mujoco"
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        check_env(env, skip_render_check=True)
+    assert [str(w.message) for w in caught if "infinity" not in str(w.message)] == []
+    obs, _ = env.reset(seed=1)
+    moved = obs
+    for _ in range(3):
+        moved, *_ = env.step(np.full(env.action_space.shape, 0.5, np.float32))
+    assert np.abs(moved[:6] - obs[:6]).max() > 0.1  # joint positions (the first observation part) changed
+
+
 def test_gymnasium_vector_wrappers_read_the_autoreset_mode():
     vec = gym.wrappers.vector.RecordEpisodeStatistics(eg.make_vec("point-mass", 2))
     vec.reset(seed=0)

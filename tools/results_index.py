@@ -489,6 +489,22 @@ def env_throughput_table(ctx: Context) -> list[list[str]]:
     return rows
 
 
+def cpu_backends_table(ctx: Context) -> list[list[str]]:
+    """The two physics backends on a CPU (benchmarks/cpu_backends.py): env steps/s and start-up."""
+    report = ctx.json("throughput/cpu_backends.json")
+    rows = [["env", "envs", "MJX env steps/s", "native env steps/s", "native / MJX", "MJX start-up", "native start-up"],
+            ["---", "---:", "---:", "---:", "---:", "---:", "---:"]]
+    by_key = {(r["env"], r["num_envs"], r["backend"]): r for r in report["rates"]}
+    for (env, n, backend), r in by_key.items():
+        m = by_key.get((env, n, "mjx"))
+        if backend != "mujoco" or m is None:
+            continue
+        rows.append([env, f"{n:,}", f"{m['env_steps_per_s']:,.1f}", f"{r['env_steps_per_s']:,.0f}",
+                     f"{r['env_steps_per_s'] / m['env_steps_per_s']:,.0f}x", f"{m['startup_s']:.0f} s",
+                     f"{r['startup_s']:.0f} s"])
+    return rows
+
+
 def train_throughput_table(ctx: Context) -> list[list[str]]:
     rows = [["GPUs", "envs", "batch", "training env steps/s", "env only", "fraction of env only", "speed-up"],
             ["---:", "---:", "---:", "---:", "---:", "---:", "---:"]]
@@ -659,6 +675,7 @@ TABLES: dict[str, Callable[[Context], list[list[str]]]] = {
     "workspaces": workspace_table,
     "obstacle_size": obstacle_table,
     "env_throughput": env_throughput_table,
+    "cpu_backends": cpu_backends_table,
     "train_throughput": train_throughput_table,
     "brax_reference": brax_table,
     "failures": failures_table,
