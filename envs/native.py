@@ -8,9 +8,10 @@ no MJX program is compiled and a step costs what MuJoCo's C step costs.
 
 State passed across the callback: time, qpos, qvel (float32 in the env state, float64 in C), the
 position targets (ctrl, held for all substeps) and qacc_warmstart. `qacc` is MuJoCo's acceleration of
-the last substep (`NativePhysics._last_acceleration`), which also warm-starts the next env step's solver. An env whose physics diverges (C
-MuJoCo then resets its data and warns) comes back as NaN, which the env reports as `physics_nan`,
-as MJX's NaN does.
+the last substep (`NativePhysics._last_acceleration`), which also warm-starts the next env step's
+solver. The env state keeps MJX's `Data` layout; fields beyond these (actuator forces, constraint
+forces) are not updated by this backend. An env whose physics diverges (C MuJoCo then resets its data
+and warns) comes back as NaN, which the env reports as `physics_nan`, as MJX's NaN does.
 """
 
 from __future__ import annotations
