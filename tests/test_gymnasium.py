@@ -227,7 +227,7 @@ def test_gymnasium_env_checker_passes_on_the_native_arm_env():
     moved = obs
     for _ in range(3):
         moved, *_ = env.step(np.full(env.action_space.shape, 0.5, np.float32))
-    assert np.abs(moved[:6] - obs[:6]).max() > 0.1  # joint positions (the first observation part) changed
+    assert np.abs(moved[:6] - obs[:6]).min() > 0.02  # every joint position (the first observation part) moved
 
 
 def test_gymnasium_vector_wrappers_read_the_autoreset_mode():
