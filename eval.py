@@ -25,7 +25,7 @@ in another order and another action mode (relative / absolute), unless `--allow-
 (then a warning).
 
 Physics: on a CPU the arm envs step with MuJoCo's C library (`--env.backend auto`, the default; no
-physics to compile, about a hundred times MJX's CPU speed), on a GPU with MJX; `--env.backend mjx` or
+physics to compile, far faster than MJX on a CPU), on a GPU with MJX; `--env.backend mjx` or
 `mujoco` picks one (docs/environments.md, "Physics backends"). The JSON records which one ran.
 
 Checkpoints: eval.py loads the small policy export (`agents.export`: policy parameters, observation

@@ -42,7 +42,7 @@ samples the same episode. Later episodes are sampled from keys carried in the st
 a sequence of actions determine the whole run. `reset()` without a seed draws one from `np_random`.
 
 Physics: on a CPU the arm envs step with MuJoCo's C library (the `backend="auto"` default, see
-`envs.physics`), so a torch learner on a laptop gets thousands of env steps/s; pass `backend="mjx"` for MJX.
+`envs.physics`), which runs far faster there than MJX; pass `backend="mjx"` for MJX.
 
 Gymnasium is an optional dependency (`pip install -e ".[gym]"`); Stable-Baselines3 is needed only
 by `to_sb3`. This module is `envs.gymnasium`: with absolute imports (Python 3) `import gymnasium`

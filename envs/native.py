@@ -124,8 +124,8 @@ class NativePhysics:
         """qacc of the last substep: a forward pass from the state it started from (MuJoCo's step computes
         qacc there before integrating). The solver's warm start is the env step's, not the previous
         substep's acceleration (rollout does not return it): the same qacc unless a joint-limit
-        constraint is active, where the one-iteration Newton solve lands elsewhere (measured: Panda
-        joints up to ~3e-3 rad off a plain mj_step loop over a 125-step episode; UR5e 1e-6)."""
+        constraint is active, where the one-iteration Newton solve lands elsewhere (the size of that
+        difference: tests/test_native_backend.py, docs/environments.md)."""
         d = self._forward
         out = np.zeros((len(before), self.nv))
         for i in np.flatnonzero(ok):
