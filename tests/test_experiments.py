@@ -30,6 +30,8 @@ def test_registered_runs_are_valid_and_their_commands_parse_back(name):
     for run in exp.runs:
         logdir = os.path.join(ex.RUNS_DIR, name, run.name)
         assert train.parse(run.train_args(logdir)) == run.config(logdir), run.name
+        part = os.path.join(logdir, ex.part_name(2, 1))
+        assert train.parse(run.train_args(part, first_seed=2, seeds=1)) == run.config(part, first_seed=2, seeds=1)
 
 
 SEEDS = {"action-space": 5, "reward": 3, "joint-penalties": 3, "reach-observation": 3, "network-size": 3,
@@ -72,59 +74,136 @@ def _metrics_csv(path, steps, seeds, rate, wall):
     _write(path, "\n".join(rows) + "\n")
 
 
+def _part(run, runs_dir, exp, run_name, first, count, steps=(), evaluated=None, metrics=None, config=None):
+    """A hand-made part folder: config.json, checkpoint folders, eval.json and metrics.csv as given."""
+    logdir = os.path.join(runs_dir, exp, run_name, ex.part_name(first, count))
+    config = config or run.config(logdir, first_seed=first, seeds=count)
+    _write(os.path.join(logdir, "config.json"), json.dumps(config_json(config)))
+    for step in steps:
+        os.makedirs(os.path.join(logdir, "checkpoints", str(step)))
+    if evaluated is not None:
+        per_seed = {"episode/target_reached": [0.1 * (first + i) for i in range(count)]}
+        _write(os.path.join(logdir, "eval.json"), json.dumps({"env_steps": evaluated, "eval_envs": 16, "per_seed": per_seed}))
+    if metrics is not None:
+        _metrics_csv(os.path.join(logdir, "metrics.csv"), *metrics)
+    return logdir
+
+
 def test_listing_and_commands_on_a_hand_made_runs_folder(tmp_path):
-    runs_dir = str(tmp_path / "runs")
-    extra = ex.Run("c", "point-mass-ppo", dict(TOY_RUN), seeds=1, num_timesteps=10_240)
-    changed = ex.Run("d", "point-mass-ppo", dict(TOY_RUN), seeds=1, num_timesteps=10_240)
+    runs_dir, out = str(tmp_path / "runs"), str(tmp_path / "out")
+    extra = ex.Run("c", "point-mass-ppo", {**TOY_RUN, "seed": 20}, seeds=1, num_timesteps=10_240)
+    changed = ex.Run("d", "point-mass-ppo", {**TOY_RUN, "seed": 30}, seeds=1, num_timesteps=10_240)
     exp = ex.Experiment("toy", TOY.title, TOY.paper_ref, TOY.runs + (extra, changed))
-    a, b = (os.path.join(runs_dir, "toy", n) for n in "ab")
-    _write(os.path.join(a, "config.json"), json.dumps(config_json(TOY.runs[0].config(a))))
-    os.makedirs(os.path.join(a, "checkpoints", "10240"))
-    _write(os.path.join(a, "eval.json"), json.dumps({"env_steps": 10240, "eval_envs": 16, "per_seed": {}}))
-    _write(os.path.join(b, "config.json"), json.dumps(config_json(TOY.runs[1].config(b))))
-    os.makedirs(os.path.join(b, "checkpoints", "5120"))
-    os.makedirs(os.path.join(b, "checkpoints", "10240.orbax-checkpoint-tmp-1"))  # an unfinished save
-    _metrics_csv(os.path.join(b, "metrics.csv"), [2560, 5120], 2, 1000.0, [12.56, 2.56])
-    d = os.path.join(runs_dir, "toy", "d")
-    _write(os.path.join(d, "config.json"), json.dumps(config_json(ex.apply_overrides(changed.config(d), {"env.dt": 0.2}))))
+    a, b = exp.runs[:2]
+    _part(a, runs_dir, "toy", "a", 0, 2, steps=[10240], evaluated=10240)
+    # Run b: seed 0 done on its own, seed 1 half trained (with an unfinished orbax save beside it).
+    _part(b, runs_dir, "toy", "b", 0, 1, steps=[10240], evaluated=10240)
+    b1 = _part(b, runs_dir, "toy", "b", 1, 1, steps=[5120], metrics=([2560, 5120], 1, 1000.0, [12.56, 2.56]))
+    os.makedirs(os.path.join(b1, "checkpoints", "10240.orbax-checkpoint-tmp-1"))
+    d = os.path.join(runs_dir, "toy", "d", "seeds-0-0")
+    _part(changed, runs_dir, "toy", "d", 0, 1, config=ex.apply_overrides(changed.config(d), {"env.dt": 0.2}))
 
     states = {r.name: ex.run_state(exp, r, runs_dir) for r in exp.runs}
     assert {n: s.status for n, s in states.items()} == {"a": "done", "b": "partial", "c": "missing", "d": "changed"}
-    assert states["b"].steps == 5120 and states["b"].rate == 1000.0
-    assert states["b"].startup == pytest.approx(10.0) and states["b"].wall_seconds == pytest.approx(15.12)
-    assert "dt" in states["d"].reason
-    text = ex.listing([(exp, list(exp.runs))], runs_dir, str(tmp_path / "out"))
+    assert states["b"].steps == 5120 and states["b"].seeds_done == 1
+    part = states["b"].parts[1]
+    assert (part.first, part.count, part.status, part.rate) == (1, 1, "partial", 1000.0)
+    assert part.startup == pytest.approx(10.0) and part.wall_seconds == pytest.approx(15.12)
+    assert "dt" in states["d"].reason and "seeds-0-0" in states["d"].reason
+    text = ex.listing([(exp, list(exp.runs))], runs_dir, out)
     assert "1 done, 1 partial, 1 missing, 1 changed; table not built" in text
-    assert "partial 0.00512M/0.01024M" in text and "total: 61,440 env steps" in text
+    assert "partial 1/2 seeds done, 0.00512M/0.01024M" in text and "total: 61,440 env steps" in text
+    assert "35,840 trained" in text  # a: 2 x 10,240, b: 10,240 + 5,120, d: nothing (changed)
 
     lines = ex.commands([(exp, list(exp.runs))], runs_dir)
     assert lines == [
-        f"python train.py point-mass-ppo --logdir {b} --seeds 2 --num-timesteps 10240 --eval-envs 16 --no-tensorboard "
-        f"--no-progress --seed 10 --resume",
-        f"python train.py point-mass-ppo --logdir {os.path.join(runs_dir, 'toy', 'c')} --seeds 1 --num-timesteps 10240 "
-        "--eval-envs 16 --no-tensorboard --no-progress"]
-    assert len(ex.commands([(exp, list(exp.runs))], runs_dir, everything=True)) == 4
+        f"python train.py point-mass-ppo --logdir {b1} --seeds 1 --num-timesteps 10240 --eval-envs 16 --no-tensorboard "
+        f"--no-progress --seed 11 --resume",
+        f"python train.py point-mass-ppo --logdir {os.path.join(runs_dir, 'toy', 'c', 'seeds-0-0')} --seeds 1 "
+        "--num-timesteps 10240 --eval-envs 16 --no-tensorboard --no-progress --seed 20"]
+    fresh = ex.commands([(exp, list(exp.runs))], runs_dir, everything=True, max_seeds=1)
+    assert len(fresh) == 6 and all("--resume" not in line for line in fresh)  # a and b as 2 x 1 seed, c, d
+
+
+def test_pending_parts_split_the_missing_seeds():
+    run = ex.Run("r", "point-mass-ppo", seeds=5, num_timesteps=10_240)
+    part = lambda first, count, status, steps=0: ex.PartState(f"f/{ex.part_name(first, count)}", first, count, status,
+                                                              steps, 10_240)
+    st = ex.RunState("e", run, "f", "partial", 0, 10_240, [part(0, 2, "done", 10_240), part(3, 1, "partial", 5_120)])
+    assert [(p.first, p.count, p.steps) for p in ex.pending_parts(st)] == [(3, 1, 5_120), (2, 1, 0), (4, 1, 0)]
+    st.parts = [part(1, 1, "done", 10_240)]
+    assert [(p.first, p.count) for p in ex.pending_parts(st)] == [(0, 1), (2, 3)]
+    assert [(p.first, p.count) for p in ex.pending_parts(st, max_seeds=2)] == [(0, 1), (2, 2), (4, 1)]
+    assert ex.pending_parts(st, max_seeds=2)[1].logdir == os.path.join("f", "seeds-2-3")
+    assert ex.parse_part("seeds-2-3") == (2, 2) and ex.parse_part("seeds-3-2") is None and ex.parse_part("ckpt") is None
+    with pytest.raises(ValueError, match="--max-seeds=0"):
+        ex.main(["list", "--max-seeds", "0"])
+
+
+def test_equal_runs_train_once_and_the_record_keeps_finished_parts(tmp_path):
+    runs_dir, out = str(tmp_path / "runs"), str(tmp_path / "out")
+    base = ex.Run("base", "point-mass-ppo", dict(TOY_RUN), seeds=2, num_timesteps=10_240)
+    same = ex.Run("same", "point-mass-ppo", dict(TOY_RUN), seeds=3, num_timesteps=10_240, label="the same config")
+    other = ex.Run("other", "point-mass-ppo", {**TOY_RUN, "env.goal_radius": 0.2}, seeds=1, num_timesteps=10_240)
+    first = ex.Experiment("first", "", "", (base,), metrics=("target_reached",), curves=())
+    second = ex.Experiment("second", "", "", (same, other), metrics=("target_reached",), curves=())
+    registry = {"first": first, "second": second}
+    assert ex.storage(second, same, registry) == ("first", "base")
+    assert ex.storage(second, other, registry) == ("second", "other")
+    assert ex.storage(second, same, {"second": second}) == ("second", "same")  # not registered together: its own
+    _part(base, runs_dir, "first", "base", 0, 2, steps=[10240], evaluated=10240)
+
+    st = ex.run_state(second, same, runs_dir, out, registry)
+    assert st.shared == "first/base" and st.folder == os.path.join(runs_dir, "first", "base")
+    assert st.status == "partial" and st.seeds_done == 2
+    assert [p.logdir for p in ex.pending_parts(st)] == [os.path.join(runs_dir, "first", "base", "seeds-2-2")]
+    selection = ex.select(None, registry)
+    text = ex.listing(selection, runs_dir, out, registry)
+    assert "[trains in first/base]" in text and "total: 40,960 env steps" in text  # 3 x 10,240 once + 1 x 10,240
+    lines = ex.commands(selection, runs_dir, registry=registry)
+    assert len(lines) == 2 and "seeds-2-2 --seeds 1" in lines[0] and "--seed 2" in lines[0]
+
+    # The build records base's finished part in the results; a checkout without the runs folder sees it done.
+    _part(base, runs_dir, "first", "base", 2, 1, steps=[10240], evaluated=10240)
+    files = ex.build(selection, runs_dir, out, log=lambda s: None, registry=registry)
+    record = os.path.join(out, "first", "runs", "base", "seeds-0-1")
+    assert os.path.join(record, "eval.json") in files and os.path.join(record, "config.json") in files
+    assert not os.path.exists(os.path.join(out, "second", "runs"))  # shared runs are recorded by their owner
+    with open(os.path.join(out, "second", "table.json")) as f:
+        row = json.load(f)["rows"][0]
+    assert row["per_seed"]["target_reached"] == pytest.approx([0.0, 0.1, 0.2]) and row["shared"] == "first/base"
+    assert [p["seeds"] for p in row["parts"]] == ["seeds-0-1", "seeds-2-2"]
+    elsewhere = str(tmp_path / "empty")
+    assert ex.run_state(first, base, elsewhere, out, registry).status == "done"
+    assert ex.run_state(first, base, elsewhere, None, registry).status == "missing"
 
 
 def test_time_limit_plan():
-    st = ex.RunState("toy", TOY.runs[0], "", "partial", steps=1000, budget=100_000, rate=100.0, startup=20.0)
+    st = ex.PartState("", 0, 1, "partial", steps=1000, budget=100_000, rate=100.0, startup=20.0)
     assert ex.plan_stop(st, None, compiled=False) == 0  # no limit: to the end
     assert ex.plan_stop(st, 120.0, compiled=False) == 1000 + 100 * 100  # 100 s after 20 s of startup
     assert ex.plan_stop(st, 120.0, compiled=True) == 1000 + 100 * 120
     assert ex.plan_stop(st, 25.0, compiled=False) is None  # less than one log interval (2,000 steps) fits
     assert ex.plan_stop(st, 10_000.0, compiled=True) == 0  # the rest fits
-    fresh = ex.RunState("toy", TOY.runs[0], "", "missing", steps=0, budget=100_000)
+    fresh = ex.PartState("", 0, 1, "missing", steps=0, budget=100_000)
     assert ex.plan_stop(fresh, 5.0, compiled=False) == 4000  # no speed measured: two log intervals
     assert ex.plan_stop(fresh, 0.0, compiled=False) is None
+    assert ex.plan_stop(fresh, 50.0, compiled=False, startup_guess=10.0, rate_guess=100.0) == 4000  # a sibling's speed
+    run = ex.Run("r", "point-mass-ppo", seeds=3, num_timesteps=100_000)
+    sibling = lambda first, count, rate: ex.PartState(f"p{first}", first, count, "done", 100_000, 100_000, rate, 7.0)
+    state = ex.RunState("e", run, "", "partial", 0, 100_000, [sibling(0, 2, 300.0), sibling(2, 1, 900.0)])
+    assert ex.speed_guess(state, fresh) == (300.0, 7.0)  # the slower per seed of the parts with >= 1 seed
+    assert ex.speed_guess(state, ex.PartState("x", 0, 3, "missing", 0, 100_000)) == (None, 0.0)
 
 
 def test_parallel_worker_commands(monkeypatch):
     monkeypatch.setenv("CUDA_VISIBLE_DEVICES", "0,1,2")
     assert ex.local_gpus() == 3
-    env, argv = ex.worker_command("action-space/relative", "1", 530.7, "runs/experiments", 53.0)
+    env, argv = ex.worker_command("action-space/relative", "1", 530.7, "runs/experiments", 53.0, max_seeds=1)
     assert env["CUDA_VISIBLE_DEVICES"] == "1"
     assert argv[1:] == ["-m", "tools.experiments", "run", "action-space/relative", "--no-build", "--runs-dir",
-                        "runs/experiments", "--reserve", "53", "--time-limit", "530"]
+                        "runs/experiments", "--out", "results/experiments", "--reserve", "53", "--time-limit", "530",
+                        "--max-seeds", "1"]
 
 
 def test_toy_experiment_trains_resumes_and_builds(tmp_path):
@@ -135,13 +214,13 @@ def test_toy_experiment_trains_resumes_and_builds(tmp_path):
     assert ex.run_state(TOY, TOY.runs[0], runs_dir).status == "missing"
     # Run b is interrupted half way, as a time-limited call leaves it.
     b = TOY.runs[1]
-    logdir = os.path.join(runs_dir, "toy", "b")
+    logdir = os.path.join(runs_dir, "toy", "b", "seeds-0-1")
     assert driver.train(b.config(logdir, stop_after_steps=5120)).status == "stopped"
     assert ex.run_state(TOY, b, runs_dir).status == "partial"
 
     log = []
     assert ex.train_pending(selection, runs_dir, log=log.append)
-    assert any("[toy/b] resuming at 5,120" in line for line in log)
+    assert any("[toy/b seeds-0-1] resuming at 5,120" in line for line in log)
     for run in TOY.runs:
         st = ex.run_state(TOY, run, runs_dir)
         assert st.status == "done" and st.steps == 10_240

@@ -3,22 +3,27 @@
 table (markdown and JSON) and figure from the runs' `eval.json` and `metrics.csv`.
 
     python -m tools.experiments list                          # every experiment: runs done, partly trained, missing
-    python -m tools.experiments run action-space --time-limit 540   # train what is missing, then build
+    python -m tools.experiments run action-space --time-limit 540 --max-seeds 1   # train what is missing, then build
     python -m tools.experiments run --parallel --time-limit 3000    # one run per local GPU, side by side
     python -m tools.experiments commands reward               # one train.py command per run (cluster schedulers)
     python -m tools.experiments build                         # tables and figures from what is trained
 
 A name selects an experiment (`action-space`) or one of its runs (`action-space/relative`); none selects all.
-A run is trained in `<runs-dir>/<experiment>/<run>/` (a train.py logdir) and its state is read from there:
-missing (nothing), partial (a checkpoint short of the budget), trained (at the budget, not evaluated), done
-(`eval.json` written by the driver at the end of the run), changed (its `config.json` differs from the
-registry's run in a field a resume may not change: move the folder away to retrain). Tables and figures go
-to `<out>/<experiment>/` (`table.md`, `table.json`, `curves.png`).
+A run trains in parts, `<runs-dir>/<experiment>/<run>/seeds-<first>-<last>/` (a train.py logdir each, the seeds
+trained together in one process; `--max-seeds K` caps them, 1 is the fastest on one GPU), and its state is
+read from them: missing (nothing), partial (some progress), trained (at the budget, not evaluated), done (every
+seed in a part whose `eval.json` the driver wrote at the end), changed (a part's `config.json` differs from the
+registry's run in a field a resume may not change: move that part away to retrain it). Runs of different
+experiments with equal training configs share the folder of the first one registered and train once. Tables
+and figures go to `<out>/<experiment>/` (`table.md`, `table.json`, `curves.png`), and the build records the
+finished parts' config.json, eval.json and metrics.csv in `<out>/<experiment>/runs/<run>/seeds-*/`, where the
+state is also read, so a checkout without the runs folder knows what is done.
 
 `run --time-limit S` returns within S seconds of its start (a 10 minute GPU call: `--time-limit 540`): each
-training call gets a `stop_after_steps` from the run's measured speed (its `metrics.csv`), less the
-`--reserve` kept for the last checkpoint, the evaluation and exit; a run with no measured speed trains two
-log intervals first (4 % of its budget) to measure it. The next call resumes where this one stopped.
+training call gets a `stop_after_steps` from the part's measured speed (its `metrics.csv`, or another part's
+of at least as many seeds), less the `--reserve` kept for the last checkpoint, the evaluation and exit; a part
+with no measured speed trains two log intervals first (4 % of its budget) to measure it. The next call resumes
+where this one stopped.
 
 This module imports only the standard library at the top, so the results index can read the registry
 cheaply; configs, training and plots import jax on use.
@@ -34,6 +39,7 @@ import json
 import math
 import os
 import shlex
+import shutil
 import statistics
 import subprocess
 import sys
@@ -86,18 +92,25 @@ class Run:
 
         return PRESETS[self.preset].run.get("num_timesteps", 1_000_000) if self.preset in PRESETS else 0
 
-    def config(self, logdir: str = "", **run_fields):
-        """The run's TrainConfig (not validated): preset, overrides, seeds, budget, logdir, plus `run_fields`."""
+    def config(self, logdir: str = "", first_seed: int = 0, seeds: int | None = None, **run_fields):
+        """The TrainConfig (not validated) of seeds `first_seed` .. `first_seed + seeds - 1` of this run (default:
+        all its seeds): preset, overrides, budget, logdir, plus `run_fields`. Seed i of the run trains from
+        PRNG seed `seed + i`, so a part of the seeds trains exactly what the whole run would for them."""
         from agents.presets import make_config
 
         config = apply_overrides(make_config(self.preset), self.overrides)
-        return dataclasses.replace(config, seeds=self.seeds, num_timesteps=self.budget(), logdir=logdir, **run_fields)
+        return dataclasses.replace(config, seed=config.seed + first_seed, seeds=self.seeds if seeds is None else seeds,
+                                   num_timesteps=self.budget(), logdir=logdir, **run_fields)
 
-    def train_args(self, logdir: str, resume: bool = False) -> list[str]:
-        """train.py's arguments for this run (`python train.py <these>` builds `self.config(logdir)`)."""
-        args = [self.preset, "--logdir", logdir, "--seeds", str(self.seeds), "--num-timesteps", str(self.budget())]
+    def train_args(self, logdir: str, resume: bool = False, first_seed: int = 0, seeds: int | None = None) -> list[str]:
+        """train.py's arguments for these seeds (`python train.py <these>` builds `self.config(logdir, ...)`)."""
+        count = self.seeds if seeds is None else seeds
+        args = [self.preset, "--logdir", logdir, "--seeds", str(count), "--num-timesteps", str(self.budget())]
         for dotted, value in self.overrides.items():
-            args += cli_option(dotted, value)
+            if dotted != "seed":
+                args += cli_option(dotted, value)
+        if first_seed or "seed" in self.overrides:
+            args += ["--seed", str(self.config(first_seed=first_seed).seed)]
         return args + (["--resume"] if resume else [])
 
 
@@ -208,11 +221,27 @@ def validate_experiment(experiment: Experiment) -> None:
 # State of a run, read from its folder.
 
 
+def part_name(first: int, count: int) -> str:
+    """Folder of seeds `first` .. `first + count - 1` of a run: "seeds-0-2"."""
+    return f"seeds-{first}-{first + count - 1}"
+
+
+def parse_part(name: str) -> tuple[int, int] | None:
+    """(first seed, count) of a part folder name, None for any other name."""
+    head, _, rest = name.partition("-")
+    first, _, last = rest.partition("-")
+    if head != "seeds" or not first.isdigit() or not last.isdigit() or int(last) < int(first):
+        return None
+    return int(first), int(last) - int(first) + 1
+
+
 @dataclasses.dataclass
-class RunState:
-    experiment: str
-    run: Run
+class PartState:
+    """One train.py logdir of a run: some of its seeds, trained together in one process."""
+
     logdir: str
+    first: int
+    count: int
     status: str
     """missing, partial, trained, done or changed (see the module docstring)."""
     steps: int
@@ -227,8 +256,65 @@ class RunState:
     reason: str = ""
 
     @property
+    def name(self) -> str:
+        return part_name(self.first, self.count)
+
+    @property
+    def seeds(self) -> range:
+        return range(self.first, self.first + self.count)
+
+
+@dataclasses.dataclass
+class RunState:
+    """A run's state, gathered from the parts in its folder (and in the results' record of finished parts)."""
+
+    experiment: str
+    run: Run
+    folder: str
+    """Where its parts are trained: `<runs_dir>/<experiment>/<run>`, or the folder of the run it shares."""
+    status: str
+    """done (every seed of the run in a done part), partial (some progress), trained (at the budget, not
+    evaluated), missing or changed."""
+    steps: int
+    """Env steps per seed reached by every seed not done yet (the budget when done)."""
+    budget: int
+    parts: list = dataclasses.field(default_factory=list)
+    """PartState of each part found, by first seed."""
+    shared: str = ""
+    """"experiment/run" whose folder this run trains in (the first registered run with the same training
+    config), "" for its own."""
+    reason: str = ""
+
+    @property
     def key(self) -> str:
         return f"{self.experiment}/{self.run.name}"
+
+    @property
+    def done_parts(self) -> list:
+        """The done parts, without overlaps, by first seed (every seed done, even beyond `run.seeds`)."""
+        chosen, covered = [], set()
+        for part in sorted((p for p in self.parts if p.status == "done"), key=lambda p: (p.first, -p.count)):
+            if not covered & set(part.seeds):
+                chosen.append(part)
+                covered |= set(part.seeds)
+        return chosen
+
+    @property
+    def seeds_done(self) -> int:
+        return sum(p.count for p in self.done_parts)
+
+    @property
+    def wall_seconds(self) -> float:
+        """Training wall-clock of one process, mean over the done parts (compilation included)."""
+        parts = self.done_parts
+        return sum(p.wall_seconds for p in parts) / len(parts) if parts else 0.0
+
+    @property
+    def rate(self) -> float | None:
+        """Env steps/s per seed, mean over the done parts (parts of different seed counts run at different
+        speeds per seed: `parts` has each)."""
+        rates = [p.rate for p in self.done_parts if p.rate is not None]
+        return sum(rates) / len(rates) if rates else None
 
 
 def checkpoint_steps(logdir: str) -> list[int]:
@@ -261,16 +347,15 @@ def read_timing(logdir: str, seeds: int) -> tuple[float | None, float, float]:
     return rate, startup, sum(w for _, w in chunks.values())
 
 
-def run_state(experiment: Experiment, run: Run, runs_dir: str) -> RunState:
-    """The run's state from the files in `<runs_dir>/<experiment>/<run>/`."""
-    logdir = os.path.join(runs_dir, experiment.name, run.name)
+def part_state(run: Run, logdir: str, first: int, count: int) -> PartState:
+    """The state of seeds `first` .. `first + count - 1` of `run` from the files in `logdir`."""
     budget = run.budget()
     steps = (checkpoint_steps(logdir) or [0])[-1]
-    rate, startup, wall = read_timing(logdir, run.seeds)
-    state = RunState(experiment.name, run, logdir, "missing", steps, budget, rate, startup, wall)
+    rate, startup, wall = read_timing(logdir, count)
+    state = PartState(logdir, first, count, "missing", steps, budget, rate, startup, wall)
     stored = os.path.join(logdir, "config.json")
     if os.path.isfile(stored):
-        reason = config_difference(run.config(logdir), stored)
+        reason = config_difference(run.config(logdir, first_seed=first, seeds=count), stored)
         if reason:
             state.status, state.reason = "changed", reason
             return state
@@ -278,13 +363,105 @@ def run_state(experiment: Experiment, run: Run, runs_dir: str) -> RunState:
         with open(os.path.join(logdir, "eval.json")) as f:
             evaluated = json.load(f).get("env_steps", 0)
         if evaluated >= budget:
-            state.status = "done"
+            state.status, state.steps = "done", max(steps, evaluated)
             return state
     if steps >= budget:
         state.status = "trained"
     elif steps > 0:
         state.status = "partial"
     return state
+
+
+_RECIPES: dict[int, tuple[Run, str]] = {}
+
+
+def recipe(run: Run) -> str:
+    """The run's training config as canonical JSON, seeds and logdir left out: runs with equal recipes train
+    the same thing."""
+    cached = _RECIPES.get(id(run))
+    if cached is None or cached[0] is not run:
+        from agents.config import config_json
+
+        text = json.dumps(config_json(dataclasses.replace(run.config(), seeds=1)), sort_keys=True)
+        cached = _RECIPES[id(run)] = (run, text)
+    return cached[1]
+
+
+def storage(experiment: Experiment, run: Run, registry: dict | None = None) -> tuple[str, str]:
+    """(experiment, run) whose folder trains `run`: the first run of the registry with the same recipe (so an
+    experiment's baseline that another experiment also has trains once), else the run's own."""
+    registry = EXPERIMENTS if registry is None else registry
+    if registry.get(experiment.name) is experiment:
+        key = recipe(run)
+        for exp in registry.values():
+            for other in exp.runs:
+                if other is run or recipe(other) == key:
+                    return exp.name, other.name
+    return experiment.name, run.name
+
+
+def record_folder(record: str, experiment: str, run: str) -> str:
+    """Where a build keeps the finished parts' config.json, eval.json and metrics.csv (in git, with the table)."""
+    return os.path.join(record, experiment, "runs", run)
+
+
+def run_state(experiment: Experiment, run: Run, runs_dir: str, record: str | None = None,
+              registry: dict | None = None) -> RunState:
+    """The run's state from its parts in `<runs_dir>/<experiment>/<run>/seeds-A-B/` (the folder of the run it
+    shares, if any) and, for parts finished elsewhere, in the record under `record` (results/experiments)."""
+    owner = storage(experiment, run, registry)
+    folder = os.path.join(runs_dir, *owner)
+    places = [folder] + ([record_folder(record, *owner)] if record else [])
+    found: dict[tuple[int, int], PartState] = {}
+    for rank, place in enumerate(places):
+        if not os.path.isdir(place):
+            continue
+        for name in sorted(os.listdir(place)):
+            span = parse_part(name)
+            if span is None or not os.path.isdir(os.path.join(place, name)):
+                continue
+            part = part_state(run, os.path.join(place, name), *span)
+            # The training folder wins unless only the record holds the finished part.
+            if span not in found or (part.status == "done" and found[span].status != "done"):
+                found[span] = part
+    parts = sorted(found.values(), key=lambda p: (p.first, p.count))
+    shared = "" if owner == (experiment.name, run.name) else "/".join(owner)
+    state = RunState(experiment.name, run, folder, "missing", 0, run.budget(), parts, shared)
+    needed = set(range(run.seeds))
+    changed = [p for p in parts if p.status == "changed" and needed & set(p.seeds)]
+    if changed:
+        state.status, state.reason = "changed", f"{changed[0].name}: {changed[0].reason}"
+        state.steps = changed[0].steps
+        return state
+    done = {s for p in state.done_parts for s in p.seeds}
+    if needed <= done:
+        state.status, state.steps = "done", state.budget
+        return state
+    reached = [max([p.steps for p in parts if s in p.seeds] or [0]) for s in sorted(needed - done)]
+    state.steps = min(reached)
+    if state.steps >= state.budget:
+        state.status = "trained"
+    elif done or max(reached) > 0:
+        state.status = "partial"
+    return state
+
+
+def pending_parts(state: RunState, max_seeds: int | None = None) -> list[PartState]:
+    """The parts still to train for `state.run`'s seeds: unfinished parts that hold some of them (resumed as
+    they are), then new parts of at most `max_seeds` seeds (None: all the rest in one) for the seeds no part
+    holds yet."""
+    needed = set(range(state.run.seeds))
+    done = {s for p in state.done_parts for s in p.seeds}
+    todo = [p for p in state.parts if p.status in ("partial", "trained", "missing") and (needed - done) & set(p.seeds)]
+    free = sorted(needed - done - {s for p in todo for s in p.seeds})
+    runs: list[list[int]] = []
+    for seed in free:
+        if runs and seed == runs[-1][-1] + 1 and (max_seeds is None or len(runs[-1]) < max_seeds):
+            runs[-1].append(seed)
+        else:
+            runs.append([seed])
+    return todo + [PartState(os.path.join(state.folder, part_name(r[0], len(r))), r[0], len(r), "missing", 0,
+                             state.budget) for r in runs]
 
 
 def config_difference(config, path: str) -> str:
@@ -332,36 +509,57 @@ def millions(steps: float) -> str:
     return f"{steps / 1e6:g}M"
 
 
-def listing(selection, runs_dir: str, out: str) -> str:
-    """Every selected experiment with its runs' states, and the env steps they cost."""
-    lines, total, trained = [], 0, 0
+def describe_state(st: RunState) -> str:
+    """'done', 'partial 2/5 seeds done, 60M/150M', 'changed (...)', with the run it shares."""
+    text = st.status
+    if st.status == "partial":
+        done = f"{st.seeds_done}/{st.run.seeds} seeds done" if st.seeds_done else ""
+        text += " " + ", ".join(x for x in (done, f"{millions(st.steps)}/{millions(st.budget)}" if st.steps else "") if x)
+    if st.reason:
+        text += f" ({st.reason})"
+    return text + (f" [trains in {st.shared}]" if st.shared else "")
+
+
+def listing(selection, runs_dir: str, out: str, registry: dict | None = None) -> str:
+    """Every selected experiment with its runs' states, and the env steps they cost (a folder shared by
+    several runs counted once, with the most seeds any of them needs)."""
+    lines, need, trained = [], {}, {}
     for exp, runs in selection:
-        states = [run_state(exp, r, runs_dir) for r in runs]
+        states = [run_state(exp, r, runs_dir, out, registry) for r in runs]
         counts = {s: sum(st.status == s for st in states) for s in ("done", "trained", "partial", "missing", "changed")}
         summary = ", ".join(f"{n} {s}" for s, n in counts.items() if n)
         lines.append(f"{exp.name}: {exp.title} [{exp.paper_ref}]")
         lines.append(f"  {summary}; table {'built' if table_built(exp, out) else 'not built'}")
         for st in states:
-            cost = st.run.seeds * st.budget
-            total += cost
-            trained += st.run.seeds * min(st.steps, st.budget)
-            status = st.status if st.status != "partial" else f"partial {millions(st.steps)}/{millions(st.budget)}"
-            extra = f" ({st.reason})" if st.reason else ""
-            lines.append(f"  {st.run.name:22s} {st.run.preset:26s} {st.run.seeds} x {millions(st.budget):>6s}  {status}{extra}")
-    lines.append(f"total: {total:,} env steps ({total / 1e9:.2f}B), {trained:,} trained")
+            need[st.folder] = max(need.get(st.folder, 0), st.run.seeds * st.budget)
+            trained[st.folder] = sum(p.count * min(p.steps, p.budget) for p in st.parts if p.status != "changed")
+            lines.append(f"  {st.run.name:22s} {st.run.preset:26s} {st.run.seeds} x {millions(st.budget):>6s}  "
+                         f"{describe_state(st)}")
+    total = sum(need.values())
+    done = sum(min(trained[f], need[f]) for f in need)
+    lines.append(f"total: {total:,} env steps ({total / 1e9:.2f}B), {done:,} trained")
     return "\n".join(lines)
 
 
-def commands(selection, runs_dir: str, everything: bool = False) -> list[str]:
-    """One `python train.py ...` per run not done (every run with `everything`); partial runs get --resume."""
-    lines = []
+def commands(selection, runs_dir: str, everything: bool = False, max_seeds: int | None = None,
+             record: str | None = None, registry: dict | None = None) -> list[str]:
+    """One `python train.py ...` per part still to train (with `everything`, every part of every run, each as a
+    fresh run); unfinished parts get --resume. A part shared by several runs is listed once."""
+    lines, seen = [], set()
     for exp, runs in selection:
         for run in runs:
-            st = run_state(exp, run, runs_dir)
-            if st.status in ("done", "changed") and not everything:
+            st = run_state(exp, run, runs_dir, record, registry)
+            if st.status == "changed" and not everything:
                 continue
-            args = run.train_args(st.logdir, resume=st.status in ("partial", "trained") and not everything)
-            lines.append(shlex.join(["python", "train.py", *args]))
+            if everything:
+                st = dataclasses.replace(st, parts=[])
+            for part in pending_parts(st, max_seeds):
+                if part.logdir in seen:
+                    continue
+                seen.add(part.logdir)
+                args = run.train_args(part.logdir, resume=part.steps > 0 and not everything, first_seed=part.first,
+                                      seeds=part.count)
+                lines.append(shlex.join(["python", "train.py", *args]))
     return lines
 
 
@@ -369,28 +567,43 @@ def commands(selection, runs_dir: str, everything: bool = False) -> list[str]:
 # Training within a time limit.
 
 
-def plan_stop(state: RunState, seconds: float | None, compiled: bool, startup_guess: float = 0.0) -> int | None:
-    """The `stop_after_steps` of the next training call of `state` in `seconds` (None: no limit): 0 to train to
-    the budget, None if there is no time for progress. Without a measured speed: two log intervals."""
-    interval = max(1, state.budget // 50)  # the driver's default log interval
+def plan_stop(part: PartState, seconds: float | None, compiled: bool, startup_guess: float = 0.0,
+              rate_guess: float | None = None) -> int | None:
+    """The `stop_after_steps` of the next training call of `part` in `seconds` (None: no limit): 0 to train to
+    the budget, None if there is no time for progress. Without a measured speed (its own, else `rate_guess`):
+    two log intervals."""
+    interval = max(1, part.budget // 50)  # the driver's default log interval
     if seconds is None:
         return 0
     if seconds <= 0:
         return None
-    if state.rate is None:
-        stop = state.steps + 2 * interval
+    rate = part.rate if part.rate is not None else rate_guess
+    if rate is None:
+        stop = part.steps + 2 * interval
     else:
-        startup = 0.0 if compiled else (state.startup or startup_guess)
-        stop = state.steps + int(state.rate * (seconds - startup))
-        if stop < state.steps + min(interval, state.budget - state.steps):
+        startup = 0.0 if compiled else (part.startup or startup_guess)
+        stop = part.steps + int(rate * (seconds - startup))
+        if stop < part.steps + min(interval, part.budget - part.steps):
             return None
-    return 0 if stop >= state.budget else stop
+    return 0 if stop >= part.budget else stop
+
+
+def speed_guess(state: RunState, part: PartState) -> tuple[float | None, float]:
+    """(env steps/s per seed, startup s) measured on another part of the run with at least as many seeds
+    (seeds trained together run no faster per seed than fewer), or (None, 0)."""
+    measured = [p for p in state.parts if p.rate is not None and p.count >= part.count and p.logdir != part.logdir]
+    if not measured:
+        return None, 0.0
+    slowest = min(measured, key=lambda p: p.rate)
+    return slowest.rate, slowest.startup
 
 
 def train_pending(selection, runs_dir: str, deadline: float | None = None, reserve: float = 0.0,
-                  log=print, learner_cls=None) -> bool:
-    """Trains the selected runs that are not done, in order, resuming partial ones; returns True when every
-    selected run is done, False when the deadline (time.monotonic) or a changed run stopped it."""
+                  log=print, learner_cls=None, max_seeds: int | None = None, record: str | None = None,
+                  registry: dict | None = None) -> bool:
+    """Trains the selected runs that are not done, in order, part by part (at most `max_seeds` seeds per
+    train.py process), resuming unfinished parts; returns True when every selected run is done, False when
+    the deadline (time.monotonic) or a changed run stopped it."""
     from agents import driver
 
     compiled: set[str] = set()
@@ -399,33 +612,36 @@ def train_pending(selection, runs_dir: str, deadline: float | None = None, reser
     for exp, runs in selection:
         for run in runs:
             while True:
-                st = run_state(exp, run, runs_dir)
+                st = run_state(exp, run, runs_dir, record, registry)
                 if st.status == "done":
                     break
                 if st.status == "changed":
-                    log(f"[{st.key}] skipped: {st.reason}; move {st.logdir} away to retrain it")
+                    log(f"[{st.key}] skipped: {st.reason}; move that part away to retrain it")
                     finished = False
                     break
+                part = pending_parts(st, max_seeds)[0]
+                where = f"[{st.key} {part.name}" + (f" in {st.shared}]" if st.shared else "]")
                 seconds = None if deadline is None else deadline - time.monotonic() - reserve
-                stop = plan_stop(st, seconds, st.key in compiled, startup_seen)
+                rate_guess, startup_guess = speed_guess(st, part)
+                stop = plan_stop(part, seconds, part.logdir in compiled, max(startup_seen, startup_guess), rate_guess)
                 if stop is None:
-                    log(f"[{st.key}] time limit: stopped at {st.steps:,} of {st.budget:,} steps; run again to continue")
+                    log(f"{where} time limit: stopped at {part.steps:,} of {part.budget:,} steps; run again to continue")
                     return False
-                resume = st.steps > 0
-                log(f"[{st.key}] {'resuming at ' + format(st.steps, ',') if resume else 'starting'}; "
-                    f"{'to ' + format(stop, ',') if stop else 'to the end'} of {st.budget:,} steps x {run.seeds} seeds")
+                resume = part.steps > 0
+                log(f"{where} {'resuming at ' + format(part.steps, ',') if resume else 'starting'}; "
+                    f"{'to ' + format(stop, ',') if stop else 'to the end'} of {part.budget:,} steps x {part.count} seeds")
                 t0 = time.monotonic()
-                result = driver.train(run.config(st.logdir, resume=resume, stop_after_steps=stop), learner_cls)
-                if st.key not in compiled:
-                    startup_seen = max(startup_seen, run_state(exp, run, runs_dir).startup)
-                compiled.add(st.key)
-                log(f"[{st.key}] {result.status} at {result.env_steps:,} steps after {time.monotonic() - t0:.0f} s")
+                config = run.config(part.logdir, first_seed=part.first, seeds=part.count, resume=resume,
+                                    stop_after_steps=stop)
+                result = driver.train(config, learner_cls)
+                if part.logdir not in compiled:
+                    startup_seen = max(startup_seen, part_state(run, part.logdir, part.first, part.count).startup)
+                compiled.add(part.logdir)
+                log(f"{where} {result.status} at {result.env_steps:,} steps after {time.monotonic() - t0:.0f} s")
                 if result.status == "interrupted":
-                    log(f"[{st.key}] interrupted: checkpoint saved at {result.env_steps:,} steps")
+                    log(f"{where} interrupted: checkpoint saved at {result.env_steps:,} steps")
                     return False
-                if result.status == "done":  # evaluated (eval.json) unless the run sets eval_envs=0
-                    break
-                if result.env_steps <= st.steps:
+                if result.status != "done" and result.env_steps <= part.steps:
                     return False
     return finished
 
@@ -442,20 +658,31 @@ def local_gpus() -> int:
     return sum(line.startswith("GPU ") for line in out.splitlines())
 
 
-def worker_command(key: str, gpu: str, seconds: float | None, runs_dir: str, reserve: float) -> tuple[dict, list[str]]:
+def worker_command(key: str, gpu: str, seconds: float | None, runs_dir: str, reserve: float,
+                   max_seeds: int | None = None, out: str = OUT_DIR) -> tuple[dict, list[str]]:
     """(environment, argv) of the process that trains run `key` on GPU `gpu` within `seconds`."""
     argv = [sys.executable, "-m", "tools.experiments", "run", key, "--no-build", "--runs-dir", runs_dir,
-            "--reserve", f"{reserve:g}"]
+            "--out", out, "--reserve", f"{reserve:g}"]
     if seconds is not None:
         argv += ["--time-limit", f"{int(seconds)}"]
+    if max_seeds is not None:
+        argv += ["--max-seeds", str(max_seeds)]
     return {**os.environ, "CUDA_VISIBLE_DEVICES": gpu}, argv
 
 
-def train_parallel(selection, runs_dir: str, gpus: list[str], deadline: float | None, reserve: float, log=print) -> bool:
+def train_parallel(selection, runs_dir: str, gpus: list[str], deadline: float | None, reserve: float, log=print,
+                   max_seeds: int | None = None, out: str = OUT_DIR) -> bool:
     """Trains the runs not done one per GPU side by side (a subprocess each, CUDA_VISIBLE_DEVICES=gpu); a GPU
-    that finishes takes the next run. Returns True when every run is done."""
-    queue = [f"{exp.name}/{r.name}" for exp, runs in selection for r in runs
-             if run_state(exp, r, runs_dir).status not in ("done", "changed")]
+    that finishes takes the next run. Runs that share a folder go to one worker (the one needing the most
+    seeds), so no two processes train one folder. Returns True when every run is done."""
+    pending: dict[str, RunState] = {}
+    for exp, runs in selection:
+        for r in runs:
+            st = run_state(exp, r, runs_dir, out)
+            if st.status not in ("done", "changed") and (st.folder not in pending or
+                                                         r.seeds > pending[st.folder].run.seeds):
+                pending[st.folder] = st
+    queue = [st.key for st in pending.values()]
     running: dict[str, tuple[subprocess.Popen, str]] = {}
     while queue or running:
         for gpu in [g for g in gpus if g not in running]:
@@ -463,7 +690,7 @@ def train_parallel(selection, runs_dir: str, gpus: list[str], deadline: float | 
             if not queue or (seconds is not None and seconds <= reserve):
                 break
             key = queue.pop(0)
-            env, argv = worker_command(key, gpu, seconds, runs_dir, reserve)
+            env, argv = worker_command(key, gpu, seconds, runs_dir, reserve, max_seeds, out)
             log(f"GPU {gpu}: {key}")
             running[gpu] = (subprocess.Popen(argv, env=env, cwd=ROOT), key)
         for gpu, (proc, key) in list(running.items()):
@@ -473,7 +700,7 @@ def train_parallel(selection, runs_dir: str, gpus: list[str], deadline: float | 
         if deadline is not None and time.monotonic() > deadline - reserve:
             queue.clear()
         time.sleep(2)
-    return all(run_state(exp, r, runs_dir).status == "done" for exp, runs in selection for r in runs)
+    return all(run_state(exp, r, runs_dir, out).status == "done" for exp, runs in selection for r in runs)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -503,6 +730,36 @@ def describe_overrides(run: Run) -> str:
     return ", ".join(f"{k}={'x'.join(map(str, v)) if isinstance(v, (tuple, list)) else v}" for k, v in run.overrides.items())
 
 
+def merged_evaluation(state: RunState) -> dict:
+    """The done parts' eval.json merged: {"env_steps" (the fewest), "eval_envs", "seeds", "per_seed": {metric:
+    [value per seed, by seed]}}."""
+    merged: dict = {"per_seed": {}, "seeds": 0}
+    for part in state.done_parts:
+        with open(os.path.join(part.logdir, "eval.json")) as f:
+            ev = json.load(f)
+        merged["env_steps"] = min(merged.get("env_steps", ev["env_steps"]), ev["env_steps"])
+        merged["eval_envs"] = ev["eval_envs"]
+        merged["seeds"] += part.count
+        for name, values in ev["per_seed"].items():
+            merged["per_seed"].setdefault(name, []).extend(values)
+    return merged
+
+
+def timing_cell(state: RunState, metric: str) -> str:
+    """Wall-clock of one training process (mean over the parts) or env steps/s per seed; parts of different
+    seed counts get one speed each ("563,000 (2 seeds) / 890,000 (1 seed)")."""
+    parts = state.done_parts
+    if metric == "wall_clock":
+        return f"{state.wall_seconds:,.0f}" if parts else ""
+    by_count: dict[int, list[float]] = {}
+    for p in parts:
+        if p.rate is not None:
+            by_count.setdefault(p.count, []).append(p.rate)
+    if len(by_count) == 1:
+        return f"{statistics.mean(next(iter(by_count.values()))):,.0f}"
+    return " / ".join(f"{statistics.mean(r):,.0f} ({n} seed{'s' if n > 1 else ''})" for n, r in sorted(by_count.items()))
+
+
 def build_default(experiment: Experiment, states: list[RunState], out_dir: str) -> list[str]:
     """table.md and table.json (one row per run: the paper's numbers beside ours, mean ± std over seeds of
     the driver's evaluation) and curves.png (training curves from metrics.csv) in `out_dir`."""
@@ -513,18 +770,18 @@ def build_default(experiment: Experiment, states: list[RunState], out_dir: str) 
     for st in states:
         run = st.run
         row = {"run": run.name, "label": run.title, "preset": run.preset, "overrides": run.overrides,
-               "seeds": run.seeds, "num_timesteps": st.budget, "status": st.status, "logdir": st.logdir,
-               "paper": run.paper}
+               "seeds": run.seeds, "num_timesteps": st.budget, "status": st.status, "folder": st.folder,
+               "shared": st.shared, "paper": run.paper}
         cells = [run.title, f"`{run.preset}`" + (f" {describe_overrides(run)}" if run.overrides else "")]
         if st.status == "done":
-            with open(os.path.join(st.logdir, "eval.json")) as f:
-                ev = json.load(f)
-            row.update(env_steps=ev["env_steps"], eval_envs=ev["eval_envs"], wall_seconds=st.wall_seconds,
-                       steps_per_second=st.rate, per_seed={}, mean={})
+            ev = merged_evaluation(st)
+            row.update(env_steps=ev["env_steps"], eval_envs=ev["eval_envs"], seeds_evaluated=ev["seeds"],
+                       wall_seconds=st.wall_seconds, steps_per_second=st.rate, per_seed={}, mean={},
+                       parts=[{"seeds": p.name, "env_steps": p.steps, "wall_seconds": p.wall_seconds,
+                               "steps_per_second_per_seed": p.rate} for p in st.done_parts])
             for m in metrics:
                 if m in TIMING_COLUMNS:
-                    value = st.wall_seconds if m == "wall_clock" else st.rate
-                    cells += ["", f"{value:,.0f}" if value is not None else ""]
+                    cells += ["", timing_cell(st, m)]
                     continue
                 values = ev["per_seed"].get(PAPER_METRICS[m])
                 paper = fmt_metric(m, run.paper[m]) if m in run.paper else ""
@@ -532,7 +789,7 @@ def build_default(experiment: Experiment, states: list[RunState], out_dir: str) 
                 if values is not None:
                     row["per_seed"][m] = values
                     row["mean"][m] = sum(values) / len(values)
-            cells.append(f"{run.seeds} x {ev['eval_envs']}")
+            cells.append(f"{ev['seeds']} x {ev['eval_envs']}")
         else:
             cells += [c for m in metrics for c in ((fmt_metric(m, run.paper[m]) if m in run.paper else ""),
                                                     "")]
@@ -549,8 +806,12 @@ def build_default(experiment: Experiment, states: list[RunState], out_dir: str) 
     lines += ["| " + " | ".join(r[i] for i in keep) + " |" for r in rows]
     budget = ", ".join(f"{st.run.name} {st.run.seeds} x {millions(st.budget)}" for st in states)
     command = f"python -m tools.experiments run {experiment.name}"
+    shared = [f"{st.run.name} trains in {st.shared}" for st in states if st.shared]
     lines += ["", "Ours: the deterministic policy's evaluation at the end of training (the runs' eval.json), mean ± std "
-              "over seeds; rates in %, distances in m.", f"Runs (seeds x env steps): {budget}.", f"Command: `{command}`.",
+              "over seeds; rates in %, distances in m. Each run's config.json, eval.json and metrics.csv per part (the "
+              "seeds trained in one process): `runs/<run>/seeds-<first>-<last>/` beside this table"
+              + (f" ({'; '.join(shared)}: the same training config, trained once)" if shared else "") + ".",
+              f"Runs (seeds x env steps): {budget}.", f"Command: `{command}`.",
               f"Code {code_version()}, built {datetime.date.today().isoformat()}.", ""]
     os.makedirs(out_dir, exist_ok=True)
     written = [os.path.join(out_dir, "table.md"), os.path.join(out_dir, "table.json")]
@@ -573,10 +834,12 @@ def training_figure(experiment: Experiment, states: list[RunState], path: str) -
         return None
     from tools import plots
 
-    logged = {st.run.title: st.logdir for st in states if os.path.isfile(os.path.join(st.logdir, "metrics.csv"))}
+    logged = {st.run.title: [p.logdir for p in st.done_parts if os.path.isfile(os.path.join(p.logdir, "metrics.csv"))]
+              for st in states}
+    logged = {title: logdirs for title, logdirs in logged.items() if logdirs}
     if not experiment.curves or not logged:
         return None
-    present = [m for m in experiment.curves if all(m in plots.read_metrics(d) for d in logged.values())]
+    present = [m for m in experiment.curves if all(m in plots.read_metrics(d) for ds in logged.values() for d in ds)]
     if not present:
         return None
     fig = plots.training_curves(logged, present, path, experiment.title)
@@ -586,15 +849,41 @@ def training_figure(experiment: Experiment, states: list[RunState], path: str) -
     return path
 
 
-def build(selection, runs_dir: str, out: str, complete_only: bool = False, log=print) -> list[str]:
-    """Builds each selected experiment's table and figure into `<out>/<experiment>/` (with `complete_only`,
-    only experiments whose runs are all done); returns the files written."""
+RECORDED_FILES = ("config.json", "eval.json", "metrics.csv")
+"""What a build copies of each finished part into the results (checkpoints stay in the runs folder)."""
+
+
+def record_parts(state: RunState, record: str) -> list[str]:
+    """Copies the files of the run's finished parts into its record folder (`record_folder`), so that the
+    results hold the evidence behind the table and the next checkout sees those parts done."""
+    written = []
+    if state.shared:
+        return written
+    target_dir = record_folder(record, state.experiment, state.run.name)
+    for part in state.done_parts:
+        target = os.path.join(target_dir, part.name)
+        if os.path.abspath(part.logdir) == os.path.abspath(target):
+            continue
+        os.makedirs(target, exist_ok=True)
+        for name in RECORDED_FILES:
+            if os.path.isfile(os.path.join(part.logdir, name)):
+                shutil.copyfile(os.path.join(part.logdir, name), os.path.join(target, name))
+                written.append(os.path.join(target, name))
+    return written
+
+
+def build(selection, runs_dir: str, out: str, complete_only: bool = False, log=print, registry: dict | None = None) -> list[str]:
+    """Builds each selected experiment's table and figure into `<out>/<experiment>/`, after recording its runs'
+    finished parts there (with `complete_only`, only experiments whose runs are all done); returns the files
+    written."""
     written = []
     for exp, _ in selection:
-        states = [run_state(exp, r, runs_dir) for r in exp.runs]
+        states = [run_state(exp, r, runs_dir, out, registry) for r in exp.runs]
         if not any(st.status == "done" for st in states) or (complete_only and any(st.status != "done" for st in states)):
             continue
-        files = (exp.builder or build_default)(exp, states, os.path.join(out, exp.name))
+        files = [f for st in states for f in record_parts(st, out)]
+        states = [run_state(exp, r, runs_dir, out, registry) for r in exp.runs]
+        files += (exp.builder or build_default)(exp, states, os.path.join(out, exp.name))
         for path in files:
             log(f"wrote {path}")
         written += files
@@ -773,13 +1062,17 @@ def main(argv=None) -> int:
     p.add_argument("--gpus", type=int, help="run --parallel: GPUs to use (default: nvidia-smi's count)")
     p.add_argument("--no-build", action="store_true", help="run: train only")
     p.add_argument("--all", action="store_true", help="commands: also the runs done (each as a fresh run)")
+    p.add_argument("--max-seeds", type=int, help="run, commands: seeds trained together in one train.py process "
+                                                 "(default: all of a run's; 1 trains each seed on its own)")
     args = p.parse_args(argv)
+    if args.max_seeds is not None and args.max_seeds < 1:
+        raise ValueError(f"--max-seeds={args.max_seeds} is impossible: allowed is 1 or more (or leave it out).")
     start = time.monotonic()
     selection = select(args.names)
     if args.action == "list":
         print(listing(selection, args.runs_dir, args.out))
     elif args.action == "commands":
-        print("\n".join(commands(selection, args.runs_dir, args.all)))
+        print("\n".join(commands(selection, args.runs_dir, args.all, args.max_seeds, args.out)))
     elif args.action == "build":
         build(selection, args.runs_dir, args.out)
     else:
@@ -789,9 +1082,11 @@ def main(argv=None) -> int:
             gpus = args.gpus or local_gpus()
             if gpus < 1:
                 raise ValueError("--parallel found no GPU: allowed is a host with GPUs (or --gpus N).")
-            finished = train_parallel(selection, args.runs_dir, [str(i) for i in range(gpus)], deadline, reserve)
+            finished = train_parallel(selection, args.runs_dir, [str(i) for i in range(gpus)], deadline, reserve,
+                                      max_seeds=args.max_seeds, out=args.out)
         else:
-            finished = train_pending(selection, args.runs_dir, deadline, reserve)
+            finished = train_pending(selection, args.runs_dir, deadline, reserve, max_seeds=args.max_seeds,
+                                     record=args.out)
         if not args.no_build:
             build(selection, args.runs_dir, args.out, complete_only=True)
         if not finished:

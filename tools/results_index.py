@@ -584,7 +584,7 @@ def index_table(ctx: Context) -> list[list[str]]:
                      "`python -m tools.paper_tables --tables baselines --num-envs 4096 --seeds 5`",
                      ctx.link("baselines/baselines.json")])
     rows.append(["Table \"action space\": precision of absolute vs relative control", PAPER_ACTION_SPACE,
-                 _experiment_ours(ctx, "action-space"), "`python -m tools.experiments run action-space`", ""])
+                 _experiment_ours(ctx, "action-space", precision=True), "`python -m tools.experiments run action-space`", ""])
     ws = {(r["trained"], r["evaluated"]): r["summary"] for r in ctx.json("workspaces/workspace_generalization.json")["rows"]}
     p = PAPER_WORKSPACE[("full", "full-range")]
     rows.append(["Table \"workspace generalization\" (13 pairs), e.g. Full on Full Range",
@@ -624,20 +624,26 @@ def index_table(ctx: Context) -> list[list[str]]:
 # The registered experiments (tools/experiments.py): their budgets, the paper's finding and ours from the
 # table.json each build writes under results/experiments/<name>/.
 
-def _experiment_ours(ctx: Context, name: str) -> str:
+def _experiment_ours(ctx: Context, name: str, precision: bool = False) -> str:
+    """Each row's target-reached rate (mean ± std over seeds), or with `precision` its distance, steps in target
+    and exits from the target (the action-space table's columns), from the experiment's table.json."""
     file = f"experiments/{name}/table.json"
     if not os.path.exists(os.path.join(ctx.results, file)):
         return "not run"
     cells = []
     for row in ctx.json(file)["rows"]:
         values = row.get("per_seed", {}).get("target_reached")
-        if values:
+        if not values:
+            cells.append(f"{row['label']}: not done")
+        elif precision:
+            mean = row["mean"]
+            cells.append(f"{row['label']}: {mean['distance']:.3f} m, {mean['steps_in_target']:.1f}, "
+                         f"{mean['times_left_target']:.2f}")
+        else:
             mean = sum(values) / len(values)
             std = (sum((v - mean) ** 2 for v in values) / len(values)) ** 0.5
-            cells.append(f"{row['label']}: {rate(mean, std) if len(values) > 1 else f'{100 * mean:.1f} %'}")
-        else:
-            cells.append(f"{row['label']}: not done")
-    return "; ".join(cells) + f" reached ({ctx.link(f'experiments/{name}/table.md')})"
+            cells.append(f"{row['label']}: {rate(mean, std) if len(values) > 1 else f'{100 * mean:.1f} %'} reached")
+    return "; ".join(cells) + f" ({ctx.link(f'experiments/{name}/table.md')})"
 
 
 def experiments_table(ctx: Context) -> list[list[str]]:
