@@ -43,7 +43,8 @@ action; relative: the clipped step towards it); random means something else in e
 Compare with the paper's baseline table under absolute control: its numbers are absolute
 control's (results: baselines study). The distance column is each episode's own last 10 steps
 (the paper's definition); the JSON's `distance_collided_as_0` is our reading of the paper's
-evaluator, Brax's: an episode that ended in a collision counts as 0 m.
+evaluator, Brax's: an episode that ended in a collision counts as 0 m; `distance_reached` and
+`steps_in_target_reached` are the precision of the episodes that reached the target only.
 
 Video: `--video PATH` (.mp4 or .gif) renders the first `--video-envs` envs' first episodes (a grid)
 with MuJoCo's offscreen renderer (`envs.render`; headless: EGL or OSMesa, chosen

@@ -278,6 +278,22 @@ def test_baselines_behave_as_in_the_paper(baseline_results):
     assert baseline_results["random"].eval_seeds == baseline_results["standstill"].eval_seeds
 
 
+def test_derived_precision_metrics_by_hand():
+    """Per-episode readings of the final distance, on hand-made episodes: 2 units x 3 episodes."""
+    per_env = {"distance": np.array([[0.004, 0.30, 0.006], [0.002, 0.008, 0.50]]),
+               "steps_in_target": np.array([[90.0, 0.0, 70.0], [100.0, 60.0, 0.0]]),
+               "target_reached": np.array([[1.0, 0.0, 1.0], [1.0, 1.0, 0.0]]),
+               "self_collision": np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 0.0]])}
+    derived = {**evaluation.collided_distances(per_env), **evaluation.reached_precision(per_env)}
+    s = evaluation.summarize({**per_env, **derived})
+    assert s["distance"]["mean"] == pytest.approx(((0.004 + 0.30 + 0.006) / 3 + (0.002 + 0.008 + 0.50) / 3) / 2)
+    assert s["distance_reached"]["mean"] == pytest.approx((0.005 + 0.005) / 2)  # unit means over reached episodes
+    assert s["distance_reached"]["episodes"] == 4
+    assert s["steps_in_target_reached"]["mean"] == pytest.approx((80.0 + 80.0) / 2)
+    assert s["distance_not_collided"]["mean"] == pytest.approx((0.005 + (0.002 + 0.008 + 0.50) / 3) / 2)
+    assert s["distance_collided_as_0"]["mean"] == pytest.approx((0.010 / 3 + 0.510 / 3) / 2)
+
+
 def test_baseline_actions_command_the_right_joint_targets():
     """standstill / pseudo-IK actions invert the env's action mapping in both modes."""
     for action in ("absolute", "relative"):
