@@ -11,8 +11,8 @@ Every option comes from the config dataclasses (`agents.config.TrainConfig`, the
 config and the environment's config), so `--help` lists each with its docstring. The presets are
 in `agents/presets.py`.
 
-Exit codes: 0 done (or stopped by --stop-after-steps), 1 a non-finite learner metric or a failed
-write, 2 bad input (a one-line `error:` message), 130 stopped by Ctrl-C (after its checkpoint).
+Exit codes: 0 done (or stopped by --stop-after-steps / --stop-after-seconds), 1 a non-finite learner
+metric or a failed write, 2 bad input (a one-line `error:` message), 130 stopped by Ctrl-C (after its checkpoint).
 """
 
 from __future__ import annotations
@@ -45,6 +45,8 @@ def main(argv: list[str] | None = None):
     config = parse(sys.argv[1:] if argv is None else argv)
     result = train(config)
     print(f"{result.status} after {result.env_steps:,} env steps; logs and checkpoints in {result.logdir}")
+    if result.status == "stopped":
+        print(f"stopped before num_timesteps: continue with --resume --logdir {result.logdir}")
     if result.note:
         print(result.note)
     if result.eval_metrics:

@@ -72,6 +72,10 @@ class TrainConfig(Generic[EnvConfigT, AlgoConfigT]):
     stop_after_steps: int = 0
     """Checkpoint and stop once this many env steps are done (0 = run to num_timesteps); continue
     later with --resume (for time-limited jobs)."""
+    stop_after_seconds: float = 0.0
+    """Checkpoint and stop before this many seconds from the start (compilation included) have passed:
+    a chunk of updates starts only if it ends in time at the last chunk's speed (0 = no limit). The
+    final evaluation is not counted: keep time for it. Continue later with --resume."""
     eval_envs: int = 4096
     """Environments of the final deterministic evaluation (one episode each; 0 = no evaluation)."""
     eval_seed: int = 1_000_000
@@ -92,7 +96,7 @@ class TrainConfig(Generic[EnvConfigT, AlgoConfigT]):
 
 
 RUN_FIELDS = ("num_timesteps", "devices", "multi_device", "logdir", "resume", "overwrite", "checkpoint_every", "keep_checkpoints",
-              "checkpoint_envs", "log_every", "stop_after_steps", "eval_envs", "eval_seed", "eval_last_steps",
+              "checkpoint_envs", "log_every", "stop_after_steps", "stop_after_seconds", "eval_envs", "eval_seed", "eval_last_steps",
               "tensorboard", "progress")
 """Fields that may differ between a checkpoint's config and a resuming command line."""
 
@@ -125,6 +129,9 @@ def validate(config: TrainConfig) -> None:
                       ("checkpoint_every", 0), ("log_every", 0), ("stop_after_steps", 0), ("eval_envs", 0)):
         if int(getattr(config, name)) < low:
             raise ValueError(f"{name}={getattr(config, name)!r} is invalid: allowed is an integer >= {low}.")
+    if not config.stop_after_seconds >= 0:  # also refuses NaN
+        raise ValueError(f"stop_after_seconds={config.stop_after_seconds!r} is invalid: allowed is a number >= 0 "
+                         "(0 = no limit).")
     if config.multi_device not in MULTI_DEVICE_MODES:
         raise ValueError(f"multi_device={config.multi_device!r} is unknown: allowed are {', '.join(MULTI_DEVICE_MODES)}.")
     if config.matmul_precision not in PRECISIONS:

@@ -78,7 +78,7 @@ class TrainResult:
     """The final seed-batched TrainState (on device)."""
     env_steps: int
     status: str
-    """"done", "stopped" (stop_after_steps) or "interrupted" (Ctrl-C)."""
+    """"done", "stopped" (stop_after_steps or stop_after_seconds) or "interrupted" (Ctrl-C)."""
     logdir: str
     config: TrainConfig
     eval_metrics: dict | None
@@ -102,7 +102,16 @@ def train(config: TrainConfig, learner_cls: type | None = None) -> TrainResult:
         return _train(config, learner_cls)
 
 
+def out_of_time(config: TrainConfig, started: float, per_update: float | None, n: int) -> bool:
+    """True if a chunk of `n` updates at `per_update` seconds each would end past `stop_after_seconds`
+    (counted from `started`, time.perf_counter); the first chunk, of unknown speed, always runs."""
+    if not config.stop_after_seconds or per_update is None:
+        return False
+    return time.perf_counter() - started + n * per_update > config.stop_after_seconds
+
+
 def _train(config: TrainConfig, learner_cls: type | None = None) -> TrainResult:
+    started = time.perf_counter()
     logdir = config.logdir or os.path.join("runs", config.preset or config.env_name,
                                            datetime.datetime.now().strftime("%Y%m%d-%H%M%S"))
     config = dataclasses.replace(config, logdir=logdir)
@@ -138,6 +147,7 @@ def _train(config: TrainConfig, learner_cls: type | None = None) -> TrainResult:
     previous_handler = _install_sigint(interrupted)
     last_saved = start_step
     last_metrics = None
+    per_update = None  # seconds per update of the last chunk (compilation included in the first)
     status = "done"
     try:
         while updates_done < stop_updates:
@@ -145,10 +155,13 @@ def _train(config: TrainConfig, learner_cls: type | None = None) -> TrainResult:
             if config.checkpoint_every:
                 targets.append((updates_done // every(config.checkpoint_every) + 1) * every(config.checkpoint_every))
             n = min(targets) - updates_done
+            if out_of_time(config, started, per_update, n):
+                break
             t0 = time.perf_counter()
             state, metrics = programs.chunk(state, jnp.int32(n))
             metrics = jax.device_get(metrics)
             seconds = time.perf_counter() - t0
+            per_update = seconds / n
             updates_done += n
             step = updates_done * spu
             bad = nonfinite_learner_metrics(metrics)

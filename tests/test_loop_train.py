@@ -98,6 +98,12 @@ def test_resume_reproduces_an_unbroken_run_bit_for_bit(tmp_path):
     assert resumed.status == "done" and resumed.env_steps == SHORT
     for a, b in zip(_full_state(unbroken), _full_state(resumed)):
         np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    # A time limit shorter than one chunk: the first chunk (one log interval) runs, then the run stops in time.
+    timed = driver.train(presets.make_config("point-mass-ppo", logdir=str(tmp_path / "c"), stop_after_seconds=1e-3, **base))
+    assert timed.status == "stopped" and timed.env_steps == 5120
+    resumed = driver.train(presets.make_config("point-mass-ppo", logdir=str(tmp_path / "c"), resume=True, **base))
+    for a, b in zip(_full_state(unbroken), _full_state(resumed)):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
     # The run did change the parameters (the comparison is not vacuous).
     init = driver.programs_for(unbroken.config).init(driver.seed_keys(unbroken.config))
     assert not np.allclose(np.asarray(jax.tree.leaves(init.learner.params)[0]),
@@ -106,6 +112,18 @@ def test_resume_reproduces_an_unbroken_run_bit_for_bit(tmp_path):
     with pytest.raises(ValueError, match="algo.learning_rate"):
         changed = presets.make_config("point-mass-ppo", logdir=str(tmp_path / "b"), resume=True, **base)
         driver.train(dataclasses.replace(changed, algo=dataclasses.replace(changed.algo, learning_rate=1.0)))
+
+
+def test_time_limit_counts_from_the_start_at_the_last_chunk_speed(monkeypatch):
+    config = presets.make_config("point-mass-ppo", stop_after_seconds=100.0)
+    monkeypatch.setattr(driver.time, "perf_counter", lambda: 1000.0 + 60.0)  # 60 s after the start
+    assert not driver.out_of_time(config, 1000.0, None, 50)  # the first chunk: speed unknown, it runs
+    assert not driver.out_of_time(config, 1000.0, 0.8, 50)  # 60 + 40 s: ends at the limit
+    assert driver.out_of_time(config, 1000.0, 0.81, 50)  # 60 + 40.5 s: past it
+    assert not driver.out_of_time(dataclasses.replace(config, stop_after_seconds=0.0), 1000.0, 10.0, 50)  # no limit
+    for bad in (-1.0, float("nan")):
+        with pytest.raises(ValueError, match="stop_after_seconds"):
+            validate(dataclasses.replace(config, stop_after_seconds=bad))
 
 
 def _stored_leaf_names(step_dir: str) -> list[str]:
