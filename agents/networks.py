@@ -23,6 +23,8 @@ ACTIVATIONS: dict[str, Callable[[jax.Array], jax.Array]] = {
     "gelu": nn.gelu,
 }
 KERNEL_INITS = ("lecun_uniform", "orthogonal", "glorot_uniform")
+COMPUTE_DTYPES = {"float32": jnp.float32, "bfloat16": jnp.bfloat16}
+"""Dtypes of the layers' matmuls and activations; parameters and outputs stay float32."""
 
 
 def kernel_init(name: str, scale: float = 1.0):
@@ -46,16 +48,21 @@ class MLP(nn.Module):
     layer_norm: bool = False
     out_scale: float = 1.0
     """Weight scale of the output layer (e.g. 0.01 for a near-uniform initial policy)."""
+    dtype: str = "float32"
+    """Compute dtype (`COMPUTE_DTYPES`): bfloat16 runs the matmuls on bf16 tensor cores; the parameters stay
+    float32 and the output is cast back to float32, so losses and optimiser states are unchanged."""
 
     @nn.compact
     def __call__(self, x: jax.Array) -> jax.Array:
         act = ACTIVATIONS[self.activation]
+        dtype = COMPUTE_DTYPES[self.dtype]
         for i, size in enumerate(self.hidden_sizes):
-            x = nn.Dense(size, kernel_init=kernel_init(self.kernel_init), name=f"hidden_{i}")(x)
+            x = nn.Dense(size, kernel_init=kernel_init(self.kernel_init), dtype=dtype, name=f"hidden_{i}")(x)
             if self.layer_norm:
-                x = nn.LayerNorm(name=f"norm_{i}")(x)
+                x = nn.LayerNorm(dtype=dtype, name=f"norm_{i}")(x)
             x = act(x)
-        return nn.Dense(self.out_size, kernel_init=kernel_init(self.kernel_init, self.out_scale), name="out")(x)
+        out = nn.Dense(self.out_size, kernel_init=kernel_init(self.kernel_init, self.out_scale), dtype=dtype, name="out")(x)
+        return out.astype(jnp.float32)
 
 
 class TwinQ(nn.Module):
@@ -67,12 +74,15 @@ class TwinQ(nn.Module):
     kernel_init: str = "lecun_uniform"
     layer_norm: bool = False
     out_size: int = 1
+    dtype: str = "float32"
+    """Compute dtype of both critics (see `MLP.dtype`)."""
 
     @nn.compact
     def __call__(self, obs: jax.Array, action: jax.Array) -> jax.Array:
         x = jnp.concatenate([obs, action], axis=-1)
         qs = [
-            MLP(self.hidden_sizes, self.out_size, self.activation, self.kernel_init, self.layer_norm, name=f"q{i}")(x)
+            MLP(self.hidden_sizes, self.out_size, self.activation, self.kernel_init, self.layer_norm, dtype=self.dtype,
+                name=f"q{i}")(x)
             for i in range(2)
         ]
         if self.out_size == 1:
@@ -80,9 +90,10 @@ class TwinQ(nn.Module):
         return jnp.stack(qs, axis=-2)
 
 
-def policy_network(action_size: int, hidden_sizes, activation="swish", init="lecun_uniform", layer_norm=False) -> MLP:
+def policy_network(action_size: int, hidden_sizes, activation="swish", init="lecun_uniform", layer_norm=False,
+                   dtype="float32") -> MLP:
     """Outputs 2 * action_size numbers: the mean and the raw scale of a `TanhNormal`."""
-    return MLP(tuple(hidden_sizes), 2 * action_size, activation, init, layer_norm)
+    return MLP(tuple(hidden_sizes), 2 * action_size, activation, init, layer_norm, dtype=dtype)
 
 
 def value_network(hidden_sizes, activation="swish", init="lecun_uniform", layer_norm=False) -> MLP:
@@ -90,8 +101,9 @@ def value_network(hidden_sizes, activation="swish", init="lecun_uniform", layer_
     return MLP(tuple(hidden_sizes), 1, activation, init, layer_norm)
 
 
-def q_network(hidden_sizes, activation="swish", init="lecun_uniform", layer_norm=False, out_size=1) -> TwinQ:
-    return TwinQ(tuple(hidden_sizes), activation, init, layer_norm, out_size)
+def q_network(hidden_sizes, activation="swish", init="lecun_uniform", layer_norm=False, out_size=1,
+              dtype="float32") -> TwinQ:
+    return TwinQ(tuple(hidden_sizes), activation, init, layer_norm, out_size, dtype)
 
 
 def validate_network_fields(hidden_field: str, hidden_sizes, activation: str, init: str, prefix: str = "algo.") -> None:

@@ -94,6 +94,9 @@ class SACConfig:
     """Lowest atom: returns (times reward_scaling) below it are clipped onto it."""
     v_max: float = 10.0
     """Highest atom: returns (times reward_scaling) above it are clipped onto it."""
+    compute_dtype: str = "float32"
+    """Dtype of the policy's and critics' matmuls and activations: float32 or bfloat16 (FastTD3's option for
+    large batches on GPUs with bf16 tensor cores). Parameters, network outputs, losses and Adam stay float32."""
 
     @property
     def env_steps_per_update(self) -> int:
@@ -144,6 +147,7 @@ class SACConfig:
             validation.positive("algo." + name, getattr(self, name), strict=False)
         networks.validate_network_fields("policy_hidden_sizes", self.policy_hidden_sizes, self.activation, self.kernel_init)
         networks.validate_network_fields("q_hidden_sizes", self.q_hidden_sizes, self.activation, self.kernel_init)
+        validation.choice("algo.compute_dtype", self.compute_dtype, tuple(networks.COMPUTE_DTYPES))
 
 
 # ----------------------------------------------------------------------------------------------
@@ -217,9 +221,10 @@ class SAC:
         self.observation_size, self.action_size = observation_size, action_size
         self.rows = c.max_replay_size // c.num_envs
         self.target_entropy = -float(action_size) if c.target_entropy is None else float(c.target_entropy)
-        self.policy_net = networks.policy_network(action_size, c.policy_hidden_sizes, c.activation, c.kernel_init, c.layer_norm)
+        self.policy_net = networks.policy_network(action_size, c.policy_hidden_sizes, c.activation, c.kernel_init, c.layer_norm,
+                                                  c.compute_dtype)
         self.q_net = networks.q_network(c.q_hidden_sizes, c.activation, c.kernel_init, c.layer_norm,
-                                        c.num_atoms if c.distributional else 1)
+                                        c.num_atoms if c.distributional else 1, c.compute_dtype)
         self.support = offpolicy.categorical_support(c.v_min, c.v_max, c.num_atoms) if c.distributional else None
         clip = [optax.clip_by_global_norm(c.max_grad_norm)] if c.max_grad_norm > 0 else []
         # On one flat vector per network: few large GPU kernels per gradient step (see agents/ppo.py).

@@ -5,6 +5,7 @@ of the same environment in the same run, and on 1..N local GPUs at the same per-
     python -m benchmarks.train_throughput --devices 1 2 --out results/throughput/multi_gpu     # scaling
     python -m benchmarks.train_throughput --devices 2 --multi-device gspmd shard_map --skip-env-only
     python -m benchmarks.train_throughput --trace traces/  # + profile: python -m benchmarks.trace_summary traces/1dev
+    python -m benchmarks.train_throughput --preset ur5e-reach-sac-fast --variant compute_dtype=bfloat16  # A/B, same rounds
 
 Training rate: the compiled chunk of `--updates` PPO updates (rollouts, GAE, the preset's epochs of
 minibatch gradient steps), timed after a one-update warm-up that compiles it; env steps per
@@ -22,6 +23,7 @@ the global batch grows with the devices (weak scaling).
 from __future__ import annotations
 
 import argparse
+import ast
 import dataclasses
 import datetime
 import json
@@ -70,6 +72,35 @@ class Training:
             jax.block_until_ready(metrics)
 
 
+def parse_variant(text: str, algo) -> dict:
+    """{field: value} from "compute_dtype=bfloat16,q_hidden_sizes=(256,256,256)" (Python literals, else strings);
+    ValueError naming an unknown field of the preset's algo config."""
+    fields = [f.name for f in dataclasses.fields(algo)]
+    out, parts, depth, current = {}, [], 0, ""
+    for char in text:  # split on the commas outside brackets
+        if char in "([":
+            depth += 1
+        elif char in ")]":
+            depth -= 1
+        if char == "," and depth == 0:
+            parts.append(current)
+            current = ""
+        else:
+            current += char
+    parts.append(current)
+    for part in parts:
+        name, sep, value = part.partition("=")
+        name = name.strip().replace("-", "_")
+        if not sep or name not in fields:
+            raise ValueError(f"--variant {text!r}: {name!r} is not a field of {type(algo).__name__}: allowed are "
+                             f"{', '.join(fields)} (as FIELD=VALUE).")
+        try:
+            out[name] = ast.literal_eval(value.strip())
+        except (ValueError, SyntaxError):
+            out[name] = value.strip()
+    return out
+
+
 def main():
     parser = argparse.ArgumentParser(prog="python -m benchmarks.train_throughput", description=__doc__.split("\n\n")[0])
     parser.add_argument("--preset", default="ur5e-reach-ppo")
@@ -81,6 +112,9 @@ def main():
     parser.add_argument("--multi-device", nargs="+", default=["gspmd"], choices=MULTI_DEVICE_MODES,
                         help="how several devices share the work (TrainConfig.multi_device), each measured")
     parser.add_argument("--skip-env-only", action="store_true")
+    parser.add_argument("--variant", action="append", default=[], metavar="FIELD=VALUE[,FIELD=VALUE]",
+                        help="also time the preset with these algo fields changed, on one device in the same rounds "
+                             "(repeatable), e.g. --variant compute_dtype=bfloat16 --variant 'q_hidden_sizes=(256,256,256)'")
     parser.add_argument("--trace", metavar="DIR", help="also write a profiler trace of one update per setting to DIR/<setting>")
     parser.add_argument("--out", default="results/throughput/train_throughput")
     args = parser.parse_args()
@@ -99,6 +133,12 @@ def main():
                                          num_timesteps=(args.rounds * args.updates + 2) * algo.env_steps_per_update)
             config_lib.validate(config)  # every setting before the first compile
             settings[f"{devices}dev" + (f"-{mode}" if mode else "")] = (devices, mode, config)
+
+    for text in args.variant:
+        algo = dataclasses.replace(base.algo, **parse_variant(text, base.algo))
+        config = dataclasses.replace(base, algo=algo, num_timesteps=(args.rounds * args.updates + 2) * algo.env_steps_per_update)
+        config_lib.validate(config)
+        settings[f"1dev {text}"] = (1, None, config)
 
     env_only = None
     if not args.skip_env_only:
@@ -127,7 +167,7 @@ def main():
     rows = []
     for label, (devices, mode, config) in settings.items():
         algo = config.algo
-        row = {"devices": devices, "multi_device": mode, "num_envs": algo.num_envs,
+        row = {"setting": label, "devices": devices, "multi_device": mode, "num_envs": algo.num_envs,
                "batch_size": algo.batch_size, "seeds": args.seeds, "env_steps_per_update": algo.env_steps_per_update,
                "train_steps_per_s": statistics.median(rates[label]), "train_steps_per_s_rounds": rates[label],
                "compile_and_first_update_s": runs[label].compile_seconds}
@@ -152,10 +192,10 @@ def main():
     lines = [f"# Training throughput: {args.preset} ({meta['device']} x{meta['local_devices']}, {meta['date']})", "",
              f"Command: `{meta['command']}`, jax {meta['jax']}, {args.seeds} seed(s), {args.rounds} rounds of "
              f"{args.updates} timed updates; medians over the rounds (fraction: median of the rounds' ratios).", "",
-             "| devices | multi-device | envs | batch | env steps/update | training env steps/s | env-only env steps/s | fraction | speed-up |",
-             "|---:|---|---:|---:|---:|---:|---:|---:|---:|"]
+             "| setting | devices | multi-device | envs | batch | env steps/update | training env steps/s | env-only env steps/s | fraction | speed-up |",
+             "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|"]
     for r in rows:
-        lines.append(f"| {r['devices']} | {r['multi_device'] or ''} | {r['num_envs']:,} | {r['batch_size']} | {r['env_steps_per_update']:,} | "
+        lines.append(f"| {r['setting']} | {r['devices']} | {r['multi_device'] or ''} | {r['num_envs']:,} | {r['batch_size']} | {r['env_steps_per_update']:,} | "
                      f"{r['train_steps_per_s']:,.0f} | {r.get('env_only_steps_per_s', float('nan')):,.0f} | "
                      f"{r.get('fraction_of_env_only', float('nan')):.1%} | {r['speedup_vs_1_device'] or float('nan'):.2f} |")
     out.with_suffix(".md").write_text("\n".join(lines) + "\n")
