@@ -386,6 +386,25 @@ def test_action_latency_applies_the_previous_action(sensing):
                                first.pipeline_state.qpos, atol=1e-5)
 
 
+def test_latency_starts_each_auto_reset_episode_by_holding_its_own_pose():
+    """In the training stack (episode limit 2, auto-reset), the step after an auto-reset applies the new
+    episode's hold action, not the last action of the episode that ended."""
+    env = envs.make("ur5e-reach-avoid", **SENSING)
+    stack = envs.wrap(env, episode_length=2)
+    reset, step = jax.jit(stack.reset), jax.jit(stack.step)
+    a = 0.5 * jax.random.uniform(jax.random.PRNGKey(13), (N, env.action_size), minval=-1, maxval=1)
+    s1 = step(reset(jax.random.split(jax.random.PRNGKey(12), N)), a)
+    s2 = step(s1, -a)  # the time limit ends every episode here: the state is the next episode's start
+    s3 = step(s2, a)
+    ok = (np.asarray(s1.done) == 0) & (np.asarray(s2.info["truncation"]) == 1) & (np.asarray(s3.done) == 0)
+    assert ok.sum() >= N // 2  # episodes that ended by the time limit and whose next step did not end
+    np.testing.assert_array_equal(np.asarray(s2.info["prev_action"])[ok], 0.0)
+    q_new = np.asarray(s2.pipeline_state.qpos)[ok]
+    np.testing.assert_array_equal(np.asarray(s3.pipeline_state.ctrl)[ok], q_new)  # q + 0.2 * 0: holds the new pose
+    stale = np.clip(q_new - env.config.action_scale * np.asarray(a)[ok], env.robot.joint_low, env.robot.joint_high)
+    assert np.abs(np.asarray(s3.pipeline_state.ctrl)[ok] - stale).max(axis=1).min() > 0.01  # not the old episode's -a
+
+
 def test_render_draws_every_obstacle_at_its_radius():
     from envs import render
 
