@@ -24,7 +24,7 @@ ACTIVATIONS: dict[str, Callable[[jax.Array], jax.Array]] = {
 }
 KERNEL_INITS = ("lecun_uniform", "orthogonal", "glorot_uniform")
 COMPUTE_DTYPES = {"float32": jnp.float32, "bfloat16": jnp.bfloat16}
-"""Dtypes of the layers' matmuls and activations; parameters and outputs stay float32."""
+"""Dtypes of the hidden layers' matmuls and activations; parameters and the output layer stay float32."""
 
 
 def kernel_init(name: str, scale: float = 1.0):
@@ -49,8 +49,8 @@ class MLP(nn.Module):
     out_scale: float = 1.0
     """Weight scale of the output layer (e.g. 0.01 for a near-uniform initial policy)."""
     dtype: str = "float32"
-    """Compute dtype (`COMPUTE_DTYPES`): bfloat16 runs the matmuls on bf16 tensor cores; the parameters stay
-    float32 and the output is cast back to float32, so losses and optimiser states are unchanged."""
+    """Compute dtype of the hidden layers (`COMPUTE_DTYPES`): bfloat16 runs their matmuls on bf16 tensor cores;
+    the parameters and the output layer stay float32, as do the losses and the optimiser state."""
 
     @nn.compact
     def __call__(self, x: jax.Array) -> jax.Array:
@@ -61,8 +61,9 @@ class MLP(nn.Module):
             if self.layer_norm:
                 x = nn.LayerNorm(dtype=dtype, name=f"norm_{i}")(x)
             x = act(x)
-        out = nn.Dense(self.out_size, kernel_init=kernel_init(self.kernel_init, self.out_scale), dtype=dtype, name="out")(x)
-        return out.astype(jnp.float32)
+        # The output layer in float32: values and logits keep full precision for the losses.
+        return nn.Dense(self.out_size, kernel_init=kernel_init(self.kernel_init, self.out_scale), dtype=jnp.float32,
+                        name="out")(x)
 
 
 class TwinQ(nn.Module):

@@ -95,8 +95,9 @@ class SACConfig:
     v_max: float = 10.0
     """Highest atom: returns (times reward_scaling) above it are clipped onto it."""
     compute_dtype: str = "float32"
-    """Dtype of the policy's and critics' matmuls and activations: float32 or bfloat16 (FastTD3's option for
-    large batches on GPUs with bf16 tensor cores). Parameters, network outputs, losses and Adam stay float32."""
+    """Dtype of the policy's and critics' hidden layers: float32 or bfloat16 (FastTD3 trains with bf16 autocast
+    by default; for large batches on GPUs with bf16 tensor cores). Parameters, output layers, losses and Adam stay
+    float32."""
 
     @property
     def env_steps_per_update(self) -> int:
