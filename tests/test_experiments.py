@@ -2,9 +2,11 @@
 it), the state listing and command list on a hand-made runs folder, the time-limit plan, and a two-run toy
 experiment on the point mass that trains, resumes after an interruption and builds its table."""
 
+import dataclasses
 import importlib.util
 import json
 import os
+import shutil
 import time
 
 import pytest
@@ -20,7 +22,8 @@ TOY_RUN = dict(eval_envs=16, tensorboard=False, progress=False)
 TOY = ex.Experiment("toy", "point mass: two sets of seeds", "not in the paper", (
     ex.Run("a", "point-mass-ppo", dict(TOY_RUN), seeds=2, num_timesteps=10_240, paper=dict(target_reached=0.5)),
     ex.Run("b", "point-mass-ppo", {**TOY_RUN, "seed": 10}, seeds=2, num_timesteps=10_240),
-), metrics=("target_reached", "distance", "wall_clock"), curves=("episode/target_reached",))
+), metrics=("target_reached", "distance", "wall_clock"), curves=("episode/target_reached",),
+    cross=(ex.Cross("a", "wide-goal", {"goal_radius": 0.5}),))
 
 
 @pytest.mark.parametrize("name", sorted(ex.EXPERIMENTS))
@@ -59,6 +62,13 @@ def test_bad_overrides_and_names_raise():
         ex.select(["toy/zzz"], {"toy": TOY})
     with pytest.raises(ValueError, match="experiment 'zzz' is unknown"):
         ex.select(["zzz"], {"toy": TOY})
+    ex.validate_experiment(TOY)
+    for cross, message in ((ex.Cross("zzz", "x", {}), "run 'zzz' is not in experiment 'toy'"),
+                           (ex.Cross("a", "x", {"no_field": 1}), "env field 'no_field' is unknown for point-mass"),
+                           (ex.Cross("a", "x", {"goal_radius": -1.0}), "goal_radius"),
+                           (ex.Cross("a", "x/y", {}), "name='x/y' is invalid")):
+        with pytest.raises(ValueError, match=message):
+            ex.validate_experiment(dataclasses.replace(TOY, cross=(cross,)))
     assert ex.cli_option("algo.policy_hidden_sizes", (64, 64)) == ["--algo.policy-hidden-sizes", "64", "64"]
     assert ex.cli_option("tensorboard", False) == ["--no-tensorboard"]
 
@@ -163,20 +173,45 @@ def test_equal_runs_train_once_and_the_record_keeps_finished_parts(tmp_path):
     assert "[trains in first/base]" in text and "total: 40,960 env steps" in text  # 3 x 10,240 once + 1 x 10,240
     lines = ex.commands(selection, runs_dir, registry=registry)
     assert len(lines) == 2 and "seeds-2-2 --seeds 1" in lines[0] and "--seed 2" in lines[0]
+    # On an empty folder the run needing the most seeds plans the shared folder's parts: no seed twice.
+    fresh = ex.commands(selection, str(tmp_path / "none"), max_seeds=2, registry=registry)
+    assert [line.split("--logdir ")[1].split()[0].rsplit("/", 1)[1] for line in fresh] == [
+        "seeds-0-1", "seeds-2-2", "seeds-0-0"]
+    # A part stopped before its first checkpoint (only config.json) is started afresh.
+    _part(other, runs_dir, "second", "other", 0, 1)
+    assert ex.commands(ex.select(["second/other"], registry), runs_dir, registry=registry)[0].endswith("--overwrite")
 
-    # The build records base's finished part in the results; a checkout without the runs folder sees it done.
+    # Building only the sharing experiment records the parts in the owner's record; a checkout without the
+    # runs folder sees them done.
     _part(base, runs_dir, "first", "base", 2, 1, steps=[10240], evaluated=10240)
-    files = ex.build(selection, runs_dir, out, log=lambda s: None, registry=registry)
+    files = ex.build(ex.select(["second"], registry), runs_dir, out, log=lambda s: None, registry=registry)
     record = os.path.join(out, "first", "runs", "base", "seeds-0-1")
     assert os.path.join(record, "eval.json") in files and os.path.join(record, "config.json") in files
-    assert not os.path.exists(os.path.join(out, "second", "runs"))  # shared runs are recorded by their owner
+    assert not os.path.exists(os.path.join(out, "second", "runs"))
     with open(os.path.join(out, "second", "table.json")) as f:
         row = json.load(f)["rows"][0]
     assert row["per_seed"]["target_reached"] == pytest.approx([0.0, 0.1, 0.2]) and row["shared"] == "first/base"
     assert [p["seeds"] for p in row["parts"]] == ["seeds-0-1", "seeds-2-2"]
+    # The owner's own table takes its 2 seeds, not the third one trained for the sharing run.
+    ex.build(ex.select(["first"], registry), runs_dir, out, log=lambda s: None, registry=registry)
+    with open(os.path.join(out, "first", "table.json")) as f:
+        row = json.load(f)["rows"][0]
+    assert row["per_seed"]["target_reached"] == pytest.approx([0.0, 0.1]) and row["seeds_evaluated"] == 2
     elsewhere = str(tmp_path / "empty")
     assert ex.run_state(first, base, elsewhere, out, registry).status == "done"
     assert ex.run_state(first, base, elsewhere, None, registry).status == "missing"
+    # Record against runs folder, same span: the done one counts; an outdated record part whose seeds are done
+    # elsewhere does not block the run.
+    shutil.rmtree(os.path.join(runs_dir, "first", "base", "seeds-0-1", "checkpoints"))
+    os.remove(os.path.join(runs_dir, "first", "base", "seeds-0-1", "eval.json"))
+    os.makedirs(os.path.join(runs_dir, "first", "base", "seeds-0-1", "checkpoints", "5120"))
+    st = ex.run_state(first, base, runs_dir, out, registry)
+    assert st.status == "done" and st.done_parts[0].logdir == record
+    old = ex.apply_overrides(base.config(), {"env.dt": 0.2})
+    _part(base, str(tmp_path / "rec"), "x", "y", 0, 2, evaluated=10240, config=old)
+    os.makedirs(os.path.join(out, "first", "runs", "base", "seeds-0-0"))
+    shutil.copytree(os.path.join(tmp_path, "rec", "x", "y", "seeds-0-1"), os.path.join(out, "first", "runs", "base", "seeds-0-2"))
+    assert ex.run_state(first, base, runs_dir, out, registry).status == "done"  # seeds-0-2 (changed) is covered
 
 
 def test_time_limit_plan():
@@ -188,6 +223,7 @@ def test_time_limit_plan():
     assert ex.plan_stop(st, 10_000.0, compiled=True) == 0  # the rest fits
     fresh = ex.PartState("", 0, 1, "missing", steps=0, budget=100_000)
     assert ex.plan_stop(fresh, 5.0, compiled=False) == 0  # no speed measured: the driver's clock stops it
+    assert ex.plan_stop(fresh, 5.0, compiled=False, startup_guess=20.0) is None  # less than a compilation left
     assert ex.plan_stop(fresh, 0.0, compiled=False) is None
     assert ex.plan_stop(fresh, 50.0, compiled=False, startup_guess=10.0, rate_guess=100.0) == 4000  # a sibling's speed
     run = ex.Run("r", "point-mass-ppo", seeds=3, num_timesteps=100_000)
@@ -218,6 +254,9 @@ def test_toy_experiment_trains_resumes_and_builds(tmp_path):
     logdir = os.path.join(runs_dir, "toy", "b", "seeds-0-1")
     assert driver.train(b.config(logdir, stop_after_steps=5120)).status == "stopped"
     assert ex.run_state(TOY, b, runs_dir).status == "partial"
+    # Run a was killed before its first checkpoint: config.json alone; the runner starts it afresh.
+    a_logdir = os.path.join(runs_dir, "toy", "a", "seeds-0-1")
+    _write(os.path.join(a_logdir, "config.json"), json.dumps(config_json(TOY.runs[0].config(a_logdir))))
 
     log = []
     assert ex.train_pending(selection, runs_dir, log=log.append)
@@ -228,12 +267,29 @@ def test_toy_experiment_trains_resumes_and_builds(tmp_path):
     with open(os.path.join(logdir, "eval.json")) as f:
         assert json.load(f)["env_steps"] == 10_240
 
+    # The cross-evaluation ran once run a was done: its policies on a 0.5 m goal, as eval.py computes it.
+    a_part = ex.run_state(TOY, TOY.runs[0], runs_dir).done_parts[0]
+    with open(os.path.join(a_part.logdir, "cross-wide-goal.json")) as f:
+        cross = json.load(f)
+    from agents import evaluation
+
+    env = dataclasses.replace(TOY.runs[0].config().env, goal_radius=0.5)
+    direct = evaluation.run(evaluation.checkpoint_policy(a_part.logdir), "point-mass", env, num_envs=16,
+                            eval_seeds=(1_000_000,))
+    assert cross["per_seed"]["episode/target_reached"] == pytest.approx([u["metrics"]["target_reached"] for u in direct.units])
+    with open(os.path.join(a_part.logdir, "eval.json")) as f:  # a larger goal is reached at least as often
+        own = json.load(f)["per_seed"]["episode/target_reached"]
+    assert all(c >= o for c, o in zip(cross["per_seed"]["episode/target_reached"], own))
+    assert ex.pending_crosses(TOY, ex.run_state(TOY, TOY.runs[0], runs_dir)) == []
+
     files = ex.build(selection, runs_dir, out, complete_only=True, log=lambda s: None)
+    assert os.path.join(out, "toy", "runs", "a", "seeds-0-1", "cross-wide-goal.json") in files
     assert os.path.join(out, "toy", "table.md") in files
     assert os.path.join(out, "toy", "curves.png") in files or importlib.util.find_spec("matplotlib") is None
     with open(os.path.join(out, "toy", "table.json")) as f:
         data = json.load(f)
-    assert [r["run"] for r in data["rows"]] == ["a", "b"]
+    assert [r["label"] for r in data["rows"]] == ["a", "b", "a on wide-goal"]
+    assert data["rows"][2]["per_seed"]["target_reached"] == pytest.approx(cross["per_seed"]["episode/target_reached"])
     assert len(data["rows"][0]["per_seed"]["target_reached"]) == 2 and data["rows"][0]["wall_seconds"] > 0
     with open(os.path.join(out, "toy", "table.md")) as f:
         text = f.read()

@@ -14,7 +14,9 @@ trained together in one process; `--max-seeds K` caps them, 1 is the fastest on 
 read from them: missing (nothing), partial (some progress), trained (at the budget, not evaluated), done (every
 seed in a part whose `eval.json` the driver wrote at the end), changed (a part's `config.json` differs from the
 registry's run in a field a resume may not change: move that part away to retrain it). Runs of different
-experiments with equal training configs share the folder of the first one registered and train once. Tables
+experiments with equal training configs share the folder of the first one registered and train once; each
+table takes its run's own seeds. An experiment's `cross` evaluations (a run's final policies on another env
+setting) run once the run is done, where its checkpoints are, into `cross-<name>.json` beside `eval.json`. Tables
 and figures go to `<out>/<experiment>/` (`table.md`, `table.json`, `curves.png`), and the build records the
 finished parts' config.json, eval.json and metrics.csv in `<out>/<experiment>/runs/<run>/seeds-*/`, where the
 state is also read, so a checkout without the runs folder knows what is done.
@@ -115,6 +117,23 @@ class Run:
 
 
 @dataclasses.dataclass(frozen=True)
+class Cross:
+    """A cross-evaluation: the final policies of one of the experiment's runs on another env setting (one
+    more table row, as the paper's workspace and obstacle-size tables have)."""
+
+    run: str
+    """The trained run (a name among the experiment's runs)."""
+    name: str
+    """Row name and file name (`cross-<name>.json` beside each part's eval.json): letters, digits, '-', '_', '.'."""
+    env: dict
+    """Env fields replacing the run's own for this evaluation ({"obstacle_motion": "linear"})."""
+    label: str = ""
+    """The row's name in the table ("" = "<run> on <name>")."""
+    paper: dict = dataclasses.field(default_factory=dict)
+    """The paper's numbers for this row (rates in [0, 1], distances in m)."""
+
+
+@dataclasses.dataclass(frozen=True)
 class Experiment:
     """A named set of runs and how their results become a table and a figure."""
 
@@ -135,6 +154,8 @@ class Experiment:
     """Where the runs depart from the paper, and what the table leaves to other tools."""
     builder: Callable | None = None
     """builder(experiment, states, out_dir) -> written files; None: `build_default`."""
+    cross: tuple[Cross, ...] = ()
+    """Cross-evaluations, run where the parts' checkpoints are (after training, or by `build`)."""
 
     def run(self, name: str) -> Run:
         for r in self.runs:
@@ -211,6 +232,15 @@ def validate_experiment(experiment: Experiment) -> None:
         unknown = [m for m in run.paper if m not in PAPER_METRICS]
         if unknown:
             raise ValueError(f"{where}: paper metric {unknown[0]!r} is unknown: allowed are {', '.join(PAPER_METRICS)}.")
+    for cross in experiment.cross:
+        where = f"experiment {experiment.name!r}, cross {cross.name!r}"
+        run = experiment.run(cross.run)
+        if not cross.name or any(not (c.isalnum() or c in "-_.") for c in cross.name):
+            raise ValueError(f"{where}: name={cross.name!r} is invalid: allowed are letters, digits, '-', '_' and '.'.")
+        cross_env(run, cross, where)
+    names = [c.name for c in experiment.cross]
+    if len(set(names)) != len(names):
+        raise ValueError(f"experiment {experiment.name!r} has crosses {names}: allowed are distinct names.")
     for m in experiment.metrics:
         if m not in PAPER_METRICS and m not in TIMING_COLUMNS:
             raise ValueError(f"experiment {experiment.name!r}: metric {m!r} is unknown: allowed are "
@@ -290,18 +320,24 @@ class RunState:
         return f"{self.experiment}/{self.run.name}"
 
     @property
+    def owner(self) -> tuple[str, str]:
+        """(experiment, run) whose folder holds the parts."""
+        return tuple((self.shared or self.key).split("/", 1))
+
+    @property
     def done_parts(self) -> list:
-        """The done parts, without overlaps, by first seed (every seed done, even beyond `run.seeds`)."""
+        """The done parts that hold some of the run's seeds (0 .. run.seeds - 1), without overlaps, by first
+        seed. A part of a shared folder may hold more seeds than this run has: `merged_evaluation` leaves them out."""
         chosen, covered = [], set()
         for part in sorted((p for p in self.parts if p.status == "done"), key=lambda p: (p.first, -p.count)):
-            if not covered & set(part.seeds):
+            if part.first < self.run.seeds and not covered & set(part.seeds):
                 chosen.append(part)
                 covered |= set(part.seeds)
         return chosen
 
     @property
     def seeds_done(self) -> int:
-        return sum(p.count for p in self.done_parts)
+        return sum(1 for p in self.done_parts for s in p.seeds if s < self.run.seeds)
 
     @property
     def wall_seconds(self) -> float:
@@ -428,12 +464,15 @@ def run_state(experiment: Experiment, run: Run, runs_dir: str, record: str | Non
     shared = "" if owner == (experiment.name, run.name) else "/".join(owner)
     state = RunState(experiment.name, run, folder, "missing", 0, run.budget(), parts, shared)
     needed = set(range(run.seeds))
-    changed = [p for p in parts if p.status == "changed" and needed & set(p.seeds)]
+    done = {s for p in state.done_parts for s in p.seeds}
+    # A changed part blocks the run only where no done part holds its seeds (an outdated record part does not).
+    changed = [p for p in parts if p.status == "changed" and (needed - done) & set(p.seeds)]
     if changed:
         state.status, state.reason = "changed", f"{changed[0].name}: {changed[0].reason}"
         state.steps = changed[0].steps
         return state
-    done = {s for p in state.done_parts for s in p.seeds}
+    if os.path.isfile(os.path.join(folder, "config.json")):
+        state.reason = f"{folder} holds a train.py run outside any seeds-* part: ignored (move it into a part to use it)"
     if needed <= done:
         state.status, state.steps = "done", state.budget
         return state
@@ -462,6 +501,55 @@ def pending_parts(state: RunState, max_seeds: int | None = None) -> list[PartSta
             runs.append([seed])
     return todo + [PartState(os.path.join(state.folder, part_name(r[0], len(r))), r[0], len(r), "missing", 0,
                              state.budget) for r in runs]
+
+
+def cross_env(run: Run, cross: Cross, where: str = ""):
+    """The run's env config with the cross-evaluation's fields; ValueError naming an unknown field or a value
+    the env refuses."""
+    import envs
+
+    config = run.config()
+    allowed = [f.name for f in dataclasses.fields(config.env)]
+    unknown = [k for k in cross.env if k not in allowed]
+    if unknown:
+        raise ValueError(f"{where or cross.name}: env field {unknown[0]!r} is unknown for {config.env_name}: allowed "
+                         f"are {', '.join(allowed)}.")
+    env = dataclasses.replace(config.env, **{k: tuple(v) if isinstance(v, list) else v for k, v in cross.env.items()})
+    envs.registry.check_config(config.env_name, env)
+    return env
+
+
+def cross_path(part: PartState, cross: Cross, record_dir: str | None = None) -> str | None:
+    """The part's cross-<name>.json (beside its logdir's eval.json, else in the record), None if not made yet."""
+    for folder in (part.logdir, *([os.path.join(record_dir, part.name)] if record_dir else [])):
+        path = os.path.join(folder, f"cross-{cross.name}.json")
+        if os.path.isfile(path):
+            return path
+    return None
+
+
+def cross_evaluate(run: Run, part: PartState, cross: Cross) -> str:
+    """Evaluates the part's final checkpoint on the cross setting (the run's eval_envs episodes per seed, its
+    eval_seed, deterministic policy) and writes `cross-<name>.json` in eval.json's format; returns the path."""
+    from agents import evaluation
+
+    config = run.config(part.logdir, first_seed=part.first, seeds=part.count)
+    result = evaluation.run(evaluation.checkpoint_policy(part.logdir), config.env_name, cross_env(run, cross),
+                            num_envs=config.eval_envs, eval_seeds=(config.eval_seed,))
+    per_seed = {key: [u["metrics"][name] for u in result.units] for name, key in evaluation.PAPER_METRICS.items()
+                if all(name in u["metrics"] for u in result.units)}
+    path = os.path.join(part.logdir, f"cross-{cross.name}.json")
+    with open(path, "w") as f:
+        json.dump({"env_steps": part.steps, "eval_envs": config.eval_envs, "env": cross.env, "per_seed": per_seed,
+                   "mean": {k: sum(v) / len(v) for k, v in per_seed.items()}}, f, indent=2)
+    return path
+
+
+def pending_crosses(experiment: Experiment, state: RunState, record: str | None = None) -> list[tuple[PartState, Cross]]:
+    """(part, cross) pairs still to evaluate for `state.run`: done parts with their checkpoints at hand."""
+    record_dir = record_folder(record, *state.owner) if record else None
+    return [(part, cross) for cross in experiment.cross if cross.run == state.run.name for part in state.done_parts
+            if cross_path(part, cross, record_dir) is None and checkpoint_steps(part.logdir)]
 
 
 def config_difference(config, path: str) -> str:
@@ -532,9 +620,21 @@ def listing(selection, runs_dir: str, out: str, registry: dict | None = None) ->
         lines.append(f"  {summary}; table {'built' if table_built(exp, out) else 'not built'}")
         for st in states:
             need[st.folder] = max(need.get(st.folder, 0), st.run.seeds * st.budget)
-            trained[st.folder] = sum(p.count * min(p.steps, p.budget) for p in st.parts if p.status != "changed")
+            reached: dict[int, int] = {}  # per seed, the furthest part holding it (parts may overlap)
+            for p in st.parts:
+                if p.status != "changed":
+                    for seed in p.seeds:
+                        reached[seed] = max(reached.get(seed, 0), min(p.steps, p.budget))
+            trained[st.folder] = max(trained.get(st.folder, 0), sum(reached.values()))
             lines.append(f"  {st.run.name:22s} {st.run.preset:26s} {st.run.seeds} x {millions(st.budget):>6s}  "
                          f"{describe_state(st)}")
+        by_name = {st.run.name: st for st in states}
+        for cross in exp.cross:
+            st = by_name.get(cross.run) or run_state(exp, exp.run(cross.run), runs_dir, out, registry)
+            status = ("done" if cross_files(st, cross, out) else "to evaluate (`run` does it where the checkpoints are)"
+                      if st.status == "done" else "after training")
+            setting = ", ".join(f"{k}={v}" for k, v in cross.env.items())
+            lines.append(f"  cross {cross.name}: {cross.run} with {setting}: {status}")
     total = sum(need.values())
     done = sum(min(trained[f], need[f]) for f in need)
     lines.append(f"total: {total:,} env steps ({total / 1e9:.2f}B), {done:,} trained")
@@ -544,22 +644,27 @@ def listing(selection, runs_dir: str, out: str, registry: dict | None = None) ->
 def commands(selection, runs_dir: str, everything: bool = False, max_seeds: int | None = None,
              record: str | None = None, registry: dict | None = None) -> list[str]:
     """One `python train.py ...` per part still to train (with `everything`, every part of every run, each as a
-    fresh run); unfinished parts get --resume. A part shared by several runs is listed once."""
-    lines, seen = [], set()
+    fresh run); unfinished parts get --resume. Runs sharing a folder are planned once, by the one needing the
+    most seeds, so no seed is listed twice."""
+    by_folder: dict[str, RunState] = {}
     for exp, runs in selection:
         for run in runs:
             st = run_state(exp, run, runs_dir, record, registry)
             if st.status == "changed" and not everything:
                 continue
-            if everything:
-                st = dataclasses.replace(st, parts=[])
-            for part in pending_parts(st, max_seeds):
-                if part.logdir in seen:
-                    continue
-                seen.add(part.logdir)
-                args = run.train_args(part.logdir, resume=part.steps > 0 and not everything, first_seed=part.first,
-                                      seeds=part.count)
-                lines.append(shlex.join(["python", "train.py", *args]))
+            # Runs sharing a folder: the one needing the most seeds plans its parts, once.
+            if st.folder not in by_folder or run.seeds > by_folder[st.folder].run.seeds:
+                by_folder[st.folder] = st
+    lines = []
+    for st in by_folder.values():
+        if everything:
+            st = dataclasses.replace(st, parts=[])
+        for part in pending_parts(st, max_seeds):
+            args = st.run.train_args(part.logdir, resume=part.steps > 0 and not everything, first_seed=part.first,
+                                     seeds=part.count)
+            if part.steps == 0 and os.path.isdir(part.logdir) and os.listdir(part.logdir):
+                args.append("--overwrite")  # stopped before its first checkpoint: only logs to replace
+            lines.append(shlex.join(["python", "train.py", *args]))
     return lines
 
 
@@ -571,16 +676,17 @@ def plan_stop(part: PartState, seconds: float | None, compiled: bool, startup_gu
               rate_guess: float | None = None) -> int | None:
     """The `stop_after_steps` of the next training call of `part` in `seconds` (None: no limit): 0 to train to
     the budget, None if there is no time for a log interval of progress at its measured speed (its own, else
-    `rate_guess`). Without a speed: 0, and the driver's own clock (`stop_after_seconds`) stops it in time."""
+    `rate_guess`). Without a speed: 0, and the driver's own clock (`stop_after_seconds`) stops it in time; None if
+    the time left is within the start-up seen (`startup_guess`: compilation of a comparable program)."""
     interval = max(1, part.budget // 50)  # the driver's default log interval
     if seconds is None:
         return 0
     if seconds <= 0:
         return None
     rate = part.rate if part.rate is not None else rate_guess
-    if rate is None:
-        return 0
     startup = 0.0 if compiled else (part.startup or startup_guess)
+    if rate is None:
+        return None if seconds <= startup else 0
     stop = part.steps + int(rate * (seconds - startup))
     if stop < part.steps + min(interval, part.budget - part.steps):
         return None
@@ -613,6 +719,12 @@ def train_pending(selection, runs_dir: str, deadline: float | None = None, reser
             while True:
                 st = run_state(exp, run, runs_dir, record, registry)
                 if st.status == "done":
+                    for part, cross in pending_crosses(exp, st, record):
+                        if deadline is not None and time.monotonic() > deadline - reserve / 2:
+                            log(f"[{st.key} {part.name}] time limit: cross-evaluation {cross.name!r} left for the next call")
+                            return False
+                        log(f"[{st.key} {part.name}] cross-evaluation {cross.name!r}: {cross.env}")
+                        cross_evaluate(run, part, cross)
                     break
                 if st.status == "changed":
                     log(f"[{st.key}] skipped: {st.reason}; move that part away to retrain it")
@@ -627,11 +739,13 @@ def train_pending(selection, runs_dir: str, deadline: float | None = None, reser
                     log(f"{where} time limit: stopped at {part.steps:,} of {part.budget:,} steps; run again to continue")
                     return False
                 resume = part.steps > 0
+                # A part stopped before its first checkpoint (a killed call) left config.json and logs: start it afresh.
+                fresh_over = not resume and os.path.isdir(part.logdir) and bool(os.listdir(part.logdir))
                 log(f"{where} {'resuming at ' + format(part.steps, ',') if resume else 'starting'}; "
                     f"{'to ' + format(stop, ',') if stop else 'to the end'} of {part.budget:,} steps x {part.count} seeds")
                 t0 = time.monotonic()
                 config = run.config(part.logdir, first_seed=part.first, seeds=part.count, resume=resume,
-                                    stop_after_steps=stop, stop_after_seconds=seconds or 0.0)
+                                    overwrite=fresh_over, stop_after_steps=stop, stop_after_seconds=seconds or 0.0)
                 result = driver.train(config, learner_cls)
                 if part.logdir not in compiled:
                     startup_seen = max(startup_seen, part_state(run, part.logdir, part.first, part.count).startup)
@@ -729,19 +843,30 @@ def describe_overrides(run: Run) -> str:
     return ", ".join(f"{k}={'x'.join(map(str, v)) if isinstance(v, (tuple, list)) else v}" for k, v in run.overrides.items())
 
 
-def merged_evaluation(state: RunState) -> dict:
-    """The done parts' eval.json merged: {"env_steps" (the fewest), "eval_envs", "seeds", "per_seed": {metric:
-    [value per seed, by seed]}}."""
+def merged_evaluation(state: RunState, files: list[str] | None = None) -> dict:
+    """The done parts' eval.json (or the given files, one per done part) merged: {"env_steps" (the fewest),
+    "eval_envs", "seeds", "per_seed": {metric: [value per seed, by seed]}}."""
     merged: dict = {"per_seed": {}, "seeds": 0}
-    for part in state.done_parts:
-        with open(os.path.join(part.logdir, "eval.json")) as f:
+    parts = state.done_parts
+    for part, path in zip(parts, files or [os.path.join(p.logdir, "eval.json") for p in parts]):
+        with open(path) as f:
             ev = json.load(f)
+        keep = min(part.count, state.run.seeds - part.first)  # a shared part's seeds beyond this run's are left out
         merged["env_steps"] = min(merged.get("env_steps", ev["env_steps"]), ev["env_steps"])
         merged["eval_envs"] = ev["eval_envs"]
-        merged["seeds"] += part.count
+        merged["seeds"] += keep
         for name, values in ev["per_seed"].items():
-            merged["per_seed"].setdefault(name, []).extend(values)
+            merged["per_seed"].setdefault(name, []).extend(values[:keep])
     return merged
+
+
+def cross_files(state: RunState, cross: Cross, record: str | None) -> list[str] | None:
+    """The cross-<name>.json of each done part of a done run, None while any is missing."""
+    if state.status != "done":
+        return None
+    record_dir = record_folder(record, *state.owner) if record else None
+    files = [cross_path(part, cross, record_dir) for part in state.done_parts]
+    return None if any(f is None for f in files) else files
 
 
 def timing_cell(state: RunState, metric: str) -> str:
@@ -766,36 +891,49 @@ def build_default(experiment: Experiment, states: list[RunState], out_dir: str) 
 
     rows, table = [], []
     metrics = [m for m in experiment.metrics]
+
+    def add(cells: list, row: dict, paper: dict, ev: dict | None, st: RunState, planned: int, timing: bool = True) -> None:
+        """The metric cells (the paper's beside ours) of one row; `ev` None: not done; timing: the run's training
+        wall-clock and speed in the timing columns."""
+        if ev is not None:
+            row.update(env_steps=ev["env_steps"], eval_envs=ev["eval_envs"], seeds_evaluated=ev["seeds"],
+                       per_seed={}, mean={})
+        for m in metrics:
+            if m in TIMING_COLUMNS:
+                cells += ["", timing_cell(st, m) if ev is not None and timing else ""]
+                continue
+            values = ev["per_seed"].get(PAPER_METRICS[m]) if ev is not None else None
+            cells += [fmt_metric(m, paper[m]) if m in paper else "", fmt_metric(m, values) if values is not None else ""]
+            if values is not None:
+                row["per_seed"][m] = values
+                row["mean"][m] = sum(values) / len(values)
+        if ev is None:
+            cells[-1] = f"not done ({row['status']})"
+        cells.append(f"{ev['seeds']} x {ev['eval_envs']}" if ev is not None else f"{planned} x -")
+        rows.append(cells)
+        table.append(row)
+
     for st in states:
         run = st.run
         row = {"run": run.name, "label": run.title, "preset": run.preset, "overrides": run.overrides,
                "seeds": run.seeds, "num_timesteps": st.budget, "status": st.status, "folder": st.folder,
                "shared": st.shared, "paper": run.paper}
-        cells = [run.title, f"`{run.preset}`" + (f" {describe_overrides(run)}" if run.overrides else "")]
         if st.status == "done":
-            ev = merged_evaluation(st)
-            row.update(env_steps=ev["env_steps"], eval_envs=ev["eval_envs"], seeds_evaluated=ev["seeds"],
-                       wall_seconds=st.wall_seconds, steps_per_second=st.rate, per_seed={}, mean={},
+            row.update(wall_seconds=st.wall_seconds, steps_per_second=st.rate,
                        parts=[{"seeds": p.name, "env_steps": p.steps, "wall_seconds": p.wall_seconds,
                                "steps_per_second_per_seed": p.rate} for p in st.done_parts])
-            for m in metrics:
-                if m in TIMING_COLUMNS:
-                    cells += ["", timing_cell(st, m)]
-                    continue
-                values = ev["per_seed"].get(PAPER_METRICS[m])
-                paper = fmt_metric(m, run.paper[m]) if m in run.paper else ""
-                cells += [paper, fmt_metric(m, values) if values is not None else ""]
-                if values is not None:
-                    row["per_seed"][m] = values
-                    row["mean"][m] = sum(values) / len(values)
-            cells.append(f"{ev['seeds']} x {ev['eval_envs']}")
-        else:
-            cells += [c for m in metrics for c in ((fmt_metric(m, run.paper[m]) if m in run.paper else ""),
-                                                    "")]
-            cells[-1] = f"not done ({st.status})"
-            cells.append(f"{run.seeds} x -")
-        rows.append(cells)
-        table.append(row)
+        cells = [run.title, f"`{run.preset}`" + (f" {describe_overrides(run)}" if run.overrides else "")]
+        add(cells, row, run.paper, merged_evaluation(st) if st.status == "done" else None, st, run.seeds)
+    by_name = {st.run.name: st for st in states}
+    for cross in experiment.cross:
+        st = by_name[cross.run]
+        files = cross_files(st, cross, os.path.dirname(out_dir))
+        label = cross.label or f"{st.run.title} on {cross.name}"
+        setting = ", ".join(f"{k}={v}" for k, v in cross.env.items())
+        row = {"run": cross.run, "cross": cross.name, "label": label, "env": cross.env, "paper": cross.paper,
+               "status": "done" if files else "not evaluated" if st.status == "done" else st.status}
+        cells = [label, f"`{cross.run}`'s policies, evaluated with {setting}"]
+        add(cells, row, cross.paper, merged_evaluation(st, files) if files else None, st, st.run.seeds, timing=False)
     head = ["run", "preset and overrides"] + [h for m in metrics for h in (f"paper: {header(m)}", header(m))] + ["seeds x episodes"]
     keep = [i for i in range(len(head)) if not head[i].startswith("paper: ") or any(r[i] for r in rows)]
     lines = [f"# {experiment.title}", "", f"Paper: {experiment.paper_ref}." + (f" {experiment.paper}" if experiment.paper else ""), ""]
@@ -849,22 +987,23 @@ def training_figure(experiment: Experiment, states: list[RunState], path: str) -
 
 
 RECORDED_FILES = ("config.json", "eval.json", "metrics.csv")
-"""What a build copies of each finished part into the results (checkpoints stay in the runs folder)."""
+"""What a build copies of each finished part into the results, with its cross-*.json (checkpoints stay in the
+runs folder)."""
 
 
 def record_parts(state: RunState, record: str) -> list[str]:
-    """Copies the files of the run's finished parts into its record folder (`record_folder`), so that the
-    results hold the evidence behind the table and the next checkout sees those parts done."""
+    """Copies the files of the run's finished parts into the record folder of the run whose folder it trains in
+    (`record_folder`), so that the results hold the evidence behind the table and the next checkout sees those
+    parts done."""
     written = []
-    if state.shared:
-        return written
-    target_dir = record_folder(record, state.experiment, state.run.name)
+    target_dir = record_folder(record, *state.owner)
     for part in state.done_parts:
         target = os.path.join(target_dir, part.name)
         if os.path.abspath(part.logdir) == os.path.abspath(target):
             continue
         os.makedirs(target, exist_ok=True)
-        for name in RECORDED_FILES:
+        crosses = sorted(n for n in os.listdir(part.logdir) if n.startswith("cross-") and n.endswith(".json"))
+        for name in RECORDED_FILES + tuple(crosses):
             if os.path.isfile(os.path.join(part.logdir, name)):
                 shutil.copyfile(os.path.join(part.logdir, name), os.path.join(target, name))
                 written.append(os.path.join(target, name))
@@ -1030,10 +1169,15 @@ register(Experiment(
                        (0.2, (0.796, 0.047, 0.040)), (0.3, (0.781, 0.049, 0.042)))),
     metrics=("target_reached", "self_collision", "obstacle_collision"),
     curves=("episode/target_reached", "episode/obstacle_collision"),
-    paper="Success falls as the obstacle grows (88.0 % at 0.025 m to 78.1 % at 0.3 m); obstacle collisions stay near 4 %.",
-    note="The table's cross-evaluated rows (trained on one radius, evaluated on another, and a reach agent) come from "
-         "`python -m tools.paper_tables --tables obstacle --obstacle 0.025=runs/experiments/obstacle-size-ur5e/r0.025 ... "
-         "reach=<a ur5e-reach run>` once these runs are done; results/obstacle_size has them for the Panda."))
+    cross=tuple(Cross(f"r{r}", f"r{r}-on-0.1", {"obstacle_radius": 0.1}, label=f"{r} m, evaluated on 0.1 m",
+                      paper=dict(zip(("target_reached", "self_collision", "obstacle_collision"), p)))
+                for r, p in ((0.025, (0.844, 0.038, 0.066)), (0.05, (0.842, 0.040, 0.052)), (0.2, (0.814, 0.046, 0.037)),
+                             (0.3, (0.803, 0.047, 0.033)))),
+    paper="Success falls as the obstacle grows (88.0 % at 0.025 m to 78.1 % at 0.3 m); obstacle collisions stay near 4 %; "
+          "agents trained on small obstacles collide more with a 0.1 m one, those trained on large ones less.",
+    note="The table's rows of a reach agent on the reach-avoid env (another env) come from "
+         "`python -m tools.paper_tables --tables obstacle --obstacle 0.1=runs/experiments/obstacle-size-ur5e/r0.1 "
+         "reach=<a ur5e-reach run>`; results/obstacle_size has the whole table for the Panda."))
 
 register(Experiment(
     "sac-reach", "Reach with SAC: Panda, and UR5e from the limited (360 degree) initial range",
@@ -1059,9 +1203,8 @@ register(Experiment(
     metrics=_AVOID_METRICS + ("wall_clock", "steps_per_second"), curves=_AVOID_CURVES,
     paper="PPO (the paper's best): UR5e reach 96.1 %, Panda reach 98.8 %, UR5e reach-avoid 86.8 %, Panda "
           "reach-avoid 95.2 %; the paper's own SAC reached 61.6 % (UR5e reach) and 87.9 % (Panda reach).",
-    note="UR5e reach-avoid trains 200M steps, not its preset's 100M: one seed of the preset was still improving at "
-         "100M (68.6 % reached; results/sac/fast). Train one seed per process (`--max-seeds 1`): five seeds "
-         "vmapped together ran no faster than one after another (results/sac/fast)."))
+    note="UR5e reach-avoid trains 200M steps, not its preset's 100M: a seed of the preset was still improving at "
+         "100M (results/sac/fast). Train one seed per process (`--max-seeds 1`; results/sac/fast says why)."))
 
 register(Experiment(
     "obstacles-moving3", "Reach-avoid with 3 obstacles of random radius (0.05-0.1 m), moving or static, UR5e and Panda",
@@ -1071,13 +1214,15 @@ register(Experiment(
      Run("ur5e-static", "ur5e-reach-avoid-ppo-moving3", {"env.obstacle_motion": "static"}, seeds=3),
      Run("panda-static", "panda-reach-avoid-ppo-moving3", {"env.obstacle_motion": "static"}, seeds=3)),
     metrics=_AVOID_METRICS, curves=_AVOID_CURVES,
+    cross=tuple(Cross(f"{robot}-{trained}", f"{robot}-{trained}-on-{other}", {"obstacle_motion": motion},
+                      label=f"{robot}, trained {trained}, evaluated {other}")
+                for robot in ("ur5e", "panda")
+                for trained, other, motion in (("static", "moving", "linear"), ("moving", "static", "static"))),
     paper="Not in the paper; its one static 0.1 m obstacle: UR5e 86.8 % reached (4.8 % obstacle collisions), "
           "Panda 95.2 % (2.5 %).",
     note="Moving: linear paths at 0.05-0.2 m/s bouncing in the sampling cube, radii and velocities observed "
          "(`agents/presets.py`, MOVING_OBSTACLES_3); static: the same obstacles held still (their velocity "
-         "observation is then 0). The cross-evaluation (static-trained on moving and back) is eval.py on the "
-         "parts' checkpoints: `python eval.py --checkpoint runs/experiments/obstacles-moving3/ur5e-static/seeds-* "
-         "--env.obstacle-motion linear --json FILE` (and `--env.obstacle-motion static` on the moving runs)."))
+         "observation is then 0), so each agent can be evaluated on the other motion (the cross rows)."))
 
 
 # ------------------------------------------------------------------------------------------------
