@@ -3,14 +3,14 @@
 table (markdown and JSON) and figure from the runs' `eval.json` and `metrics.csv`.
 
     python -m tools.experiments list                          # every experiment: runs done, partly trained, missing
-    python -m tools.experiments run action-space --time-limit 540 --max-seeds 1   # train what is missing, then build
+    python -m tools.experiments run action-space --time-limit 540 --max-seeds 2   # train what is missing, then build
     python -m tools.experiments run --parallel --time-limit 3000    # one run per local GPU, side by side
     python -m tools.experiments commands reward               # one train.py command per run (cluster schedulers)
     python -m tools.experiments build                         # tables and figures from what is trained
 
 A name selects an experiment (`action-space`) or one of its runs (`action-space/relative`); none selects all.
 A run trains in parts, `<runs-dir>/<experiment>/<run>/seeds-<first>-<last>/` (a train.py logdir each, the seeds
-trained together in one process; `--max-seeds K` caps them, 1 is the fastest on one GPU), and its state is
+trained together in one process; `--max-seeds K` caps them so that a part fits a time-limited call), and its state is
 read from them: missing (nothing), partial (some progress), trained (at the budget, not evaluated), done (every
 seed in a part whose `eval.json` the driver wrote at the end), changed (a part's `config.json` differs from the
 registry's run in a field a resume may not change: move that part away to retrain it). Runs of different
@@ -871,7 +871,7 @@ def cross_files(state: RunState, cross: Cross, record: str | None) -> list[str] 
 
 def timing_cell(state: RunState, metric: str) -> str:
     """Wall-clock of one training process (mean over the parts) or env steps/s per seed; parts of different
-    seed counts get one speed each ("563,000 (2 seeds) / 890,000 (1 seed)")."""
+    seed counts get one speed each ("500,000 (2 seeds) / 800,000 (1 seed)")."""
     parts = state.done_parts
     if metric == "wall_clock":
         return f"{state.wall_seconds:,.0f}" if parts else ""
@@ -1204,7 +1204,8 @@ register(Experiment(
     paper="PPO (the paper's best): UR5e reach 96.1 %, Panda reach 98.8 %, UR5e reach-avoid 86.8 %, Panda "
           "reach-avoid 95.2 %; the paper's own SAC reached 61.6 % (UR5e reach) and 87.9 % (Panda reach).",
     note="UR5e reach-avoid trains 200M steps, not its preset's 100M: a seed of the preset was still improving at "
-         "100M (results/sac/fast). Train one seed per process (`--max-seeds 1`; results/sac/fast says why)."))
+         "100M (results/sac/fast). `--max-seeds 1`: a 100M-step seed fits a 10 minute call, and vmapped fast-SAC "
+         "seeds ran no faster in all than one (results/sac/fast)."))
 
 register(Experiment(
     "obstacles-moving3", "Reach-avoid with 3 obstacles of random radius (0.05-0.1 m), moving or static, UR5e and Panda",
