@@ -889,6 +889,7 @@ def build_default(experiment: Experiment, states: list[RunState], out_dir: str) 
     the driver's evaluation) and curves.png (training curves from metrics.csv) in `out_dir`."""
     from agents.evaluation import PAPER_METRICS, code_version
 
+    code = code_version()  # before anything is written (a written file would mark the tree modified)
     rows, table = [], []
     metrics = [m for m in experiment.metrics]
 
@@ -949,13 +950,13 @@ def build_default(experiment: Experiment, states: list[RunState], out_dir: str) 
               "seeds trained in one process): `runs/<run>/seeds-<first>-<last>/` beside this table"
               + (f" ({'; '.join(shared)}: the same training config, trained once)" if shared else "") + ".",
               f"Runs (seeds x env steps): {budget}.", f"Command: `{command}`.",
-              f"Code {code_version()}, built {datetime.date.today().isoformat()}.", ""]
+              f"Code {code}, built {datetime.date.today().isoformat()}.", ""]
     os.makedirs(out_dir, exist_ok=True)
     written = [os.path.join(out_dir, "table.md"), os.path.join(out_dir, "table.json")]
     with open(written[0], "w") as f:
         f.write("\n".join(lines))
     data = {"experiment": experiment.name, "title": experiment.title, "paper_ref": experiment.paper_ref,
-            "paper": experiment.paper, "command": command, "code": code_version(),
+            "paper": experiment.paper, "command": command, "code": code,
             "date": datetime.date.today().isoformat(), "rows": table}
     with open(written[1], "w") as f:
         json.dump(data, f, indent=2)
