@@ -6,6 +6,7 @@ step takes ~20 s on a 2-core CPU.
 """
 
 import dataclasses
+import os
 import re
 
 import jax
@@ -72,6 +73,35 @@ def test_jit_vmap_determinism_and_sizes(compiled, name):
     assert jax.tree.structure(after) == jax.tree.structure(state)
     assert np.isfinite(after.obs).all() and np.isfinite(after.reward).all()
     assert not np.allclose(after.obs, state.obs)
+
+
+GOLDEN = os.path.join(os.path.dirname(__file__), "golden_default_rollouts.npz")
+"""Stored rollouts of the default envs (see the test below); `UPDATE_GOLDEN=1 pytest tests/test_envs.py -k golden`
+rewrites the entries of the backend in use, for an intended change of the defaults only."""
+
+
+@pytest.mark.parametrize("name", ARM_ENVS)
+def test_default_envs_reproduce_their_golden_rollout(compiled, name):
+    """The default envs (the paper's options) reproduce a stored rollout: 4 envs of seed 0 through the training
+    stack, 3 steps of fixed random actions; observations, rewards and joint positions. Options added later (more
+    obstacles, noise, latency, backends) must leave the defaults as they were."""
+    c = compiled(name)
+    state = c.start(seed=0)
+    got = {"obs0": state.obs}
+    for t in range(1, 4):
+        actions = jax.random.uniform(jax.random.PRNGKey(100 + t), (N, c.env.action_size), minval=-1, maxval=1)
+        state = c.step(state, actions)
+        got.update({f"obs{t}": state.obs, f"reward{t}": state.reward, f"qpos{t}": state.pipeline_state.qpos})
+    prefix = f"{c.env.backend}/{name}/"
+    stored = dict(np.load(GOLDEN)) if os.path.exists(GOLDEN) else {}
+    if os.environ.get("UPDATE_GOLDEN"):
+        stored.update({prefix + k: np.asarray(v) for k, v in got.items()})
+        np.savez(GOLDEN, **stored)
+        pytest.skip(f"rewrote {prefix}* in {GOLDEN}")
+    if not any(k.startswith(prefix) for k in stored):
+        pytest.skip(f"no golden rollout for {prefix} (backend {c.env.backend}): UPDATE_GOLDEN=1 writes one")
+    for key, value in got.items():
+        np.testing.assert_allclose(np.asarray(value), stored[prefix + key], atol=1e-4, err_msg=prefix + key)
 
 
 @pytest.mark.parametrize("name", ["ur5e-reach", "panda-reach"])
