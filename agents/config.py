@@ -74,8 +74,9 @@ class TrainConfig(Generic[EnvConfigT, AlgoConfigT]):
     later with --resume (for time-limited jobs)."""
     stop_after_seconds: float = 0.0
     """Checkpoint and stop before this many seconds from the start (compilation included) have passed:
-    a chunk of updates starts only if it ends in time at the last chunk's speed (0 = no limit). The
-    final evaluation is not counted: keep time for it. Continue later with --resume."""
+    a chunk of updates starts only if it ends in time at the last chunk's speed (0 = no limit; the
+    first chunk's time includes compilation, so the second is judged conservatively). The final
+    evaluation is not counted: keep time for it. Continue later with --resume."""
     eval_envs: int = 4096
     """Environments of the final deterministic evaluation (one episode each; 0 = no evaluation)."""
     eval_seed: int = 1_000_000
