@@ -134,6 +134,12 @@ def test_listing_and_commands_on_a_hand_made_runs_folder(tmp_path):
         "--num-timesteps 10240 --eval-envs 16 --no-tensorboard --no-progress --seed 20"]
     fresh = ex.commands([(exp, list(exp.runs))], runs_dir, everything=True, max_seeds=1)
     assert len(fresh) == 6 and all("--resume" not in line for line in fresh)  # a and b as 2 x 1 seed, c, d
+    # `run` records the finished parts of an experiment whose table cannot be built yet.
+    recorded = ex.record([(exp, list(exp.runs))], runs_dir, out)
+    assert sorted(os.path.relpath(p, out) for p in recorded) == [
+        os.path.join("toy", "runs", r, part, f) for r, part in (("a", "seeds-0-1"), ("b", "seeds-0-0"))
+        for f in ("config.json", "eval.json")]
+    assert not ex.table_built(exp, out)
 
 
 def test_pending_parts_split_the_missing_seeds():

@@ -1011,6 +1011,13 @@ def record_parts(state: RunState, record: str) -> list[str]:
     return written
 
 
+def record(selection, runs_dir: str, out: str, registry: dict | None = None) -> list[str]:
+    """Records the finished parts of every selected run (`record_parts`), built table or not: what a GPU call
+    brings back is `out`."""
+    return [path for exp, runs in selection for r in runs
+            for path in record_parts(run_state(exp, r, runs_dir, out, registry), out)]
+
+
 def build(selection, runs_dir: str, out: str, complete_only: bool = False, log=print, registry: dict | None = None) -> list[str]:
     """Builds each selected experiment's table and figure into `<out>/<experiment>/`, after recording its runs'
     finished parts there (with `complete_only`, only experiments whose runs are all done); returns the files
@@ -1242,7 +1249,7 @@ def main(argv=None) -> int:
                                                   "(default: 10 %% of --time-limit, at least 30)")
     p.add_argument("--parallel", action="store_true", help="run: one run per local GPU, side by side (subprocesses)")
     p.add_argument("--gpus", type=int, help="run --parallel: GPUs to use (default: nvidia-smi's count)")
-    p.add_argument("--no-build", action="store_true", help="run: train only")
+    p.add_argument("--no-build", action="store_true", help="run: train only (no record of finished parts, no tables)")
     p.add_argument("--all", action="store_true", help="commands: also the runs done (each as a fresh run)")
     p.add_argument("--max-seeds", type=int, help="run, commands: seeds trained together in one train.py process "
                                                  "(default: all of a run's; 1 trains each seed on its own)")
@@ -1270,6 +1277,8 @@ def main(argv=None) -> int:
             finished = train_pending(selection, args.runs_dir, deadline, reserve, max_seeds=args.max_seeds,
                                      record=args.out)
         if not args.no_build:
+            for path in record(selection, args.runs_dir, args.out):
+                print(f"recorded {path}")
             build(selection, args.runs_dir, args.out, complete_only=True)
         if not finished:
             print("not finished: `python -m tools.experiments run` again continues.")
