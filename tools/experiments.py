@@ -37,6 +37,7 @@ import argparse
 import csv
 import dataclasses
 import datetime
+import functools
 import json
 import math
 import os
@@ -884,12 +885,12 @@ def timing_cell(state: RunState, metric: str) -> str:
     return " / ".join(f"{statistics.mean(r):,.0f} ({n} seed{'s' if n > 1 else ''})" for n, r in sorted(by_count.items()))
 
 
-def build_default(experiment: Experiment, states: list[RunState], out_dir: str) -> list[str]:
+def build_default(experiment: Experiment, states: list[RunState], out_dir: str, code: str | None = None) -> list[str]:
     """table.md and table.json (one row per run: the paper's numbers beside ours, mean ± std over seeds of
     the driver's evaluation) and curves.png (training curves from metrics.csv) in `out_dir`."""
     from agents.evaluation import PAPER_METRICS, code_version
 
-    code = code_version()  # before anything is written (a written file would mark the tree modified)
+    code = code or code_version()  # before anything is written (a written file would mark the tree modified)
     rows, table = [], []
     metrics = [m for m in experiment.metrics]
 
@@ -1022,14 +1023,17 @@ def build(selection, runs_dir: str, out: str, complete_only: bool = False, log=p
     """Builds each selected experiment's table and figure into `<out>/<experiment>/`, after recording its runs'
     finished parts there (with `complete_only`, only experiments whose runs are all done); returns the files
     written."""
-    written = []
+    from agents.evaluation import code_version
+
+    written, code = [], code_version()  # once: the first table written would mark the tree modified
     for exp, _ in selection:
         states = [run_state(exp, r, runs_dir, out, registry) for r in exp.runs]
         if not any(st.status == "done" for st in states) or (complete_only and any(st.status != "done" for st in states)):
             continue
         files = [f for st in states for f in record_parts(st, out)]
         states = [run_state(exp, r, runs_dir, out, registry) for r in exp.runs]
-        files += (exp.builder or build_default)(exp, states, os.path.join(out, exp.name))
+        builder = exp.builder or functools.partial(build_default, code=code)
+        files += builder(exp, states, os.path.join(out, exp.name))
         for path in files:
             log(f"wrote {path}")
         written += files
