@@ -133,6 +133,11 @@ class Cross:
     paper: dict = dataclasses.field(default_factory=dict)
     """The paper's numbers for this row (rates in [0, 1], distances in m)."""
 
+    @property
+    def setting(self) -> str:
+        """"obstacle_motion=linear, ...": the env fields it changes, for listings and tables."""
+        return ", ".join(f"{k}={v}" for k, v in self.env.items())
+
 
 @dataclasses.dataclass(frozen=True)
 class Experiment:
@@ -450,7 +455,7 @@ def run_state(experiment: Experiment, run: Run, runs_dir: str, record: str | Non
     folder = os.path.join(runs_dir, *owner)
     places = [folder] + ([record_folder(record, *owner)] if record else [])
     found: dict[tuple[int, int], PartState] = {}
-    for rank, place in enumerate(places):
+    for place in places:
         if not os.path.isdir(place):
             continue
         for name in sorted(os.listdir(place)):
@@ -634,8 +639,7 @@ def listing(selection, runs_dir: str, out: str, registry: dict | None = None) ->
             st = by_name.get(cross.run) or run_state(exp, exp.run(cross.run), runs_dir, out, registry)
             status = ("done" if cross_files(st, cross, out) else "to evaluate (`run` does it where the checkpoints are)"
                       if st.status == "done" else "after training")
-            setting = ", ".join(f"{k}={v}" for k, v in cross.env.items())
-            lines.append(f"  cross {cross.name}: {cross.run} with {setting}: {status}")
+            lines.append(f"  cross {cross.name}: {cross.run} with {cross.setting}: {status}")
     total = sum(need.values())
     done = sum(min(trained[f], need[f]) for f in need)
     lines.append(f"total: {total:,} env steps ({total / 1e9:.2f}B), {done:,} trained")
@@ -931,10 +935,9 @@ def build_default(experiment: Experiment, states: list[RunState], out_dir: str, 
         st = by_name[cross.run]
         files = cross_files(st, cross, os.path.dirname(out_dir))
         label = cross.label or f"{st.run.title} on {cross.name}"
-        setting = ", ".join(f"{k}={v}" for k, v in cross.env.items())
         row = {"run": cross.run, "cross": cross.name, "label": label, "env": cross.env, "paper": cross.paper,
                "status": "done" if files else "not evaluated" if st.status == "done" else st.status}
-        cells = [label, f"`{cross.run}`'s policies, evaluated with {setting}"]
+        cells = [label, f"`{cross.run}`'s policies, evaluated with {cross.setting}"]
         add(cells, row, cross.paper, merged_evaluation(st, files) if files else None, st, st.run.seeds, timing=False)
     head = ["run", "preset and overrides"] + [h for m in metrics for h in (f"paper: {header(m)}", header(m))] + ["seeds x episodes"]
     keep = [i for i in range(len(head)) if not head[i].startswith("paper: ") or any(r[i] for r in rows)]
