@@ -44,11 +44,12 @@ SAC_PAPER = SACConfig(grad_updates_per_step=8)
 
 # Fast SAC for thousands of envs (FastTD3 / FastSAC's recipe, agents/sac.py): 4,096 envs, batch 16,384, 4 gradient
 # steps per vector step, 3-step returns, a categorical critic, LayerNorm, tau 0.1, a small initial temperature; wider
-# critics learned faster per env step on UR5e reach (results/sac/fast).
+# critics learned faster per env step on UR5e reach, and bfloat16 hidden layers train them 1.4x faster to the same
+# success there (results/sac/fast).
 SAC_FAST = SACConfig(num_envs=4096, batch_size=16_384, learning_rate=3e-4, discount=0.97, reward_scaling=1.0, tau=0.1,
                      min_replay_size=4096 * 8, max_replay_size=4096 * 512, grad_updates_per_step=4, init_alpha=0.01,
                      layer_norm=True, n_step=3, distributional=True, num_atoms=101, v_min=-10.0, v_max=40.0,
-                     max_grad_norm=0.0, q_hidden_sizes=(512, 512, 256))
+                     max_grad_norm=0.0, q_hidden_sizes=(512, 512, 256), compute_dtype="bfloat16")
 # Reach-avoid's semi-sparse reward is larger per step: a wider support.
 SAC_FAST_REACH_AVOID = dataclasses.replace(SAC_FAST, v_min=-20.0, v_max=120.0)
 # The buffer is left out of checkpoints (checkpoint_envs=False): saving and resuming take seconds and a resume
@@ -79,9 +80,10 @@ PPO_PROBE = PPOConfig(num_envs=64, batch_size=64, num_minibatches=8, unroll_leng
                       learning_rate=3e-3, value_hidden_sizes=(64, 64), **_PROBE_NETS)
 SAC_PROBE = SACConfig(num_envs=16, batch_size=256, learning_rate=1e-3, reward_scaling=1.0, min_replay_size=1024,
                       max_replay_size=32_000, grad_updates_per_step=4, q_hidden_sizes=(64, 64), **_PROBE_NETS)
+# float32 here: bfloat16 matmuls pay off on GPUs, and the probe runs in the CPU tests.
 SAC_FAST_PROBE = dataclasses.replace(SAC_FAST, num_envs=64, batch_size=512, learning_rate=1e-3, min_replay_size=1024,
                                      max_replay_size=64 * 500, grad_updates_per_step=2, v_min=-5.0, v_max=25.0,
-                                     q_hidden_sizes=(64, 64), **_PROBE_NETS)
+                                     q_hidden_sizes=(64, 64), compute_dtype="float32", **_PROBE_NETS)
 
 PRESETS: dict[str, Preset] = {
     "point-mass-ppo": Preset("probe task, PPO (checks the learner in seconds)", "point-mass", PPO_PROBE,
