@@ -3,7 +3,7 @@
     python train.py point-mass-ppo
     python train.py point-mass-ppo --seeds 5 --num-timesteps 300000 --env.goal-radius 0.05
     python train.py ur5e-reach-ppo --algo.learning-rate 3e-4 --logdir runs/lr3e-4
-    python train.py ur5e-reach-ppo --logdir runs/lr3e-4 --resume          # continue a run
+    python train.py ur5e-reach-ppo --logdir runs/lr3e-4 --resume          # continue a run, with its stored options
     python train.py ur5e-reach-ppo --logdir runs/lr3e-4 --overwrite       # delete that run, start afresh
     python train.py point-mass-sac --help                                 # every option
 
@@ -17,9 +17,11 @@ metric or a failed write, 2 bad input (a one-line `error:` message), 130 stopped
 
 from __future__ import annotations
 
+import json
+import os
 import sys
 
-from agents.config import TrainConfig, validate
+from agents.config import TrainConfig, adopt_saved_config, config_from_json, validate
 from agents.driver import NonFiniteLossError, train
 from agents.logger import summary_lines
 from agents.presets import PRESETS, make_config
@@ -38,7 +40,25 @@ def parse(argv: list[str]) -> TrainConfig:
     config = tyro.cli(cls, default=config, args=argv[1:], prog=f"train.py {argv[0]}",
                       description=PRESETS[argv[0]].description)
     validate(config)
+    saved_path = os.path.join(config.logdir, "config.json")
+    if config.resume and os.path.isfile(saved_path):
+        with open(saved_path) as f:
+            saved = config_from_json(json.load(f))
+        config = adopt_saved_config(config, saved, explicit_fields(argv[1:]))
+        validate(config)
     return config
+
+
+def explicit_fields(args: list[str]) -> set[str]:
+    """Dotted config field names that command-line options set: "--algo.learning-rate 3e-4" gives
+    "algo.learning_rate", "--no-progress" gives "progress"."""
+    names = set()
+    for arg in args:
+        if arg.startswith("--") and len(arg) > 2:
+            *path, last = arg[2:].split("=", 1)[0].split(".")
+            last = last[3:] if last.startswith("no-") else last
+            names.add(".".join(path + [last]).replace("-", "_"))
+    return names
 
 
 def main(argv: list[str] | None = None):
@@ -46,7 +66,8 @@ def main(argv: list[str] | None = None):
     result = train(config)
     print(f"{result.status} after {result.env_steps:,} env steps; logs and checkpoints in {result.logdir}")
     if result.status == "stopped":
-        print(f"stopped before num_timesteps: continue with --resume --logdir {result.logdir}")
+        print(f"stopped before num_timesteps: continue with `python train.py {config.preset} --resume --logdir "
+              f"{result.logdir}`")
     if result.note:
         print(result.note)
     if result.eval_metrics:
@@ -74,7 +95,8 @@ def cli(argv: list[str] | None = None) -> int:
         print(f"error: {error}", file=sys.stderr)
         return 1
     if result.status == "interrupted":
-        print(f"interrupted: continue with --resume --logdir {result.logdir}", file=sys.stderr)
+        print(f"interrupted: continue with `python train.py {result.config.preset} --resume --logdir {result.logdir}`",
+              file=sys.stderr)
         return INTERRUPTED
     return 0
 

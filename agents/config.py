@@ -53,7 +53,8 @@ class TrainConfig(Generic[EnvConfigT, AlgoConfigT]):
     logdir: str = ""
     """Output directory ("" = runs/<preset>/<date-time>)."""
     resume: bool = False
-    """Continue from the newest intact checkpoint in logdir (with the config stored there)."""
+    """Continue from the newest intact checkpoint in logdir, with the config stored there: train.py takes
+    the options not typed from it; a typed option must equal the stored one, except the run-control ones."""
     overwrite: bool = False
     """Start afresh in a logdir that holds an earlier run, removing that run's files first (checkpoints,
     config.json, metrics.csv, eval.json, tb/). Without it (or --resume) such a logdir is refused."""
@@ -195,6 +196,27 @@ def config_from_json(data: dict) -> TrainConfig:
     data["env"] = dataclass_from_dict(env_cls, data["env"])
     data["algo"] = dataclass_from_dict(algo_cls, data["algo"])
     return dataclass_from_dict(TrainConfig, data)
+
+
+def adopt_saved_config(config: TrainConfig, saved: TrainConfig, explicit: set[str]) -> TrainConfig:
+    """`config` with every field the command line did not set (`explicit`: dotted names such as
+    "algo.learning_rate") taken from the run being resumed, so that `--resume` needs only the options
+    that change; the run-control fields other than num_timesteps stay the command line's.
+    Unchanged if the saved run used another algorithm or env config class (merge_resume_config refuses it)."""
+    if type(config.env) is not type(saved.env) or type(config.algo) is not type(saved.algo):
+        return config
+    changes = {}
+    for field in dataclasses.fields(TrainConfig):
+        name = field.name
+        if name in explicit or (name in RUN_FIELDS and name != "num_timesteps"):
+            continue
+        mine, theirs = getattr(config, name), getattr(saved, name)
+        if dataclasses.is_dataclass(mine):
+            keep = {sub.name: getattr(mine, sub.name) for sub in dataclasses.fields(mine) if f"{name}.{sub.name}" in explicit}
+            changes[name] = dataclasses.replace(theirs, **keep)
+        else:
+            changes[name] = theirs
+    return dataclasses.replace(config, **changes)
 
 
 def merge_resume_config(config: TrainConfig, saved: TrainConfig, done_steps: int = 0) -> TrainConfig:

@@ -18,7 +18,7 @@ import pytest
 import train as train_cli
 from agents import driver, presets
 from agents.checkpoint import Checkpointer
-from agents.config import merge_resume_config
+from agents.config import config_json, merge_resume_config
 from agents.ppo import PPO
 
 SHORT = 30_720  # 6 updates of the PPO probe preset (the program of tests/test_loop_train.py)
@@ -85,6 +85,38 @@ def test_resume_of_a_missing_directory_creates_nothing(tmp_path, no_compile):
     with pytest.raises(ValueError, match=r"resume=True but logdir=.* holds no checkpoint"):
         driver.train(_config(tmp_path / "missing", resume=True))
     assert not (tmp_path / "missing").exists()
+
+
+def test_explicit_fields_names_the_typed_options():
+    args = ["--algo.learning-rate", "3e-4", "--no-progress", "--env.goal-radius=0.05", "--seeds", "2",
+            "--algo.target-entropy", "-3"]
+    assert train_cli.explicit_fields(args) == {"algo.learning_rate", "progress", "env.goal_radius", "seeds",
+                                               "algo.target_entropy"}
+
+
+def test_resume_takes_the_untyped_options_from_the_stored_run(tmp_path, no_compile):
+    # A run trained with a changed learning rate, goal radius and length: resuming it with the preset alone
+    # continues it with those values (before, the preset's own values were refused as differing).
+    base = presets.make_config("point-mass-ppo", logdir=str(tmp_path))
+    stored = dataclasses.replace(base, num_timesteps=40960, seeds=2,
+                                 algo=dataclasses.replace(base.algo, learning_rate=1e-2),
+                                 env=dataclasses.replace(base.env, goal_radius=0.07))
+    (tmp_path / "config.json").write_text(json.dumps(config_json(stored)))
+    resumed = train_cli.parse(["point-mass-ppo", "--logdir", str(tmp_path), "--resume", "--no-progress"])
+    assert (resumed.algo.learning_rate, resumed.env.goal_radius, resumed.num_timesteps, resumed.seeds) == (1e-2, 0.07, 40960, 2)
+    assert resumed.progress is False and resumed.resume is True  # run-control options stay the command line's
+    assert merge_resume_config(resumed, stored, done_steps=20480) == resumed
+    # A typed option is kept, so that the driver refuses it when it differs from the stored run ...
+    typed = train_cli.parse(["point-mass-ppo", "--logdir", str(tmp_path), "--resume", "--algo.learning-rate", "0.003"])
+    assert typed.algo.learning_rate == 0.003 and typed.env.goal_radius == 0.07
+    with pytest.raises(ValueError, match=r"algo.learning_rate=0.003 differs from the checkpoint's 0.01"):
+        merge_resume_config(typed, stored, done_steps=20480)
+    # ... except num_timesteps, which a resume may raise.
+    longer = train_cli.parse(["point-mass-ppo", "--logdir", str(tmp_path), "--resume", "--num-timesteps", "61440"])
+    assert longer.num_timesteps == 61440 and longer.algo.learning_rate == 1e-2
+    # Another preset's run is left to the driver's refusal.
+    sac = train_cli.parse(["point-mass-sac", "--logdir", str(tmp_path), "--resume"])
+    assert sac.algo_name == "sac"
 
 
 def test_resume_with_fewer_timesteps_than_done_is_refused_and_a_change_is_noted(earlier_run, no_compile):
