@@ -241,6 +241,30 @@ def test_time_limit_plan():
     assert ex.speed_guess(state, ex.PartState("x", 0, 3, "missing", 0, 100_000)) == (None, 0.0)
 
 
+def test_whole_parts_prediction():
+    part = ex.PartState("", 0, 2, "partial", steps=20_000, budget=100_000, rate=400.0, startup=30.0)
+    assert ex.seconds_to_finish(part, compiled=False) == 30.0 + 80_000 / 400.0
+    assert ex.seconds_to_finish(part, compiled=True) == 200.0
+    fresh = ex.PartState("", 2, 2, "missing", steps=0, budget=100_000)
+    assert ex.seconds_to_finish(fresh, compiled=False) is None  # no speed: it cannot be promised
+    assert ex.seconds_to_finish(fresh, compiled=False, startup_guess=45.0, rate_guess=500.0) == 245.0
+
+
+def test_whole_parts_leaves_a_part_that_cannot_finish(tmp_path):
+    runs_dir = str(tmp_path / "runs")
+    b = TOY.runs[1]
+    logdir = os.path.join(runs_dir, "toy", "b", "seeds-0-1")
+    assert driver.train(b.config(logdir, stop_after_steps=5120)).status == "stopped"
+    before = ex.checkpoint_steps(logdir)
+    selection = ex.select(["toy/b"], {"toy": TOY})
+    log = []
+    # 1 s left after the reserve cannot finish the remaining 5,120 steps with a compilation first.
+    assert not ex.train_pending(selection, runs_dir, deadline=time.monotonic() + 31.0, reserve=30.0, log=log.append,
+                                whole_parts=True)
+    assert any("[toy/b seeds-0-1] left for a later call: it needs ~" in line for line in log), log
+    assert ex.checkpoint_steps(logdir) == before == [5120]
+
+
 def test_parallel_worker_commands(monkeypatch):
     monkeypatch.setenv("CUDA_VISIBLE_DEVICES", "0,1,2")
     assert ex.local_gpus() == 3
@@ -249,6 +273,8 @@ def test_parallel_worker_commands(monkeypatch):
     assert argv[1:] == ["-m", "tools.experiments", "run", "action-space/relative", "--no-build", "--runs-dir",
                         "runs/experiments", "--out", "results/experiments", "--reserve", "53", "--time-limit", "530",
                         "--max-seeds", "1"]
+    _, argv = ex.worker_command("action-space/relative", "0", None, "runs/experiments", 30.0, whole_parts=True)
+    assert argv[-1] == "--whole-parts" and "--time-limit" not in argv
 
 
 def test_toy_experiment_trains_resumes_and_builds(tmp_path):

@@ -25,7 +25,9 @@ state is also read, so a checkout without the runs folder knows what is done.
 training call gets the time left less the `--reserve` kept for the last checkpoint, the evaluation and exit as
 its `stop_after_seconds` (the driver starts a chunk of updates only if it ends in time), and a part is not
 started when its measured speed (its `metrics.csv`, or another part's of at least as many seeds) leaves no time
-for one log interval. The next call resumes where this one stopped.
+for one log interval. The next call resumes where this one stopped. A part stopped half way resumes only where
+its checkpoints are: for the last call on a machine that will not keep `runs/`, `--whole-parts` trains only the
+parts predicted to finish in the time left and leaves the others untouched.
 
 This module imports only the standard library at the top, so the results index can read the registry
 cheaply; configs, training and plots import jax on use.
@@ -698,6 +700,17 @@ def plan_stop(part: PartState, seconds: float | None, compiled: bool, startup_gu
     return 0 if stop >= part.budget else stop
 
 
+def seconds_to_finish(part: PartState, compiled: bool, startup_guess: float = 0.0,
+                      rate_guess: float | None = None) -> float | None:
+    """Predicted seconds to train `part` from its checkpoint to its budget (startup included unless `compiled`),
+    at its own measured speed per seed, else `rate_guess`; None without a speed."""
+    rate = part.rate if part.rate is not None else rate_guess
+    if not rate:
+        return None
+    startup = 0.0 if compiled else (part.startup or startup_guess)
+    return startup + (part.budget - part.steps) / rate
+
+
 def speed_guess(state: RunState, part: PartState) -> tuple[float | None, float]:
     """(env steps/s per seed, startup s) measured on another part of the run with at least as many seeds
     (seeds trained together run no faster per seed than fewer), or (None, 0)."""
@@ -710,10 +723,13 @@ def speed_guess(state: RunState, part: PartState) -> tuple[float | None, float]:
 
 def train_pending(selection, runs_dir: str, deadline: float | None = None, reserve: float = 0.0,
                   log=print, learner_cls=None, max_seeds: int | None = None, record: str | None = None,
-                  registry: dict | None = None) -> bool:
+                  registry: dict | None = None, whole_parts: bool = False) -> bool:
     """Trains the selected runs that are not done, in order, part by part (at most `max_seeds` seeds per
     train.py process), resuming unfinished parts; returns True when every selected run is done, False when
-    the deadline (time.monotonic) or a changed run stopped it."""
+    the deadline (time.monotonic) or a changed run stopped it. `whole_parts`: with a deadline, a part is
+    trained only if it is predicted to reach its budget in time (`seconds_to_finish`); the others, and parts
+    of unknown speed, are left for later and the next run is tried. For a machine that will not outlive the
+    call, where a part stopped half way would be lost."""
     from agents import driver
 
     compiled: set[str] = set()
@@ -739,6 +755,14 @@ def train_pending(selection, runs_dir: str, deadline: float | None = None, reser
                 where = f"[{st.key} {part.name}" + (f" in {st.shared}]" if st.shared else "]")
                 seconds = None if deadline is None else deadline - time.monotonic() - reserve
                 rate_guess, startup_guess = speed_guess(st, part)
+                if whole_parts and seconds is not None:
+                    need = seconds_to_finish(part, part.logdir in compiled, max(startup_seen, startup_guess), rate_guess)
+                    if need is None or need > seconds:
+                        log(f"{where} left for a later call: it needs "
+                            f"{'an unknown time (no speed measured)' if need is None else f'~{need:.0f} s'} to finish, "
+                            f"{max(0.0, seconds):.0f} s are left")
+                        finished = False
+                        break
                 stop = plan_stop(part, seconds, part.logdir in compiled, max(startup_seen, startup_guess), rate_guess)
                 if stop is None:
                     log(f"{where} time limit: stopped at {part.steps:,} of {part.budget:,} steps; run again to continue")
@@ -777,7 +801,7 @@ def local_gpus() -> int:
 
 
 def worker_command(key: str, gpu: str, seconds: float | None, runs_dir: str, reserve: float,
-                   max_seeds: int | None = None, out: str = OUT_DIR) -> tuple[dict, list[str]]:
+                   max_seeds: int | None = None, out: str = OUT_DIR, whole_parts: bool = False) -> tuple[dict, list[str]]:
     """(environment, argv) of the process that trains run `key` on GPU `gpu` within `seconds`."""
     argv = [sys.executable, "-m", "tools.experiments", "run", key, "--no-build", "--runs-dir", runs_dir,
             "--out", out, "--reserve", f"{reserve:g}"]
@@ -785,11 +809,13 @@ def worker_command(key: str, gpu: str, seconds: float | None, runs_dir: str, res
         argv += ["--time-limit", f"{int(seconds)}"]
     if max_seeds is not None:
         argv += ["--max-seeds", str(max_seeds)]
+    if whole_parts:
+        argv += ["--whole-parts"]
     return {**os.environ, "CUDA_VISIBLE_DEVICES": gpu}, argv
 
 
 def train_parallel(selection, runs_dir: str, gpus: list[str], deadline: float | None, reserve: float, log=print,
-                   max_seeds: int | None = None, out: str = OUT_DIR) -> bool:
+                   max_seeds: int | None = None, out: str = OUT_DIR, whole_parts: bool = False) -> bool:
     """Trains the runs not done one per GPU side by side (a subprocess each, CUDA_VISIBLE_DEVICES=gpu); a GPU
     that finishes takes the next run. Runs that share a folder go to one worker (the one needing the most
     seeds), so no two processes train one folder. Returns True when every run is done."""
@@ -808,7 +834,7 @@ def train_parallel(selection, runs_dir: str, gpus: list[str], deadline: float | 
             if not queue or (seconds is not None and seconds <= reserve):
                 break
             key = queue.pop(0)
-            env, argv = worker_command(key, gpu, seconds, runs_dir, reserve, max_seeds, out)
+            env, argv = worker_command(key, gpu, seconds, runs_dir, reserve, max_seeds, out, whole_parts)
             log(f"GPU {gpu}: {key}")
             running[gpu] = (subprocess.Popen(argv, env=env, cwd=ROOT), key)
         for gpu, (proc, key) in list(running.items()):
@@ -1274,6 +1300,8 @@ def main(argv=None) -> int:
     p.add_argument("--all", action="store_true", help="commands: also the runs done (each as a fresh run)")
     p.add_argument("--max-seeds", type=int, help="run, commands: seeds trained together in one train.py process "
                                                  "(default: all of a run's; 1 trains each seed on its own)")
+    p.add_argument("--whole-parts", action="store_true", help="run --time-limit: train only the parts predicted to "
+                   "finish in time (measured speeds), for a last call on a machine that will not keep its runs/")
     args = p.parse_args(argv)
     if args.max_seeds is not None and args.max_seeds < 1:
         raise ValueError(f"--max-seeds={args.max_seeds} is impossible: allowed is 1 or more (or leave it out).")
@@ -1293,10 +1321,10 @@ def main(argv=None) -> int:
             if gpus < 1:
                 raise ValueError("--parallel found no GPU: allowed is a host with GPUs (or --gpus N).")
             finished = train_parallel(selection, args.runs_dir, [str(i) for i in range(gpus)], deadline, reserve,
-                                      max_seeds=args.max_seeds, out=args.out)
+                                      max_seeds=args.max_seeds, out=args.out, whole_parts=args.whole_parts)
         else:
             finished = train_pending(selection, args.runs_dir, deadline, reserve, max_seeds=args.max_seeds,
-                                     record=args.out)
+                                     record=args.out, whole_parts=args.whole_parts)
         if not args.no_build:
             for path in record(selection, args.runs_dir, args.out):
                 print(f"recorded {path}")
