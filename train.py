@@ -42,8 +42,12 @@ def parse(argv: list[str]) -> TrainConfig:
     validate(config)
     saved_path = os.path.join(config.logdir, "config.json")
     if config.resume and os.path.isfile(saved_path):
-        with open(saved_path) as f:
-            saved = config_from_json(json.load(f))
+        try:
+            with open(saved_path) as f:
+                saved = config_from_json(json.load(f))
+        except (ValueError, KeyError, TypeError) as error:
+            raise ValueError(f"resume=True but {saved_path} cannot be read as a run's config ({error!r}): allowed is "
+                             "the config.json that train.py wrote (or --overwrite to start afresh).") from error
         config = adopt_saved_config(config, saved, explicit_fields(argv[1:]))
         validate(config)
     return config
@@ -55,7 +59,7 @@ def explicit_fields(args: list[str]) -> set[str]:
     names = set()
     for arg in args:
         if arg.startswith("--") and len(arg) > 2:
-            *path, last = arg[2:].split("=", 1)[0].split(".")
+            *path, last = arg[2:].split("=", 1)[0].replace("_", "-").split(".")  # tyro takes both spellings
             last = last[3:] if last.startswith("no-") else last
             names.add(".".join(path + [last]).replace("-", "_"))
     return names

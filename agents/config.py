@@ -54,7 +54,8 @@ class TrainConfig(Generic[EnvConfigT, AlgoConfigT]):
     """Output directory ("" = runs/<preset>/<date-time>)."""
     resume: bool = False
     """Continue from the newest intact checkpoint in logdir, with the config stored there: train.py takes
-    the options not typed from it; a typed option must equal the stored one, except the run-control ones."""
+    the options not typed from it (but the call's own: logdir, stop_after_*, devices, progress); a typed option
+    must equal the stored one, except the run-control ones (num_timesteps may grow)."""
     overwrite: bool = False
     """Start afresh in a logdir that holds an earlier run, removing that run's files first (checkpoints,
     config.json, metrics.csv, eval.json, tb/). Without it (or --resume) such a logdir is refused."""
@@ -198,17 +199,24 @@ def config_from_json(data: dict) -> TrainConfig:
     return dataclass_from_dict(TrainConfig, data)
 
 
+PER_CALL_FIELDS = ("logdir", "resume", "overwrite", "stop_after_steps", "stop_after_seconds", "devices", "multi_device",
+                   "progress")
+"""Fields that belong to one train.py call: a resume takes them from the command line, the others from the run."""
+
+
 def adopt_saved_config(config: TrainConfig, saved: TrainConfig, explicit: set[str]) -> TrainConfig:
     """`config` with every field the command line did not set (`explicit`: dotted names such as
-    "algo.learning_rate") taken from the run being resumed, so that `--resume` needs only the options
-    that change; the run-control fields other than num_timesteps stay the command line's.
-    Unchanged if the saved run used another algorithm or env config class (merge_resume_config refuses it)."""
+    "algo.learning_rate") taken from the run being resumed, except the `PER_CALL_FIELDS`, so that `--resume`
+    needs only the options that change. ValueError if the run was trained from another preset."""
+    if saved.preset and config.preset != saved.preset:
+        raise ValueError(f"preset={config.preset!r} differs from the resumed run's {saved.preset!r}: allowed on "
+                         f"--resume is the run's own preset, {saved.preset!r}.")
     if type(config.env) is not type(saved.env) or type(config.algo) is not type(saved.algo):
-        return config
+        return config  # merge_resume_config names the difference
     changes = {}
     for field in dataclasses.fields(TrainConfig):
         name = field.name
-        if name in explicit or (name in RUN_FIELDS and name != "num_timesteps"):
+        if name in explicit or name in PER_CALL_FIELDS or name == "preset":
             continue
         mine, theirs = getattr(config, name), getattr(saved, name)
         if dataclasses.is_dataclass(mine):

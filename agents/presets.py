@@ -44,7 +44,7 @@ SAC_PAPER = SACConfig(grad_updates_per_step=8)
 
 # Fast SAC for thousands of envs (FastTD3 / FastSAC's recipe, agents/sac.py): 4,096 envs, batch 16,384, 4 gradient
 # steps per vector step, 3-step returns, a categorical critic, LayerNorm, tau 0.1, a small initial temperature; wider
-# critics learned faster per env step on UR5e reach, and bfloat16 hidden layers train them 1.4x faster to the same
+# critics learned faster per env step on UR5e reach, and bfloat16 hidden layers train them faster to the same
 # success there (results/sac/fast).
 SAC_FAST = SACConfig(num_envs=4096, batch_size=16_384, learning_rate=3e-4, discount=0.97, reward_scaling=1.0, tau=0.1,
                      min_replay_size=4096 * 8, max_replay_size=4096 * 512, grad_updates_per_step=4, init_alpha=0.01,

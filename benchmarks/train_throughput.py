@@ -5,7 +5,7 @@ of the same environment in the same run, and on 1..N local GPUs at the same per-
     python -m benchmarks.train_throughput --devices 1 2 --out results/throughput/multi_gpu     # scaling
     python -m benchmarks.train_throughput --devices 2 --multi-device gspmd shard_map --skip-env-only
     python -m benchmarks.train_throughput --trace traces/  # + profile: python -m benchmarks.trace_summary traces/1dev
-    python -m benchmarks.train_throughput --preset ur5e-reach-sac-fast --variant compute_dtype=bfloat16  # A/B, same rounds
+    python -m benchmarks.train_throughput --preset ur5e-reach-sac-fast --variant compute_dtype=float32  # A/B, same rounds
 
 Training rate: the compiled chunk of `--updates` PPO updates (rollouts, GAE, the preset's epochs of
 minibatch gradient steps), timed after a one-update warm-up that compiles it; env steps per

@@ -27,6 +27,6 @@ def test_full_step_moves_match_a_plain_mujoco_loop():
                 mujoco.mj_step(model, data)
             expected.append(np.abs(data.qpos - before))
         np.testing.assert_allclose(moves[i], np.array(expected), atol=2e-4)
-    # The servo covers a sixth of a 0.3 rad step per env step (time constant ~0.23 s against 0.04 s): the cap
-    # that keeps the arm from arriving sooner.
+    # The servo's time constant, (kv + damping) / kp, is several env steps long: a joint covers only a fraction
+    # of each commanded step.
     assert np.all(moves[:, -1] > 0.1 * config.action_scale) and np.all(moves[:, -1] < 0.25 * config.action_scale)

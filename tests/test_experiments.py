@@ -263,6 +263,16 @@ def test_whole_parts_leaves_a_part_that_cannot_finish(tmp_path):
                                 whole_parts=True)
     assert any("[toy/b seeds-0-1] left for a later call: it needs ~" in line for line in log), log
     assert ex.checkpoint_steps(logdir) == before == [5120]
+    # With time to spare, run a (never started: no speed measured) is left and run b is finished.
+    log.clear()
+    both = ex.select(None, {"toy": TOY})
+    assert not ex.train_pending(both, runs_dir, deadline=time.monotonic() + 600.0, reserve=30.0, log=log.append,
+                                whole_parts=True)
+    assert any("[toy/a seeds-0-1] left for a later call: it needs an unknown time" in line for line in log), log
+    assert ex.run_state(TOY, TOY.runs[0], runs_dir).status == "missing"
+    assert ex.run_state(TOY, b, runs_dir).status == "done"
+    with pytest.raises(ValueError, match=r"--whole-parts without --time-limit"):
+        ex.main(["run", "toy", "--whole-parts"])
 
 
 def test_parallel_worker_commands(monkeypatch):

@@ -89,22 +89,23 @@ def test_resume_of_a_missing_directory_creates_nothing(tmp_path, no_compile):
 
 def test_explicit_fields_names_the_typed_options():
     args = ["--algo.learning-rate", "3e-4", "--no-progress", "--env.goal-radius=0.05", "--seeds", "2",
-            "--algo.target-entropy", "-3"]
+            "--algo.target-entropy", "-3", "--algo.no_layer_norm", "--env.observation", "joint_pos", "ee_pos"]
     assert train_cli.explicit_fields(args) == {"algo.learning_rate", "progress", "env.goal_radius", "seeds",
-                                               "algo.target_entropy"}
+                                               "algo.target_entropy", "algo.layer_norm", "env.observation"}
 
 
 def test_resume_takes_the_untyped_options_from_the_stored_run(tmp_path, no_compile):
     # A run trained with a changed learning rate, goal radius and length: resuming it with the preset alone
     # continues it with those values (before, the preset's own values were refused as differing).
     base = presets.make_config("point-mass-ppo", logdir=str(tmp_path))
-    stored = dataclasses.replace(base, num_timesteps=40960, seeds=2,
-                                 algo=dataclasses.replace(base.algo, learning_rate=1e-2),
+    stored = dataclasses.replace(base, num_timesteps=40960, seeds=2, log_every=5120, tensorboard=False,
+                                 stop_after_steps=20480, algo=dataclasses.replace(base.algo, learning_rate=1e-2),
                                  env=dataclasses.replace(base.env, goal_radius=0.07))
     (tmp_path / "config.json").write_text(json.dumps(config_json(stored)))
     resumed = train_cli.parse(["point-mass-ppo", "--logdir", str(tmp_path), "--resume", "--no-progress"])
     assert (resumed.algo.learning_rate, resumed.env.goal_radius, resumed.num_timesteps, resumed.seeds) == (1e-2, 0.07, 40960, 2)
-    assert resumed.progress is False and resumed.resume is True  # run-control options stay the command line's
+    assert (resumed.log_every, resumed.tensorboard) == (5120, False)  # the run's logging ...
+    assert (resumed.progress, resumed.resume, resumed.stop_after_steps) == (False, True, 0)  # ... this call's own
     assert merge_resume_config(resumed, stored, done_steps=20480) == resumed
     # A typed option is kept, so that the driver refuses it when it differs from the stored run ...
     typed = train_cli.parse(["point-mass-ppo", "--logdir", str(tmp_path), "--resume", "--algo.learning-rate", "0.003"])
@@ -114,9 +115,13 @@ def test_resume_takes_the_untyped_options_from_the_stored_run(tmp_path, no_compi
     # ... except num_timesteps, which a resume may raise.
     longer = train_cli.parse(["point-mass-ppo", "--logdir", str(tmp_path), "--resume", "--num-timesteps", "61440"])
     assert longer.num_timesteps == 61440 and longer.algo.learning_rate == 1e-2
-    # Another preset's run is left to the driver's refusal.
-    sac = train_cli.parse(["point-mass-sac", "--logdir", str(tmp_path), "--resume"])
-    assert sac.algo_name == "sac"
+    # Another preset's run is refused, before anything compiles.
+    with pytest.raises(ValueError, match=r"preset='point-mass-sac' differs from the resumed run's 'point-mass-ppo': "
+                                         r"allowed on --resume is the run's own preset"):
+        train_cli.parse(["point-mass-sac", "--logdir", str(tmp_path), "--resume"])
+    (tmp_path / "config.json").write_text("{not json")
+    with pytest.raises(ValueError, match=r"config.json cannot be read as a run's config"):
+        train_cli.parse(["point-mass-ppo", "--logdir", str(tmp_path), "--resume"])
 
 
 def test_resume_with_fewer_timesteps_than_done_is_refused_and_a_change_is_noted(earlier_run, no_compile):

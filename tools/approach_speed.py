@@ -91,8 +91,11 @@ def policy_approach(checkpoint: str, env_name: str | None, env_config, num_envs:
     inside = (distance < env_config.target_radius) & (np.arange(len(distance))[:, None] <= length[None, :])
     reached = inside.any(0)
     first = inside.argmax(0)
+    if not reached.any():
+        raise ValueError(f"checkpoint={checkpoint!r} reached the target in none of {num_envs} episodes: allowed is a "
+                         "policy that reaches it (an approach needs an arrival).")
     largest = (np.abs(np.diff(qpos, axis=0)) / cap).max(-1)  # (T, n): the fastest joint, as a fraction of its cap
-    approach = np.concatenate([largest[:f, i] for i, f in enumerate(first) if reached[i] and f > 0])
+    approach = np.concatenate([largest[:f, i] for i, f in enumerate(first) if reached[i] and f > 0] + [np.zeros(0)])
     entry = first[reached]
     return {"checkpoint": checkpoint, "unit": unit, "env_name": env_name, "num_envs": num_envs,
             "episode_length": int(env_config.episode_length), "reached": float(reached.mean()),

@@ -1257,10 +1257,8 @@ register(Experiment(
     metrics=("target_reached", "self_collision", "distance", "steps_in_target", "times_left_target"),
     curves=("episode/target_reached", "episode/self_collision", "episode/steps_in_target"),
     paper="Relative control: 96.4 % reached, 0.005 m, 99.1 steps of 125 in the target, 0.05 exits per episode.",
-    note="At 0.3 rad a full step moves a UR5e joint only 0.05 rad per env step (the servo closes 16 % of the gap "
-         "in 0.04 s), and the shipped ur5e-reach-ppo policy moves at that cap in 93 % of its approach steps, so it "
-         "enters the target at step 47 (median) where the paper's arm entered at about 26 (`python -m "
-         "tools.approach_speed`, results/experiments/README.md). 0.6 doubles the cap (0.08-0.10 rad)."))
+    note="Tests whether relative control's per-step joint cap (the servo's lag, `python -m tools.approach_speed`) "
+         "is what makes our arm enter the target later than the paper's: results/experiments/README.md."))
 
 register(Experiment(
     "obstacles-moving3", "Reach-avoid with 3 obstacles of random radius (0.05-0.1 m), moving or static, UR5e and Panda",
@@ -1305,6 +1303,9 @@ def main(argv=None) -> int:
     args = p.parse_args(argv)
     if args.max_seeds is not None and args.max_seeds < 1:
         raise ValueError(f"--max-seeds={args.max_seeds} is impossible: allowed is 1 or more (or leave it out).")
+    if args.whole_parts and args.time_limit is None:
+        raise ValueError("--whole-parts without --time-limit is meaningless: allowed is --whole-parts with "
+                         "--time-limit S (every part fits no limit).")
     start = time.monotonic()
     selection = select(args.names)
     if args.action == "list":
