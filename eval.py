@@ -104,6 +104,8 @@ class EvalConfig(Generic[EnvConfigT]):
     allow_env_mismatch: bool = False
     """Evaluate a checkpoint with another observation layout (the same parts reordered) or action
     mode than it was trained with, warning instead of refusing (its network reads and acts as trained)."""
+    compute_dtype: Annotated[str | None, tyro.conf.arg(metavar="DTYPE")] = None
+    """Hidden layers of a SAC checkpoint's policy in float32 or bfloat16 for this evaluation (None: as trained)."""
     last_steps: int = 10
     """Steps the final distance is averaged over."""
     json: Annotated[str | None, tyro.conf.arg(metavar="PATH")] = None
@@ -148,6 +150,9 @@ def check(args: EvalConfig) -> None:
     if args.stochastic and args.policy:
         raise ValueError(f"--stochastic is invalid with --policy {args.policy}: allowed only with --checkpoint (the "
                          "baselines have no action distribution).")
+    if args.compute_dtype and args.policy:
+        raise ValueError(f"--compute-dtype is invalid with --policy {args.policy}: allowed only with --checkpoint (the "
+                         "baselines have no network).")
     if args.policy and not args.env_name:
         raise ValueError("--policy needs --env NAME (allowed: " + ", ".join(envs.names()) + ").")
 
@@ -161,7 +166,8 @@ def main(argv: list[str] | None = None) -> list:
     if not wants_help:
         check(args)
     if args.checkpoint:
-        policies = [evaluation.checkpoint_policy(path) for path in args.checkpoint]
+        policies = [evaluation.with_compute_dtype(evaluation.checkpoint_policy(path), args.compute_dtype)
+                    for path in args.checkpoint]
     else:
         policies = [evaluation.baseline_policy(args.policy or "standstill")]
     env_name = args.env_name or policies[0].train_env_name

@@ -67,6 +67,17 @@ class Policy:
     units: list
     """Labels of the policy's units: trained seeds (checkpoint) or [None] (baseline)."""
     export: export.PolicyExport | None = None
+    compute_dtype: str | None = None
+    """The number format of the network's hidden layers in this evaluation (learners with a `compute_dtype`
+    field, `with_compute_dtype`); None: as trained."""
+
+    @property
+    def algo_config(self):
+        """The learner config the evaluation acts with: the trained one, with `compute_dtype` applied."""
+        if self.export is None:
+            return None
+        algo = self.export.config.algo
+        return dataclasses.replace(algo, compute_dtype=self.compute_dtype) if self.compute_dtype else algo
 
     @property
     def train_env_name(self) -> str | None:
@@ -80,9 +91,30 @@ class Policy:
         if self.export is None:
             return {"kind": self.kind, "name": self.name}
         e = self.export
-        return {"kind": self.kind, "name": self.name, "export": e.path, "env_steps": e.env_steps,
-                "algo": e.config.algo_name, "train_env_name": e.env_name, "seeds": e.seeds,
-                "train_config": e.meta["config"]}
+        out = {"kind": self.kind, "name": self.name, "export": e.path, "env_steps": e.env_steps,
+               "algo": e.config.algo_name, "train_env_name": e.env_name, "seeds": e.seeds,
+               "train_config": e.meta["config"]}
+        if self.compute_dtype:
+            out["compute_dtype"] = self.compute_dtype
+        return out
+
+
+def with_compute_dtype(policy: Policy, dtype: str | None) -> Policy:
+    """`policy` evaluated with its hidden layers in `dtype` (float32 or bfloat16; None: as trained), to
+    measure what the number format does to a trained policy; ValueError for a baseline or a learner
+    without that setting."""
+    if dtype is None:
+        return policy
+    from agents.networks import COMPUTE_DTYPES
+
+    if policy.export is None or not hasattr(policy.export.config.algo, "compute_dtype"):
+        what = f"the baseline {policy.name!r}" if policy.export is None else \
+            f"{policy.name!r} ({policy.export.config.algo_name}, which has no compute_dtype setting)"
+        raise ValueError(f"compute_dtype={dtype!r} is invalid for {what}: allowed only for checkpoints of learners "
+                         "with a compute_dtype (SAC).")
+    if dtype not in COMPUTE_DTYPES:
+        raise ValueError(f"compute_dtype={dtype!r} is invalid: allowed are {', '.join(map(repr, COMPUTE_DTYPES))}.")
+    return dataclasses.replace(policy, compute_dtype=dtype)
 
 
 def baseline_policy(name: str) -> Policy:
@@ -209,7 +241,7 @@ def _program(policy: Policy, env_name: str, env_config, num_envs: int, last_step
         raise ValueError(f"stochastic=True is invalid for the baseline {policy.name!r}: allowed only for checkpoints "
                          "(the baselines have no action distribution).")
     e = policy.export
-    program = _evaluator(env_name, env_config, e.config.algo if e else None, e.observation_size if e else 0,
+    program = _evaluator(env_name, env_config, policy.algo_config, e.observation_size if e else 0,
                          e.action_size if e else 0, int(num_envs), int(last_steps), bool(stochastic))
     check_compatible(policy, env_name, program.env, allow_env_mismatch)
     return program

@@ -519,6 +519,10 @@ BAD = [
     (lambda d, t: ["--env", "ur5-reach", "--policy", "random"], r"env='ur5-reach' is unknown: allowed are"),
     (lambda d, t: ["--policy", "random"], r"--policy needs --env NAME"),
     (lambda d, t: ["--env", "point-mass", "--policy", "random", "--stochastic"], r"--stochastic is invalid with --policy random"),
+    (lambda d, t: ["--env", "point-mass", "--policy", "random", "--compute-dtype", "float32"],
+     r"--compute-dtype is invalid with --policy random"),
+    (lambda d, t: ["--checkpoint", str(d["point"]), "--compute-dtype", "bfloat16"],
+     r"compute_dtype='bfloat16' is invalid for '.*' \(ppo, which has no compute_dtype setting\)"),
     (lambda d, t: ["--env", "ur5e-reach"], r"give exactly one of --checkpoint"),
     (lambda d, t: ["--env", "ur5e-reach", "--policy", "random", "--checkpoint", str(d["arm"])], r"give exactly one of"),
     (lambda d, t: ["--env", "ur5e-reach", "--policy", "random", "--num-envs", "0"], r"--num-envs=0 is invalid"),
@@ -711,6 +715,20 @@ def test_sac_export_acts_as_the_learner(tmp_path):
     dist = learner._dist(first.policy_params, learner._obs(first.obs_stats, obs))
     expected = np.tanh(np.asarray(dist.mean) + np.asarray(dist.std) * np.asarray(jax.random.normal(key, dist.mean.shape)))
     np.testing.assert_allclose(loaded.learner.stochastic_policy(first, obs, key), expected, rtol=1e-5, atol=1e-6)
+
+    # The same export evaluated with bfloat16 hidden layers: close to float32's actions, not equal.
+    policy = evaluation.Policy("checkpoint", str(tmp_path), loaded.seeds, loaded)
+    with pytest.raises(ValueError, match=r"compute_dtype='float16' is invalid: allowed are 'float32', 'bfloat16'"):
+        evaluation.with_compute_dtype(policy, "float16")
+    bf16 = evaluation.with_compute_dtype(policy, "bfloat16")
+    assert policy.algo_config.compute_dtype == "float32" and bf16.algo_config.compute_dtype == "bfloat16"
+    bf16_learner = registry.make_learner(bf16.algo_config, env.observation_size, env.action_size, 1)
+    acted = np.asarray(jax.vmap(bf16_learner.policy, in_axes=(0, None))(loaded.state, obs))
+    assert not np.array_equal(acted, np.asarray(ours))
+    np.testing.assert_allclose(acted, ours, atol=0.05)
+    result = evaluation.run(bf16, "point-mass", loaded.config.env, num_envs=4, eval_seeds=(5,))
+    assert result.to_json()["policy"]["compute_dtype"] == "bfloat16"
+    assert "compute_dtype" not in policy.describe()
 
 
 # ------------------------------------------------------------------------------------------------
