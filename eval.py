@@ -150,6 +150,9 @@ def check(args: EvalConfig) -> None:
     if args.stochastic and args.policy:
         raise ValueError(f"--stochastic is invalid with --policy {args.policy}: allowed only with --checkpoint (the "
                          "baselines have no action distribution).")
+    if args.compute_dtype is not None and args.compute_dtype not in evaluation.COMPUTE_DTYPES:
+        raise ValueError(f"--compute-dtype={args.compute_dtype!r} is invalid: allowed are "
+                         f"{', '.join(evaluation.COMPUTE_DTYPES)}.")
     if args.compute_dtype and args.policy:
         raise ValueError(f"--compute-dtype is invalid with --policy {args.policy}: allowed only with --checkpoint (the "
                          "baselines have no network).")

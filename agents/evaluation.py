@@ -33,6 +33,7 @@ import numpy as np
 import envs
 from agents import baselines, driver, export, registry
 from agents.loop import make_evaluate
+from agents.networks import COMPUTE_DTYPES
 
 PAPER_METRICS = {
     "target_reached": "episode/target_reached",
@@ -77,7 +78,9 @@ class Policy:
         if self.export is None:
             return None
         algo = self.export.config.algo
-        return dataclasses.replace(algo, compute_dtype=self.compute_dtype) if self.compute_dtype else algo
+        if self.compute_dtype and hasattr(algo, "compute_dtype"):
+            return dataclasses.replace(algo, compute_dtype=self.compute_dtype)
+        return algo
 
     @property
     def train_env_name(self) -> str | None:
@@ -105,13 +108,11 @@ def with_compute_dtype(policy: Policy, dtype: str | None) -> Policy:
     without that setting."""
     if dtype is None:
         return policy
-    from agents.networks import COMPUTE_DTYPES
-
     if policy.export is None or not hasattr(policy.export.config.algo, "compute_dtype"):
         what = f"the baseline {policy.name!r}" if policy.export is None else \
             f"{policy.name!r} ({policy.export.config.algo_name}, which has no compute_dtype setting)"
         raise ValueError(f"compute_dtype={dtype!r} is invalid for {what}: allowed only for checkpoints of learners "
-                         "with a compute_dtype (SAC).")
+                         "with a compute_dtype setting.")
     if dtype not in COMPUTE_DTYPES:
         raise ValueError(f"compute_dtype={dtype!r} is invalid: allowed are {', '.join(map(repr, COMPUTE_DTYPES))}.")
     return dataclasses.replace(policy, compute_dtype=dtype)
@@ -449,7 +450,7 @@ def label(result: Result) -> str:
     p = result.policy
     if p.export is None:
         return p.name
-    mode = ", stochastic" if result.stochastic else ""
+    mode = (", stochastic" if result.stochastic else "") + (f", {p.compute_dtype}" if p.compute_dtype else "")
     return f"{p.name} ({p.export.config.algo_name}, {p.export.env_steps:,} steps{mode})"
 
 

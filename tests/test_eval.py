@@ -521,6 +521,8 @@ BAD = [
     (lambda d, t: ["--env", "point-mass", "--policy", "random", "--stochastic"], r"--stochastic is invalid with --policy random"),
     (lambda d, t: ["--env", "point-mass", "--policy", "random", "--compute-dtype", "float32"],
      r"--compute-dtype is invalid with --policy random"),
+    (lambda d, t: ["--checkpoint", str(t / "nowhere"), "--compute-dtype", "float16"],  # refused before loading
+     r"--compute-dtype='float16' is invalid: allowed are float32, bfloat16"),
     (lambda d, t: ["--checkpoint", str(d["point"]), "--compute-dtype", "bfloat16"],
      r"compute_dtype='bfloat16' is invalid for '.*' \(ppo, which has no compute_dtype setting\)"),
     (lambda d, t: ["--env", "ur5e-reach"], r"give exactly one of --checkpoint"),
@@ -716,7 +718,20 @@ def test_sac_export_acts_as_the_learner(tmp_path):
     expected = np.tanh(np.asarray(dist.mean) + np.asarray(dist.std) * np.asarray(jax.random.normal(key, dist.mean.shape)))
     np.testing.assert_allclose(loaded.learner.stochastic_policy(first, obs, key), expected, rtol=1e-5, atol=1e-6)
 
-    # The same export evaluated with bfloat16 hidden layers: close to float32's actions, not equal.
+
+
+def test_sac_export_evaluated_in_bfloat16(tmp_path):
+    """eval.py --compute-dtype: the evaluation acts with the chosen number format (its own program)."""
+    config = presets.make_config("point-mass-sac", seeds=2)
+    config = dataclasses.replace(config, algo=dataclasses.replace(config.algo, max_replay_size=1024,
+                                                                                min_replay_size=256))
+    env = envs.make("point-mass")
+    learner = registry.make_learner(config.algo, env.observation_size, env.action_size, 1)
+    state = jax.jit(jax.vmap(learner.init))(jax.random.split(jax.random.PRNGKey(0), 2))
+    export.save(str(tmp_path / "policy"), learner, state, config_json(config), 640)
+    loaded = export.load(str(tmp_path))
+    obs = jax.random.normal(jax.random.PRNGKey(1), (5, env.observation_size))
+    ours = np.asarray(jax.vmap(loaded.learner.policy, in_axes=(0, None))(loaded.state, obs))
     policy = evaluation.Policy("checkpoint", str(tmp_path), loaded.seeds, loaded)
     with pytest.raises(ValueError, match=r"compute_dtype='float16' is invalid: allowed are 'float32', 'bfloat16'"):
         evaluation.with_compute_dtype(policy, "float16")
@@ -724,11 +739,16 @@ def test_sac_export_acts_as_the_learner(tmp_path):
     assert policy.algo_config.compute_dtype == "float32" and bf16.algo_config.compute_dtype == "bfloat16"
     bf16_learner = registry.make_learner(bf16.algo_config, env.observation_size, env.action_size, 1)
     acted = np.asarray(jax.vmap(bf16_learner.policy, in_axes=(0, None))(loaded.state, obs))
-    assert not np.array_equal(acted, np.asarray(ours))
+    assert not np.array_equal(acted, ours)  # close to float32's actions, not equal
     np.testing.assert_allclose(acted, ours, atol=0.05)
-    result = evaluation.run(bf16, "point-mass", loaded.config.env, num_envs=4, eval_seeds=(5,))
-    assert result.to_json()["policy"]["compute_dtype"] == "bfloat16"
-    assert "compute_dtype" not in policy.describe()
+    # The evaluation compiles its own program for the bfloat16 learner; the label and the JSON say which.
+    cfg = loaded.config.env
+    assert evaluation._program(bf16, "point-mass", cfg, 4, 10, False) is not evaluation._program(policy, "point-mass", cfg, 4, 10, False)
+    assert evaluation._program(evaluation.with_compute_dtype(policy, "float32"), "point-mass", cfg, 4, 10, False) is \
+        evaluation._program(policy, "point-mass", cfg, 4, 10, False)
+    result = evaluation.run(bf16, "point-mass", cfg, num_envs=4, eval_seeds=(5,))
+    assert result.to_json()["policy"]["compute_dtype"] == "bfloat16" and "compute_dtype" not in policy.describe()
+    assert evaluation.label(result).endswith(", bfloat16)")
 
 
 # ------------------------------------------------------------------------------------------------

@@ -1268,7 +1268,7 @@ register(Experiment(
          paper=_PPO_ROWS["ur5e-reach-avoid"])),
     metrics=_AVOID_METRICS, curves=_AVOID_CURVES,
     paper="UR5e reach-avoid, semi-sparse reward: 86.8 % reached, 2.7 % self and 4.8 % obstacle collisions.",
-    note="Tests whether the preset's misses, which mostly end stopped just outside the penalty's margin "
+    note="Tests whether the preset's misses, many of which end stopped near the edge of the penalty's margin "
          "(results/failures/README.md), turn into reaches when the margin leaves the arm more room."))
 
 register(Experiment(
