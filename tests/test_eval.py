@@ -693,14 +693,20 @@ def test_paper_tables_evaluate_each_pair_on_the_right_env_config(arm_export, tmp
     assert calls[1][2].substeps == 2  # the reach checkpoint's own settings otherwise
 
 
-def test_sac_export_acts_as_the_learner(tmp_path):
-    """A SAC state's export (policy params + observation statistics) gives the learner's actions."""
-    config = presets.make_config("point-mass-sac", seeds=2)
+def _sac_point_mass(seeds: int = 2):
+    """(config, env, learner, freshly initialised state with `seeds` seeds) of a small point-mass SAC."""
+    config = presets.make_config("point-mass-sac", seeds=seeds)
     config = dataclasses.replace(config, algo=dataclasses.replace(config.algo, max_replay_size=1024,
                                                                                 min_replay_size=256))
     env = envs.make("point-mass")
     learner = registry.make_learner(config.algo, env.observation_size, env.action_size, 1)
-    state = jax.jit(jax.vmap(learner.init))(jax.random.split(jax.random.PRNGKey(0), 2))
+    state = jax.jit(jax.vmap(learner.init))(jax.random.split(jax.random.PRNGKey(0), seeds))
+    return config, env, learner, state
+
+
+def test_sac_export_acts_as_the_learner(tmp_path):
+    """A SAC state's export (policy params + observation statistics) gives the learner's actions."""
+    config, env, learner, state = _sac_point_mass()
     stats = state.obs_stats.replace(mean=state.obs_stats.mean + 0.3, var=state.obs_stats.var * 2.0)  # non-trivial
     state = state.replace(obs_stats=stats)
     export.save(str(tmp_path / "policy"), learner, state, config_json(config), 640)
@@ -722,12 +728,7 @@ def test_sac_export_acts_as_the_learner(tmp_path):
 
 def test_sac_export_evaluated_in_bfloat16(tmp_path):
     """eval.py --compute-dtype: the evaluation acts with the chosen number format (its own program)."""
-    config = presets.make_config("point-mass-sac", seeds=2)
-    config = dataclasses.replace(config, algo=dataclasses.replace(config.algo, max_replay_size=1024,
-                                                                                min_replay_size=256))
-    env = envs.make("point-mass")
-    learner = registry.make_learner(config.algo, env.observation_size, env.action_size, 1)
-    state = jax.jit(jax.vmap(learner.init))(jax.random.split(jax.random.PRNGKey(0), 2))
+    config, env, learner, state = _sac_point_mass()
     export.save(str(tmp_path / "policy"), learner, state, config_json(config), 640)
     loaded = export.load(str(tmp_path))
     obs = jax.random.normal(jax.random.PRNGKey(1), (5, env.observation_size))
