@@ -17,11 +17,10 @@ metric or a failed write, 2 bad input (a one-line `error:` message), 130 stopped
 
 from __future__ import annotations
 
-import json
 import os
 import sys
 
-from agents.config import TrainConfig, adopt_saved_config, config_from_json, validate
+from agents.config import TrainConfig, adopt_saved_config, read_config, validate
 from agents.driver import NonFiniteLossError, train
 from agents.logger import summary_lines
 from agents.presets import PRESETS, make_config
@@ -42,13 +41,7 @@ def parse(argv: list[str]) -> TrainConfig:
     validate(config)
     saved_path = os.path.join(config.logdir, "config.json")
     if config.resume and os.path.isfile(saved_path):
-        try:
-            with open(saved_path) as f:
-                saved = config_from_json(json.load(f))
-        except (ValueError, KeyError, TypeError) as error:
-            raise ValueError(f"resume=True but {saved_path} cannot be read as a run's config ({error!r}): allowed is "
-                             "the config.json that train.py wrote (or --overwrite to start afresh).") from error
-        config = adopt_saved_config(config, saved, explicit_fields(argv[1:]))
+        config = adopt_saved_config(config, read_config(saved_path), explicit_fields(argv[1:]))
         validate(config)
     return config
 

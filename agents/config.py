@@ -199,6 +199,16 @@ def config_from_json(data: dict) -> TrainConfig:
     return dataclass_from_dict(TrainConfig, data)
 
 
+def read_config(path: str) -> TrainConfig:
+    """The TrainConfig stored in a run's config.json; ValueError naming the file if it cannot be read as one."""
+    try:
+        with open(path) as f:
+            return config_from_json(json.load(f))
+    except (ValueError, KeyError, TypeError) as error:
+        raise ValueError(f"{path} cannot be read as a run's config ({error!r}): allowed is the config.json that "
+                         "train.py wrote.") from error
+
+
 PER_CALL_FIELDS = ("logdir", "resume", "overwrite", "stop_after_steps", "stop_after_seconds", "devices", "multi_device",
                    "progress")
 """Fields that belong to one train.py call: a resume takes them from the command line, the others from the run."""

@@ -54,51 +54,43 @@ def full_step_moves(env, num_envs: int, seed: int = 0) -> tuple[np.ndarray, np.n
     return np.asarray(moves), np.asarray(q0)
 
 
-def servo_cap(env_name: str, env_config, num_envs: int = 32, seed: int = 0) -> dict:
+def servo_cap(env, num_envs: int = 32, seed: int = 0) -> dict:
     """Per joint: the displacement (rad) of the first full commanded step from rest and the mean of the
     last `CAP_STEPS // 2` steps (moving), as numbers and as fractions of action_scale."""
-    import envs
-
-    if env_config.action != "relative":
-        raise ValueError(f"env.action={env_config.action!r} is invalid for servo_cap: allowed is 'relative' "
+    if env.config.action != "relative":
+        raise ValueError(f"env.action={env.config.action!r} is invalid for servo_cap: allowed is 'relative' "
                          "(absolute control has no per-step cap).")
-    env = envs.from_config(env_name, env_config)
     moves, _ = full_step_moves(env, num_envs, seed)
     first = moves[:, 0].mean(0).astype(float)
     moving = moves[:, CAP_STEPS // 2:].mean((0, 1)).astype(float)
-    scale = env_config.action_scale
+    scale = env.config.action_scale
     return {"action_scale": scale, "env_dt": float(env.dt), "num_envs": num_envs, "steps": CAP_STEPS,
             "first_step": first.round(4).tolist(), "moving_step": moving.round(4).tolist(),
             "moving_step_fraction_of_scale": (moving / scale).round(3).tolist(),
             "moving_speed_rad_s": (moving / env.dt).round(3).tolist()}
 
 
-def policy_approach(checkpoint: str, env_name: str | None, env_config, num_envs: int, cap: np.ndarray,
-                    unit: int = 0) -> dict:
-    """First entry into the target, steps in it, and the approach's per-step joint motion against `cap`."""
-    import jax
-
-    import envs
+def policy_approach(policy, env_name: str, env, num_envs: int, cap: np.ndarray, unit: int = 0) -> dict:
+    """First entry into the target, steps in it, and the approach's per-step joint motion against `cap`, of
+    `policy` (an `agents.evaluation.Policy`) on `env` (registered as `env_name`)."""
     from agents import evaluation
 
-    policy = evaluation.checkpoint_policy(checkpoint)
-    env_name = env_name or policy.train_env_name
-    rec = evaluation.rollout(policy, env_name, env_config, num_envs=num_envs, unit=unit)
-    env = envs.from_config(env_name, env_config)
+    cfg = env.config
+    rec = evaluation.rollout(policy, env_name, cfg, num_envs=num_envs, unit=unit)
     qpos, target, length = rec["qpos"], rec["target_pos"], rec["length"]
-    ee = jax.vmap(lambda q: env.robot.kinematics(q).ee_pos)(qpos.reshape(-1, qpos.shape[-1]))
-    distance = np.linalg.norm(np.asarray(ee).reshape(target.shape) - target, axis=-1)  # (T + 1, n): after t steps
-    inside = (distance < env_config.target_radius) & (np.arange(len(distance))[:, None] <= length[None, :])
+    ee = np.asarray(env.robot.kinematics(qpos).ee_pos)
+    distance = np.linalg.norm(ee - target, axis=-1)  # (T + 1, n): after t steps
+    inside = (distance < cfg.target_radius) & (np.arange(len(distance))[:, None] <= length[None, :])
     reached = inside.any(0)
     first = inside.argmax(0)
     if not reached.any():
-        raise ValueError(f"checkpoint={checkpoint!r} reached the target in none of {num_envs} episodes: allowed is a "
+        raise ValueError(f"checkpoint={policy.name!r} reached the target in none of {num_envs} episodes: allowed is a "
                          "policy that reaches it (an approach needs an arrival).")
     largest = (np.abs(np.diff(qpos, axis=0)) / cap).max(-1)  # (T, n): the fastest joint, as a fraction of its cap
     approach = np.concatenate([largest[:f, i] for i, f in enumerate(first) if reached[i] and f > 0] + [np.zeros(0)])
     entry = first[reached]
-    return {"checkpoint": checkpoint, "unit": unit, "env_name": env_name, "num_envs": num_envs,
-            "episode_length": int(env_config.episode_length), "reached": float(reached.mean()),
+    return {"checkpoint": policy.name, "unit": unit, "env_name": env_name, "num_envs": num_envs,
+            "episode_length": int(cfg.episode_length), "reached": float(reached.mean()),
             "first_entry_step": {"mean": float(entry.mean()), "median": float(np.median(entry)),
                                  "p10": float(np.percentile(entry, 10)), "p90": float(np.percentile(entry, 90))},
             "steps_in_target_reached": float(inside[:, reached].sum(0).mean()),
@@ -135,14 +127,15 @@ def main(argv: list[str] | None = None) -> dict:
     if args.action_scale is not None:
         config = dataclasses.replace(config, action_scale=args.action_scale)
     config.validate()
+    env = envs.from_config(env_name, config)
     out = {"env_name": env_name, "env_config": dataclasses.asdict(config), "device": evaluation.device_description(),
-           "code": evaluation.code_version(), "cap": servo_cap(env_name, config)}
+           "code": evaluation.code_version(), "cap": servo_cap(env)}
     print(f"{env_name}: action_scale {config.action_scale}; a full commanded step moves the joints "
           f"{out['cap']['moving_step']} rad per env step while moving "
           f"({out['cap']['moving_step_fraction_of_scale']} of the step)")
     if args.checkpoint:
-        out["policy"] = policy_approach(args.checkpoint, env_name, config, args.num_envs,
-                                        np.asarray(out["cap"]["moving_step"]), args.unit)
+        out["policy"] = policy_approach(policy, env_name, env, args.num_envs, np.asarray(out["cap"]["moving_step"]),
+                                        args.unit)
         p = out["policy"]
         print(f"policy: reached {p['reached']:.1%}; first entry at step {p['first_entry_step']['median']:.0f} "
               f"(median; p10 {p['first_entry_step']['p10']:.0f}, p90 {p['first_entry_step']['p90']:.0f}); "

@@ -562,14 +562,10 @@ def pending_crosses(experiment: Experiment, state: RunState, record: str | None 
 
 def config_difference(config, path: str) -> str:
     """"" if the config stored at `path` may be resumed as `config`, else which field differs."""
-    from agents.config import config_from_json, merge_resume_config
+    from agents.config import merge_resume_config, read_config
 
-    with open(path) as f:
-        try:
-            saved = config_from_json(json.load(f))
-        except (ValueError, KeyError, TypeError) as error:
-            return f"{path} is unreadable: {error}"
     try:
+        saved = read_config(path)
         merge_resume_config(config, saved)
     except ValueError as error:
         return str(error)
@@ -690,8 +686,7 @@ def plan_stop(part: PartState, seconds: float | None, compiled: bool, startup_gu
         return 0
     if seconds <= 0:
         return None
-    rate = part.rate if part.rate is not None else rate_guess
-    startup = 0.0 if compiled else (part.startup or startup_guess)
+    rate, startup = _speed(part, compiled, startup_guess, rate_guess)
     if rate is None:
         return None if seconds <= startup else 0
     stop = part.steps + int(rate * (seconds - startup))
@@ -704,11 +699,15 @@ def seconds_to_finish(part: PartState, compiled: bool, startup_guess: float = 0.
                       rate_guess: float | None = None) -> float | None:
     """Predicted seconds to train `part` from its checkpoint to its budget (startup included unless `compiled`),
     at its own measured speed per seed, else `rate_guess`; None without a speed."""
+    rate, startup = _speed(part, compiled, startup_guess, rate_guess)
+    return startup + (part.budget - part.steps) / rate if rate else None
+
+
+def _speed(part: PartState, compiled: bool, startup_guess: float, rate_guess: float | None) -> tuple[float | None, float]:
+    """(env steps/s per seed, startup seconds) of `part`'s next call: its own measurements, else the guesses;
+    no startup once its program is compiled in this process."""
     rate = part.rate if part.rate is not None else rate_guess
-    if not rate:
-        return None
-    startup = 0.0 if compiled else (part.startup or startup_guess)
-    return startup + (part.budget - part.steps) / rate
+    return rate, 0.0 if compiled else (part.startup or startup_guess)
 
 
 def speed_guess(state: RunState, part: PartState) -> tuple[float | None, float]:
@@ -755,15 +754,16 @@ def train_pending(selection, runs_dir: str, deadline: float | None = None, reser
                 where = f"[{st.key} {part.name}" + (f" in {st.shared}]" if st.shared else "]")
                 seconds = None if deadline is None else deadline - time.monotonic() - reserve
                 rate_guess, startup_guess = speed_guess(st, part)
+                is_compiled, startup_guess = part.logdir in compiled, max(startup_seen, startup_guess)
                 if whole_parts and seconds is not None:
-                    need = seconds_to_finish(part, part.logdir in compiled, max(startup_seen, startup_guess), rate_guess)
+                    need = seconds_to_finish(part, is_compiled, startup_guess, rate_guess)
                     if need is None or need > seconds:
                         log(f"{where} left for a later call: it needs "
                             f"{'an unknown time (no speed measured)' if need is None else f'~{need:.0f} s'} to finish, "
                             f"{max(0.0, seconds):.0f} s are left")
                         finished = False
                         break
-                stop = plan_stop(part, seconds, part.logdir in compiled, max(startup_seen, startup_guess), rate_guess)
+                stop = plan_stop(part, seconds, is_compiled, startup_guess, rate_guess)
                 if stop is None:
                     log(f"{where} time limit: stopped at {part.steps:,} of {part.budget:,} steps; run again to continue")
                     return False
