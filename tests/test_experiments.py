@@ -224,21 +224,46 @@ def test_equal_runs_train_once_and_the_record_keeps_finished_parts(tmp_path):
 
 def test_time_limit_plan():
     st = ex.PartState("", 0, 1, "partial", steps=1000, budget=100_000, rate=100.0, startup=20.0)
-    assert ex.plan_stop(st, None, compiled=False) == 0  # no limit: to the end
-    assert ex.plan_stop(st, 120.0, compiled=False) == 1000 + 100 * 100  # 100 s after 20 s of startup
-    assert ex.plan_stop(st, 120.0, compiled=True) == 1000 + 100 * 120
-    assert ex.plan_stop(st, 25.0, compiled=False) is None  # less than one log interval (2,000 steps) fits
-    assert ex.plan_stop(st, 10_000.0, compiled=True) == 0  # the rest fits
+    assert ex.may_start(st, None, compiled=False)  # no limit
+    # One log interval (2,000 steps at 100/s: 20 s) after 20 s of startup: 40 s are needed.
+    assert ex.may_start(st, 40.0, compiled=False) and not ex.may_start(st, 39.9, compiled=False)
+    assert ex.may_start(st, 20.0, compiled=True) and not ex.may_start(st, 19.9, compiled=True)
+    near_end = dataclasses.replace(st, steps=99_500)  # 500 steps left: 5 s of training
+    assert ex.may_start(near_end, 25.0, compiled=False) and not ex.may_start(near_end, 24.9, compiled=False)
     fresh = ex.PartState("", 0, 1, "missing", steps=0, budget=100_000)
-    assert ex.plan_stop(fresh, 5.0, compiled=False) == 0  # no speed measured: the driver's clock stops it
-    assert ex.plan_stop(fresh, 5.0, compiled=False, startup_guess=20.0) is None  # less than a compilation left
-    assert ex.plan_stop(fresh, 0.0, compiled=False) is None
-    assert ex.plan_stop(fresh, 50.0, compiled=False, startup_guess=10.0, rate_guess=100.0) == 4000  # a sibling's speed
+    assert ex.may_start(fresh, 5.0, compiled=False)  # no speed measured: the driver's clock stops it
+    assert not ex.may_start(fresh, 5.0, compiled=False, startup_guess=20.0)  # less than a compilation left
+    assert not ex.may_start(fresh, 0.0, compiled=False)
+    assert ex.may_start(fresh, 30.0, compiled=False, startup_guess=10.0, rate_guess=100.0)  # a sibling's speed
+    assert not ex.may_start(fresh, 29.9, compiled=False, startup_guess=10.0, rate_guess=100.0)
     run = ex.Run("r", "point-mass-ppo", seeds=3, num_timesteps=100_000)
     sibling = lambda first, count, rate: ex.PartState(f"p{first}", first, count, "done", 100_000, 100_000, rate, 7.0)
     state = ex.RunState("e", run, "", "partial", 0, 100_000, [sibling(0, 2, 300.0), sibling(2, 1, 900.0)])
     assert ex.speed_guess(state, fresh) == (300.0, 7.0)  # the slower per seed of the parts with >= 1 seed
     assert ex.speed_guess(state, ex.PartState("x", 0, 3, "missing", 0, 100_000)) == (None, 0.0)
+
+
+def test_a_time_limited_call_trains_one_part_until_the_clock_stops_it(tmp_path, monkeypatch):
+    """A part with a measured speed is not cut at a predicted step: one driver call per part, stopped by its
+    clock (`stop_after_seconds`); the next part is tried only if time is left."""
+    runs_dir = str(tmp_path / "runs")
+    b = TOY.runs[1]
+    # Half trained at 10 env steps/s per seed after 30 s of startup: 100 s predict a stop at 5,820 of 10,240 steps.
+    _part(b, runs_dir, "toy", "b", 0, 2, steps=[5120], metrics=([2560, 5120], 2, 10.0, [286.0, 256.0]))
+    calls = []
+
+    def fake_train(config, learner_cls=None):
+        calls.append(config)
+        return driver.TrainResult(None, 5120, "stopped", config.logdir, config, None, None)  # no progress: returns
+
+    monkeypatch.setattr(driver, "train", fake_train)
+    log = []
+    assert not ex.train_pending(ex.select(["toy/b"], {"toy": TOY}), runs_dir, deadline=time.monotonic() + 130.0,
+                                reserve=30.0, log=log.append)
+    assert len(calls) == 1, log
+    assert calls[0].resume and calls[0].stop_after_steps == 0
+    assert 95.0 < calls[0].stop_after_seconds <= 100.0
+    assert "[toy/b seeds-0-1] resuming at 5,120; to the end of 10,240 steps x 2 seeds or 100 s" in log[0], log
 
 
 def test_whole_parts_prediction():

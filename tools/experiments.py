@@ -675,24 +675,23 @@ def commands(selection, runs_dir: str, everything: bool = False, max_seeds: int 
 # Training within a time limit.
 
 
-def plan_stop(part: PartState, seconds: float | None, compiled: bool, startup_guess: float = 0.0,
-              rate_guess: float | None = None) -> int | None:
-    """The `stop_after_steps` of the next training call of `part` in `seconds` (None: no limit): 0 to train to
-    the budget, None if there is no time for a log interval of progress at its measured speed (its own, else
-    `rate_guess`). Without a speed: 0, and the driver's own clock (`stop_after_seconds`) stops it in time; None if
-    the time left is within the start-up seen (`startup_guess`: compilation of a comparable program)."""
-    interval = max(1, part.budget // 50)  # the driver's default log interval
+def may_start(part: PartState, seconds: float | None, compiled: bool, startup_guess: float = 0.0,
+              rate_guess: float | None = None) -> bool:
+    """Whether a training call of `part` with `seconds` left (None: no limit) makes progress: one log interval
+    fits after the start-up at its measured speed (its own, else `rate_guess`); without a speed, the time left
+    exceeds the start-up seen (`startup_guess`: compilation of a comparable program). The call then trains to
+    its budget or until the driver's clock (`stop_after_seconds`) stops it, never to a predicted step: a
+    prediction from a slower start-up (one compiled without the cache) would end it early, and each restart
+    costs a compilation and, for an off-policy learner, a refill of its replay buffer."""
     if seconds is None:
-        return 0
+        return True
     if seconds <= 0:
-        return None
+        return False
     rate, startup = _speed(part, compiled, startup_guess, rate_guess)
     if rate is None:
-        return None if seconds <= startup else 0
-    stop = part.steps + int(rate * (seconds - startup))
-    if stop < part.steps + min(interval, part.budget - part.steps):
-        return None
-    return 0 if stop >= part.budget else stop
+        return seconds > startup
+    interval = max(1, part.budget // 50)  # the driver's default log interval
+    return rate * (seconds - startup) >= min(interval, part.budget - part.steps)
 
 
 def seconds_to_finish(part: PartState, compiled: bool, startup_guess: float = 0.0,
@@ -763,18 +762,18 @@ def train_pending(selection, runs_dir: str, deadline: float | None = None, reser
                             f"{max(0.0, seconds):.0f} s are left")
                         finished = False
                         break
-                stop = plan_stop(part, seconds, is_compiled, startup_guess, rate_guess)
-                if stop is None:
+                if not may_start(part, seconds, is_compiled, startup_guess, rate_guess):
                     log(f"{where} time limit: stopped at {part.steps:,} of {part.budget:,} steps; run again to continue")
                     return False
                 resume = part.steps > 0
                 # A part stopped before its first checkpoint (a killed call) left config.json and logs: start it afresh.
                 fresh_over = not resume and os.path.isdir(part.logdir) and bool(os.listdir(part.logdir))
                 log(f"{where} {'resuming at ' + format(part.steps, ',') if resume else 'starting'}; "
-                    f"{'to ' + format(stop, ',') if stop else 'to the end'} of {part.budget:,} steps x {part.count} seeds")
+                    f"to the end of {part.budget:,} steps x {part.count} seeds"
+                    + ("" if seconds is None else f" or {seconds:.0f} s"))
                 t0 = time.monotonic()
                 config = run.config(part.logdir, first_seed=part.first, seeds=part.count, resume=resume,
-                                    overwrite=fresh_over, stop_after_steps=stop, stop_after_seconds=seconds or 0.0)
+                                    overwrite=fresh_over, stop_after_steps=0, stop_after_seconds=seconds or 0.0)
                 result = driver.train(config, learner_cls)
                 if part.logdir not in compiled:
                     startup_seen = max(startup_seen, part_state(run, part.logdir, part.first, part.count).startup)
