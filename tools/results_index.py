@@ -409,6 +409,34 @@ def sampled_table(ctx: Context) -> list[list[str]]:
     return rows
 
 
+EXPERIMENT_HEADLINE = (
+    ("UR5e reach, fast SAC, 4,096 envs (not in the paper)", "sac-fast", "ur5e-reach", "ur5e-reach-sac"),
+)
+"""README rows taken from a registered experiment's table.json: (label, experiment, run, PAPER_ROWS key of the
+paper's row beside it); a row appears once every seed of its run is evaluated."""
+
+
+SAC_FAST_THROUGHPUT = "sac/fast/train_throughput_sac_fast_bf16_h200.json"
+"""benchmarks/train_throughput.py's measurement of the fast SAC preset (its `1dev` row) for the README."""
+
+
+def _finished_experiment_row(ctx: Context, experiment: str, run: str) -> dict | None:
+    """The table.json row of `experiment`/`run` if all its seeds are evaluated, else None."""
+    file = f"experiments/{experiment}/table.json"
+    if not os.path.exists(os.path.join(ctx.results, file)):
+        return None
+    for row in ctx.json(file)["rows"]:
+        if row["run"] == run and row.get("seeds_evaluated") == row["seeds"]:
+            return row
+    return None
+
+
+def _seed_rate(values: list[float]) -> str:
+    """Mean ± std over seeds (population std, as eval.py's `std_units`)."""
+    mean = sum(values) / len(values)
+    return rate(mean, (sum((v - mean) ** 2 for v in values) / len(values)) ** 0.5)
+
+
 def headline_table(ctx: Context) -> list[list[str]]:
     return EvalTable(("run", "paper_reached", "paper_collisions", "reached", "collisions", "env_steps", "preset", "file"),
                      HEADLINE)(ctx)
@@ -423,6 +451,17 @@ def readme_table(ctx: Context) -> list[list[str]]:
         rows.append([run.label + ": reached / collisions",
                      " / ".join([paper_pct(paper[0]), paper_collisions(run.paper)]),
                      f"{pct(ev['summary']['target_reached'])} / {collisions(ev)} at {millions(ev['policy']['env_steps'])} steps"])
+    for label, experiment, run, paper_key in EXPERIMENT_HEADLINE:
+        row = _finished_experiment_row(ctx, experiment, run)
+        if row is None:
+            continue
+        seeds = row["per_seed"]
+        ours = [_seed_rate(seeds["target_reached"]), _seed_rate(seeds["self_collision"]) + " self"]
+        if "avoid" in run:
+            ours[1] += ", " + _seed_rate(seeds["obstacle_collision"]) + " obstacle"
+        rows.append([label + ": reached / collisions",
+                     " / ".join([paper_pct(PAPER_ROWS[paper_key][0]), paper_collisions(paper_key)]),
+                     f"{ours[0]} / {ours[1]} at {millions(row['env_steps'])} steps"])
     b = _baseline_rows(ctx)
     ik = [b[("ur5e", "pseudo_ik", "absolute", r)]["summary"]["target_reached"] for r in (0.01, 0.02)]
     rows.append(["baseline: pseudo-IK, UR5e, absolute control: reached, 1 cm / 2 cm",
@@ -438,6 +477,10 @@ def readme_table(ctx: Context) -> list[list[str]]:
     rows.append([f"UR5e reach PPO training env steps/s, 1 seed, 8,192 envs per GPU ({train['meta']['date']})", "",
                  f"{thousands(one['train_steps_per_s'])} on 1 GPU"
                  + "".join(f", {thousands(r['train_steps_per_s'])} on {r['devices']}" for r in train["rows"] if r["devices"] > 1)])
+    sac = ctx.json(SAC_FAST_THROUGHPUT)
+    row = next(r for r in sac["rows"] if r["setting"] == "1dev")
+    rows.append([f"UR5e reach fast SAC training env steps/s, 1 seed, {row['num_envs']:,} envs ({sac['meta']['date']})", "",
+                 f"{thousands(row['train_steps_per_s'])} on 1 GPU"])
     return rows
 
 
