@@ -266,6 +266,33 @@ def test_a_time_limited_call_trains_one_part_until_the_clock_stops_it(tmp_path, 
     assert "[toy/b seeds-0-1] resuming at 5,120; to the end of 10,240 steps x 2 seeds or 100 s" in log[0], log
 
 
+def test_a_finished_part_is_recorded_before_the_call_ends(tmp_path, monkeypatch):
+    """With `record_each`, a part's config.json, eval.json and metrics.csv reach the record folder as soon as
+    it is done, so a call killed afterwards still brings them back."""
+    runs_dir, out = str(tmp_path / "runs"), str(tmp_path / "out")
+    b = TOY.runs[1]
+    seen = []
+
+    def fake_train(config, learner_cls=None):  # trains the part to its end: checkpoint, eval.json, metrics.csv
+        _part(b, runs_dir, "toy", "b", 0, 2, steps=[10240], evaluated=10240, metrics=([5120, 10240], 2, 10.0, [30.0, 9.0]))
+        return driver.TrainResult(None, 10240, "done", config.logdir, config, None, None)
+
+    def log(line):
+        seen.append((line, sorted(os.listdir(os.path.join(out, "toy", "runs", "b", "seeds-0-1")))
+                     if os.path.isdir(os.path.join(out, "toy", "runs", "b", "seeds-0-1")) else []))
+
+    monkeypatch.setattr(driver, "train", fake_train)
+    assert ex.train_pending(ex.select(["toy/b"], {"toy": TOY}), runs_dir, log=log, record=out, record_each=True)
+    recorded = [files for line, files in seen if line.startswith("recorded ")]
+    assert recorded and recorded[-1] == ["config.json", "eval.json", "metrics.csv"], seen
+    assert ex.run_state(TOY, b, str(tmp_path / "elsewhere"), out).status == "done"  # the record alone says done
+    # Without record_each nothing is copied during training (main records at the end instead).
+    shutil.rmtree(out)
+    shutil.rmtree(runs_dir)
+    assert ex.train_pending(ex.select(["toy/b"], {"toy": TOY}), runs_dir, log=lambda s: None, record=out)
+    assert ex.run_state(TOY, b, runs_dir).status == "done" and not os.path.exists(out)
+
+
 def test_whole_parts_prediction():
     part = ex.PartState("", 0, 2, "partial", steps=20_000, budget=100_000, rate=400.0, startup=30.0)
     assert ex.seconds_to_finish(part, compiled=False) == 30.0 + 80_000 / 400.0

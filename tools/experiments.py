@@ -721,13 +721,14 @@ def speed_guess(state: RunState, part: PartState) -> tuple[float | None, float]:
 
 def train_pending(selection, runs_dir: str, deadline: float | None = None, reserve: float = 0.0,
                   log=print, learner_cls=None, max_seeds: int | None = None, record: str | None = None,
-                  registry: dict | None = None, whole_parts: bool = False) -> bool:
+                  registry: dict | None = None, whole_parts: bool = False, record_each: bool = False) -> bool:
     """Trains the selected runs that are not done, in order, part by part (at most `max_seeds` seeds per
     train.py process), resuming unfinished parts; returns True when every selected run is done, False when
     the deadline (time.monotonic) or a changed run stopped it. `whole_parts`: with a deadline, a part is
     trained only if it is predicted to reach its budget in time (`seconds_to_finish`); the others, and parts
     of unknown speed, are left for later and the next run is tried. For a machine that will not outlive the
-    call, where a part stopped half way would be lost."""
+    call, where a part stopped half way would be lost. `record_each`: a part's files are recorded in `record`
+    as soon as it is done (`record_parts`), so a call killed later still brings them back."""
     from agents import driver
 
     compiled: set[str] = set()
@@ -779,6 +780,10 @@ def train_pending(selection, runs_dir: str, deadline: float | None = None, reser
                     startup_seen = max(startup_seen, part_state(run, part.logdir, part.first, part.count).startup)
                 compiled.add(part.logdir)
                 log(f"{where} {result.status} at {result.env_steps:,} steps after {time.monotonic() - t0:.0f} s")
+                if record_each and record is not None and result.status == "done":
+                    for path in record_parts(run_state(exp, run, runs_dir, record, registry), record):
+                        if os.path.basename(os.path.dirname(path)) == part.name:
+                            log(f"recorded {path}")
                 if result.status == "interrupted":
                     log(f"{where} interrupted: checkpoint saved at {result.env_steps:,} steps")
                     return False
@@ -1335,7 +1340,7 @@ def main(argv=None) -> int:
                                       max_seeds=args.max_seeds, out=args.out, whole_parts=args.whole_parts)
         else:
             finished = train_pending(selection, args.runs_dir, deadline, reserve, max_seeds=args.max_seeds,
-                                     record=args.out, whole_parts=args.whole_parts)
+                                     record=args.out, whole_parts=args.whole_parts, record_each=not args.no_build)
         if not args.no_build:
             for path in record(selection, args.runs_dir, args.out):
                 print(f"recorded {path}")
