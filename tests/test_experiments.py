@@ -23,7 +23,7 @@ TOY = ex.Experiment("toy", "point mass: two sets of seeds", "not in the paper", 
     ex.Run("a", "point-mass-ppo", dict(TOY_RUN), seeds=2, num_timesteps=10_240, paper=dict(target_reached=0.5)),
     ex.Run("b", "point-mass-ppo", {**TOY_RUN, "seed": 10}, seeds=2, num_timesteps=10_240),
 ), metrics=("target_reached", "distance", "wall_clock"), curves=("episode/target_reached",),
-    cross=(ex.Cross("a", "wide-goal", {"goal_radius": 0.5}),))
+    cross=(ex.Cross("a", "wide-goal", {"goal_radius": 0.5}), ex.Cross("a", "sampled", {}, stochastic=True)))
 
 
 @pytest.mark.parametrize("name", sorted(ex.EXPERIMENTS))
@@ -68,7 +68,8 @@ def test_bad_overrides_and_names_raise():
     for cross, message in ((ex.Cross("zzz", "x", {}), "run 'zzz' is not in experiment 'toy'"),
                            (ex.Cross("a", "x", {"no_field": 1}), "env field 'no_field' is unknown for point-mass"),
                            (ex.Cross("a", "x", {"goal_radius": -1.0}), "goal_radius"),
-                           (ex.Cross("a", "x/y", {}), "name='x/y' is invalid")):
+                           (ex.Cross("a", "x/y", {}), "name='x/y' is invalid"),
+                           (ex.Cross("a", "x", {}), r"env=\{\} with stochastic=False evaluates the run as trained again")):
         with pytest.raises(ValueError, match=message):
             ex.validate_experiment(dataclasses.replace(TOY, cross=(cross,)))
     assert ex.cli_option("algo.policy_hidden_sizes", (64, 64)) == ["--algo.policy-hidden-sizes", "64", "64"]
@@ -142,6 +143,28 @@ def test_listing_and_commands_on_a_hand_made_runs_folder(tmp_path):
         os.path.join("toy", "runs", r, part, f) for r, part in (("a", "seeds-0-1"), ("b", "seeds-0-0"))
         for f in ("config.json", "eval.json")]
     assert not ex.table_built(exp, out)
+
+
+def test_a_cross_row_holds_the_parts_evaluated(tmp_path):
+    """A part whose checkpoints were gone before its cross-evaluation leaves the row with the other parts' seeds."""
+    runs_dir = str(tmp_path / "runs")
+    b = TOY.runs[1]
+    exp = dataclasses.replace(TOY, cross=(ex.Cross("b", "sampled", {}, stochastic=True),))
+    _part(b, runs_dir, "toy", "b", 0, 1, steps=[10240], evaluated=10240)
+    late = _part(b, runs_dir, "toy", "b", 1, 1, steps=[10240], evaluated=10240)
+    _write(os.path.join(late, "cross-sampled.json"), json.dumps(
+        {"env_steps": 10240, "eval_envs": 16, "per_seed": {"episode/target_reached": [0.75]}}))
+    st = ex.run_state(exp, b, runs_dir)
+    assert ex.cross_files(st, exp.cross[0], None) == {"seeds-1-1": os.path.join(late, "cross-sampled.json")}
+    merged = ex.merged_evaluation(st, ex.cross_files(st, exp.cross[0], None))
+    assert merged["seeds"] == 1 and merged["per_seed"]["episode/target_reached"] == [0.75]
+    assert ex.merged_evaluation(st)["per_seed"]["episode/target_reached"] == [0.0, 0.1]  # the eval.json of both
+    assert "cross sampled: b with sampled actions: 1 of 2 parts evaluated" in ex.listing([(exp, [b])], runs_dir, "")
+    out = str(tmp_path / "out")
+    ex.build_default(exp, [ex.run_state(exp, r, runs_dir) for r in exp.runs], os.path.join(out, "toy"), code="test")
+    with open(os.path.join(out, "toy", "table.json")) as f:
+        row = json.load(f)["rows"][-1]
+    assert (row["status"], row["seeds_evaluated"], row["per_seed"]["target_reached"]) == ("partly evaluated", 1, [0.75])
 
 
 def test_pending_parts_split_the_missing_seeds():
@@ -376,6 +399,15 @@ def test_toy_experiment_trains_resumes_and_builds(tmp_path):
     with open(os.path.join(a_part.logdir, "eval.json")) as f:  # a larger goal is reached at least as often
         own = json.load(f)["per_seed"]["episode/target_reached"]
     assert all(c >= o for c, o in zip(cross["per_seed"]["episode/target_reached"], own))
+    # The sampled-actions cross: the run's own env, actions sampled, as eval.py --stochastic computes it.
+    with open(os.path.join(a_part.logdir, "cross-sampled.json")) as f:
+        sampled = json.load(f)
+    direct = evaluation.run(evaluation.checkpoint_policy(a_part.logdir), "point-mass", TOY.runs[0].config().env,
+                            num_envs=16, eval_seeds=(1_000_000,), stochastic=True)
+    assert sampled["actions"] == "sampled" and cross["actions"] == "deterministic"
+    assert sampled["per_seed"]["episode/distance_last10"] == pytest.approx([u["metrics"]["distance"] for u in direct.units])
+    with open(os.path.join(a_part.logdir, "eval.json")) as f:  # the mode's distances differ from the samples'
+        assert sampled["per_seed"]["episode/distance_last10"] != pytest.approx(json.load(f)["per_seed"]["episode/distance_last10"])
     assert ex.pending_crosses(TOY, ex.run_state(TOY, TOY.runs[0], runs_dir)) == []
 
     files = ex.build(selection, runs_dir, out, complete_only=True, log=lambda s: None)
@@ -384,7 +416,7 @@ def test_toy_experiment_trains_resumes_and_builds(tmp_path):
     assert os.path.join(out, "toy", "curves.png") in files or importlib.util.find_spec("matplotlib") is None
     with open(os.path.join(out, "toy", "table.json")) as f:
         data = json.load(f)
-    assert [r["label"] for r in data["rows"]] == ["a", "b", "a on wide-goal"]
+    assert [r["label"] for r in data["rows"]] == ["a", "b", "a on wide-goal", "a on sampled"]
     assert data["rows"][2]["per_seed"]["target_reached"] == pytest.approx(cross["per_seed"]["episode/target_reached"])
     assert len(data["rows"][0]["per_seed"]["target_reached"]) == 2 and data["rows"][0]["wall_seconds"] > 0
     with open(os.path.join(out, "toy", "table.md")) as f:

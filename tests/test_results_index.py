@@ -103,12 +103,13 @@ def test_check_fails_after_a_cell_is_edited(tmp_path):
 
 def test_experiment_rows_for_the_readme_only_when_every_seed_is_evaluated(tmp_path):
     rows = [{"run": "done", "seeds": 2, "seeds_evaluated": 2, "per_seed": {"target_reached": [0.96, 0.97]}},
-            {"run": "half", "seeds": 2, "seeds_evaluated": 1, "per_seed": {"target_reached": [0.9]}}]
+            {"run": "half", "seeds": 2, "seeds_evaluated": 1, "per_seed": {"target_reached": [0.9]}},
+            {"run": "done", "cross": "sampled", "seeds": 2, "seeds_evaluated": 2, "per_seed": {"target_reached": [1.0, 1.0]}}]
     folder = tmp_path / "results" / "experiments" / "x"
     folder.mkdir(parents=True)
     (folder / "table.json").write_text(json.dumps({"rows": rows}))
     ctx = ri.Context(str(tmp_path))
-    assert ri._finished_experiment_row(ctx, "x", "done")["per_seed"]["target_reached"] == [0.96, 0.97]
+    assert ri._finished_experiment_row(ctx, "x", "done")["per_seed"]["target_reached"] == [0.96, 0.97]  # not the cross row
     assert ri._finished_experiment_row(ctx, "x", "half") is None
     assert ri._finished_experiment_row(ctx, "x", "absent") is None
     assert ri._finished_experiment_row(ctx, "not-built", "done") is None

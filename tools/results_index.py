@@ -426,7 +426,7 @@ def _finished_experiment_row(ctx: Context, experiment: str, run: str) -> dict | 
     if not os.path.exists(os.path.join(ctx.results, file)):
         return None
     for row in ctx.json(file)["rows"]:
-        if row["run"] == run and row.get("seeds_evaluated") == row["seeds"]:
+        if row["run"] == run and "cross" not in row and row.get("seeds_evaluated") == row["seeds"]:
             return row
     return None
 
