@@ -1001,8 +1001,8 @@ def build_default(experiment: Experiment, states: list[RunState], out_dir: str, 
     budget = ", ".join(f"{st.run.name} {st.run.seeds} x {millions(st.budget)}" for st in states)
     command = f"python -m tools.experiments run {experiment.name}"
     shared = [f"{st.run.name} trains in {st.shared}" for st in states if st.shared]
-    lines += ["", "Ours: the deterministic policy's evaluation at the end of training (the runs' eval.json), mean ± std "
-              "over seeds; rates in %, distances in m. Each run's config.json, eval.json and metrics.csv per part (the "
+    lines += ["", "Ours: the deterministic policy's evaluation at the end of training (the runs' eval.json; a cross row: "
+              "the setting its second column names), mean ± std over seeds; rates in %, distances in m. Each run's config.json, eval.json and metrics.csv per part (the "
               "seeds trained in one process): `runs/<run>/seeds-<first>-<last>/` beside this table"
               + (f" ({'; '.join(shared)}: the same training config, trained once)" if shared else "") + ".",
               f"Runs (seeds x env steps): {budget}.", f"Command: `{command}`.",
