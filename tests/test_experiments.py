@@ -159,7 +159,10 @@ def test_a_cross_row_holds_the_parts_evaluated(tmp_path):
     merged = ex.merged_evaluation(st, ex.cross_files(st, exp.cross[0], None))
     assert merged["seeds"] == 1 and merged["per_seed"]["episode/target_reached"] == [0.75]
     assert ex.merged_evaluation(st)["per_seed"]["episode/target_reached"] == [0.0, 0.1]  # the eval.json of both
-    assert "cross sampled: b with sampled actions: 1 of 2 parts evaluated" in ex.listing([(exp, [b])], runs_dir, "")
+    assert ("cross sampled: b with sampled actions: 1 of 2 parts evaluated; 1 to evaluate here (`run`), 0 without "
+            "checkpoints here") in ex.listing([(exp, [b])], runs_dir, "")
+    shutil.rmtree(os.path.join(runs_dir, "toy", "b", "seeds-0-0", "checkpoints"))  # a machine that did not keep them
+    assert "0 to evaluate here (`run`), 1 without checkpoints here" in ex.listing([(exp, [b])], runs_dir, "")
     out = str(tmp_path / "out")
     ex.build_default(exp, [ex.run_state(exp, r, runs_dir) for r in exp.runs], os.path.join(out, "toy"), code="test")
     with open(os.path.join(out, "toy", "table.json")) as f:
@@ -289,31 +292,60 @@ def test_a_time_limited_call_trains_one_part_until_the_clock_stops_it(tmp_path, 
     assert "[toy/b seeds-0-1] resuming at 5,120; to the end of 10,240 steps x 2 seeds or 100 s" in log[0], log
 
 
-def test_a_finished_part_is_recorded_before_the_call_ends(tmp_path, monkeypatch):
-    """With `record_each`, a part's config.json, eval.json and metrics.csv reach the record folder as soon as
-    it is done, so a call killed afterwards still brings them back."""
+def test_each_part_is_cross_evaluated_and_recorded_before_the_next_trains(tmp_path, monkeypatch):
+    """With `--max-seeds 1`, part 0's cross-evaluations (its run's and those of a run of another experiment
+    sharing its folder) and its record happen before part 1 trains, so a call killed during part 1 keeps them."""
     runs_dir, out = str(tmp_path / "runs"), str(tmp_path / "out")
     b = TOY.runs[1]
-    seen = []
+    mine = dataclasses.replace(TOY, runs=(b,), cross=(ex.Cross("b", "sampled", {}, stochastic=True),))
+    twin = ex.Experiment("twin", "the same run elsewhere", "", (ex.Run("b2", b.preset, dict(b.overrides), seeds=2,
+                         num_timesteps=10_240),), cross=(ex.Cross("b2", "wide", {"goal_radius": 0.5}),))
+    registry = {"toy": mine, "twin": twin}
+    assert ex.storage(twin, twin.runs[0], registry) == ("toy", "b")
+    events = []
 
     def fake_train(config, learner_cls=None):  # trains the part to its end: checkpoint, eval.json, metrics.csv
-        _part(b, runs_dir, "toy", "b", 0, 2, steps=[10240], evaluated=10240, metrics=([5120, 10240], 2, 10.0, [30.0, 9.0]))
+        first = config.seed - 10
+        events.append(("train", first, sorted(os.listdir(os.path.join(out, "toy", "runs", "b"))) if os.path.isdir(
+            os.path.join(out, "toy", "runs", "b")) else []))
+        _part(b, runs_dir, "toy", "b", first, 1, steps=[10240], evaluated=10240, metrics=([5120, 10240], 1, 10.0, [30.0, 9.0]))
         return driver.TrainResult(None, 10240, "done", config.logdir, config, None, None)
 
-    def log(line):
-        seen.append((line, sorted(os.listdir(os.path.join(out, "toy", "runs", "b", "seeds-0-1")))
-                     if os.path.isdir(os.path.join(out, "toy", "runs", "b", "seeds-0-1")) else []))
+    def fake_cross(run, part, cross):
+        events.append(("cross", part.first, cross.name))
+        path = os.path.join(part.logdir, f"cross-{cross.name}.json")
+        _write(path, json.dumps({"env_steps": 10240, "eval_envs": 16, "per_seed": {"episode/target_reached": [0.5]}}))
+        return path
 
     monkeypatch.setattr(driver, "train", fake_train)
-    assert ex.train_pending(ex.select(["toy/b"], {"toy": TOY}), runs_dir, log=log, record=out, record_each=True)
-    recorded = [files for line, files in seen if line.startswith("recorded ")]
-    assert recorded and recorded[-1] == ["config.json", "eval.json", "metrics.csv"], seen
-    assert ex.run_state(TOY, b, str(tmp_path / "elsewhere"), out).status == "done"  # the record alone says done
-    # Without record_each nothing is copied during training (main records at the end instead).
-    shutil.rmtree(out)
-    shutil.rmtree(runs_dir)
-    assert ex.train_pending(ex.select(["toy/b"], {"toy": TOY}), runs_dir, log=lambda s: None, record=out)
-    assert ex.run_state(TOY, b, runs_dir).status == "done" and not os.path.exists(out)
+    monkeypatch.setattr(ex, "cross_evaluate", fake_cross)
+    assert ex.train_pending(ex.select(["toy"], registry), runs_dir, log=lambda s: None, max_seeds=1, record=out,
+                            registry=registry, record_each=True)
+    assert [e[:2] for e in events] == [("train", 0), ("cross", 0), ("cross", 0), ("train", 1), ("cross", 1), ("cross", 1)]
+    assert {e[2] for e in events if e[0] == "cross"} == {"sampled", "wide"}
+    assert events[3][2] == ["seeds-0-0"]  # part 0 recorded before part 1 trained
+    assert sorted(os.listdir(os.path.join(out, "toy", "runs", "b", "seeds-0-0"))) == [
+        "config.json", "cross-sampled.json", "cross-wide.json", "eval.json", "metrics.csv"]
+    # Nothing is left: a second call evaluates nothing more.
+    events.clear()
+    assert ex.train_pending(ex.select(["toy", "twin"], registry), runs_dir, log=lambda s: None, record=out,
+                            registry=registry, record_each=True)
+    assert events == []
+
+
+def test_a_cross_evaluation_waits_for_a_call_with_time_for_it(tmp_path, monkeypatch):
+    runs_dir = str(tmp_path / "runs")
+    b = TOY.runs[1]
+    exp = dataclasses.replace(TOY, runs=(b,), cross=(ex.Cross("b", "sampled", {}, stochastic=True),))
+    _part(b, runs_dir, "toy", "b", 0, 2, steps=[10240], evaluated=10240)
+    done = []
+    monkeypatch.setattr(ex, "cross_evaluate", lambda run, part, cross: done.append(part.name))
+    log = []
+    # 20 s left, 60 s of reserve: less than the half reserve a first cross-evaluation needs.
+    assert not ex.train_pending([(exp, [b])], runs_dir, deadline=time.monotonic() + 20.0, reserve=60.0, log=log.append)
+    assert done == [] and "time limit: cross-evaluation 'sampled' left for the next call" in log[-1]
+    assert ex.train_pending([(exp, [b])], runs_dir, deadline=time.monotonic() + 40.0, reserve=60.0, log=log.append)
+    assert done == ["seeds-0-1"]
 
 
 def test_whole_parts_prediction():
@@ -404,7 +436,7 @@ def test_toy_experiment_trains_resumes_and_builds(tmp_path):
         sampled = json.load(f)
     direct = evaluation.run(evaluation.checkpoint_policy(a_part.logdir), "point-mass", TOY.runs[0].config().env,
                             num_envs=16, eval_seeds=(1_000_000,), stochastic=True)
-    assert sampled["actions"] == "sampled" and cross["actions"] == "deterministic"
+    assert sampled["actions"] == "stochastic" and cross["actions"] == "deterministic"
     assert sampled["per_seed"]["episode/distance_last10"] == pytest.approx([u["metrics"]["distance"] for u in direct.units])
     with open(os.path.join(a_part.logdir, "eval.json")) as f:  # the mode's distances differ from the samples'
         assert sampled["per_seed"]["episode/distance_last10"] != pytest.approx(json.load(f)["per_seed"]["episode/distance_last10"])

@@ -122,8 +122,8 @@ class Run:
 
 @dataclasses.dataclass(frozen=True)
 class Cross:
-    """A cross-evaluation: the final policies of one of the experiment's runs on another env setting (one
-    more table row, as the paper's workspace and obstacle-size tables have)."""
+    """A cross-evaluation: the final policies of one of the experiment's runs on another env setting, or with
+    sampled actions (one more table row, as the paper's workspace and obstacle-size tables have)."""
 
     run: str
     """The trained run (a name among the experiment's runs)."""
@@ -136,8 +136,8 @@ class Cross:
     paper: dict = dataclasses.field(default_factory=dict)
     """The paper's numbers for this row (rates in [0, 1], distances in m)."""
     stochastic: bool = False
-    """Actions sampled from the policy (`eval.py --stochastic`) instead of its mode. The paper does not say
-    which it reports, and SAC's policies reach more often with the samples (results/sampled_actions)."""
+    """Actions sampled from the policy (`eval.py --stochastic`) instead of its mode: the paper does not say
+    which it reports, and for SAC it matters (results/sampled_actions)."""
 
     @property
     def setting(self) -> str:
@@ -557,7 +557,7 @@ def cross_evaluate(run: Run, part: PartState, cross: Cross) -> str:
     path = os.path.join(part.logdir, f"cross-{cross.name}.json")
     with open(path, "w") as f:
         json.dump({"env_steps": part.steps, "eval_envs": config.eval_envs, "env": cross.env,
-                   "actions": "sampled" if cross.stochastic else "deterministic", "per_seed": per_seed,
+                   "actions": "stochastic" if cross.stochastic else "deterministic", "per_seed": per_seed,
                    "mean": {k: sum(v) / len(v) for k, v in per_seed.items()}}, f, indent=2)
     return path
 
@@ -567,6 +567,16 @@ def pending_crosses(experiment: Experiment, state: RunState, record: str | None 
     record_dir = record_folder(record, *state.owner) if record else None
     return [(part, cross) for cross in experiment.cross if cross.run == state.run.name for part in state.done_parts
             if cross_path(part, cross, record_dir) is None and checkpoint_steps(part.logdir)]
+
+
+def sharing_runs(experiment: Experiment, run: Run, owner: tuple[str, str], registry: dict | None = None) -> list:
+    """(experiment, run) pairs whose parts are in the folder of `owner` (`storage`): `run` first, then the
+    registered runs with its training config, whose cross-evaluations use the same checkpoints."""
+    registry = EXPERIMENTS if registry is None else registry
+    pairs = [(experiment, run)]
+    for exp in registry.values():
+        pairs += [(exp, r) for r in exp.runs if r is not run and storage(exp, r, registry) == owner]
+    return pairs
 
 
 def config_difference(config, path: str) -> str:
@@ -644,9 +654,12 @@ def listing(selection, runs_dir: str, out: str, registry: dict | None = None) ->
         by_name = {st.run.name: st for st in states}
         for cross in exp.cross:
             st = by_name.get(cross.run) or run_state(exp, exp.run(cross.run), runs_dir, out, registry)
-            done, parts = len(cross_files(st, cross, out)), len(st.done_parts)
-            status = ("after training" if st.status != "done" else "done" if done == parts else
-                      f"{done} of {parts} parts evaluated; the rest to evaluate (`run` does it where the checkpoints are)")
+            files = cross_files(st, cross, out)
+            left = [p for p in st.done_parts if p.name not in files]
+            here = sum(bool(checkpoint_steps(p.logdir)) for p in left)
+            status = ("after training" if st.status != "done" else "done" if not left else
+                      f"{len(files)} of {len(st.done_parts)} parts evaluated; {here} to evaluate here (`run`), "
+                      f"{len(left) - here} without checkpoints here (evaluated where they are, or retrained)")
             lines.append(f"  cross {cross.name}: {cross.run} with {cross.setting}: {status}")
     total = sum(need.values())
     done = sum(min(trained[f], need[f]) for f in need)
@@ -743,6 +756,7 @@ def train_pending(selection, runs_dir: str, deadline: float | None = None, reser
 
     compiled: set[str] = set()
     startup_seen = 0.0
+    cross_seconds = 0.0  # the longest cross-evaluation of this call
     finished = True
 
     def record_part(exp, run, name: str) -> None:
@@ -755,15 +769,19 @@ def train_pending(selection, runs_dir: str, deadline: float | None = None, reser
         for run in runs:
             while True:
                 st = run_state(exp, run, runs_dir, record, registry)
-                # Each done part's cross-evaluations run while its checkpoints are at hand (this machine may
-                # not keep them for the rest of the run).
-                for part, cross in pending_crosses(exp, st, record):
-                    if deadline is not None and time.monotonic() > deadline - reserve / 2:
-                        log(f"[{st.key} {part.name}] time limit: cross-evaluation {cross.name!r} left for the next call")
-                        return False
-                    log(f"[{st.key} {part.name}] cross-evaluation {cross.name!r}: {cross.setting}")
-                    cross_evaluate(run, part, cross)
-                    record_part(exp, run, part.name)
+                # Each done part's cross-evaluations (this run's, and those of runs sharing its folder) run while
+                # its checkpoints are at hand: this machine may not keep them for the rest of the run.
+                for exp_x, run_x in sharing_runs(exp, run, st.owner, registry):
+                    st_x = st if run_x is run else run_state(exp_x, run_x, runs_dir, record, registry)
+                    for part, cross in pending_crosses(exp_x, st_x, record):
+                        if deadline is not None and deadline - time.monotonic() < max(cross_seconds, reserve / 2):
+                            log(f"[{st_x.key} {part.name}] time limit: cross-evaluation {cross.name!r} left for the next call")
+                            return False
+                        log(f"[{st_x.key} {part.name}] cross-evaluation {cross.name!r}: {cross.setting}")
+                        t0 = time.monotonic()
+                        cross_evaluate(run_x, part, cross)
+                        cross_seconds = max(cross_seconds, time.monotonic() - t0)
+                        record_part(exp_x, run_x, part.name)
                 if st.status == "done":
                     break
                 if st.status == "changed":
@@ -838,15 +856,19 @@ def worker_command(key: str, gpu: str, seconds: float | None, runs_dir: str, res
 
 def train_parallel(selection, runs_dir: str, gpus: list[str], deadline: float | None, reserve: float, log=print,
                    max_seeds: int | None = None, out: str = OUT_DIR, whole_parts: bool = False) -> bool:
-    """Trains the runs not done one per GPU side by side (a subprocess each, CUDA_VISIBLE_DEVICES=gpu); a GPU
-    that finishes takes the next run. Runs that share a folder go to one worker (the one needing the most
-    seeds), so no two processes train one folder. Returns True when every run is done."""
+    """Trains the runs not done (and runs done with cross-evaluations left where their checkpoints are) one per
+    GPU side by side (a subprocess each, CUDA_VISIBLE_DEVICES=gpu); a GPU that finishes takes the next run. Runs
+    that share a folder go to one worker (the one needing the most seeds), so no two processes train one folder.
+    Returns True when every run is done."""
     pending: dict[str, RunState] = {}
     for exp, runs in selection:
         for r in runs:
             st = run_state(exp, r, runs_dir, out)
-            if st.status not in ("done", "changed") and (st.folder not in pending or
-                                                         r.seeds > pending[st.folder].run.seeds):
+            crosses_left = st.status == "done" and any(
+                pending_crosses(e, st if x is r else run_state(e, x, runs_dir, out), out)
+                for e, x in sharing_runs(exp, r, st.owner))
+            if (st.status not in ("done", "changed") or crosses_left) and (st.folder not in pending or
+                                                                          r.seeds > pending[st.folder].run.seeds):
                 pending[st.folder] = st
     queue = [st.key for st in pending.values()]
     running: dict[str, tuple[subprocess.Popen, str]] = {}
@@ -988,7 +1010,7 @@ def build_default(experiment: Experiment, states: list[RunState], out_dir: str, 
         status = (st.status if st.status != "done" else "not evaluated" if not files else
                   "done" if len(files) == len(st.done_parts) else "partly evaluated")
         row = {"run": cross.run, "cross": cross.name, "label": label, "env": cross.env, "paper": cross.paper,
-               "stochastic": cross.stochastic, "status": status}
+               "stochastic": cross.stochastic, "seeds": st.run.seeds, "status": status}
         cells = [label, f"`{cross.run}`'s policies, evaluated with {cross.setting}"]
         add(cells, row, cross.paper, merged_evaluation(st, files) if files else None, st, st.run.seeds, timing=False)
     head = ["run", "preset and overrides"] + [h for m in metrics for h in (f"paper: {header(m)}", header(m))] + ["seeds x episodes"]
@@ -1001,8 +1023,9 @@ def build_default(experiment: Experiment, states: list[RunState], out_dir: str, 
     budget = ", ".join(f"{st.run.name} {st.run.seeds} x {millions(st.budget)}" for st in states)
     command = f"python -m tools.experiments run {experiment.name}"
     shared = [f"{st.run.name} trains in {st.shared}" for st in states if st.shared]
-    lines += ["", "Ours: the deterministic policy's evaluation at the end of training (the runs' eval.json; a cross row: "
-              "the setting its second column names), mean ± std over seeds; rates in %, distances in m. Each run's config.json, eval.json and metrics.csv per part (the "
+    lines += ["", "Ours: the deterministic policy's evaluation at the end of training (the runs' eval.json; "
+              "a cross row: the setting its second column names), mean ± std over seeds; rates in %, "
+              "distances in m. Each run's config.json, eval.json and metrics.csv per part (the "
               "seeds trained in one process): `runs/<run>/seeds-<first>-<last>/` beside this table"
               + (f" ({'; '.join(shared)}: the same training config, trained once)" if shared else "") + ".",
               f"Runs (seeds x env steps): {budget}.", f"Command: `{command}`.",
@@ -1247,18 +1270,19 @@ register(Experiment(
          "`python -m tools.paper_tables --tables obstacle --obstacle 0.1=runs/experiments/obstacle-size-ur5e/r0.1 "
          "reach=<a ur5e-reach run>`; results/obstacle_size has the whole table for the Panda."))
 
+_SAC_ROWS = {"panda": dict(target_reached=0.879, self_collision=0.027),
+             "ur5e-limited": dict(target_reached=0.848, self_collision=0.035)}
 register(Experiment(
     "sac-reach", "Reach with SAC: Panda, and UR5e from the limited (360 degree) initial range",
     'Section "Results", second and fourth paragraphs',
-    (Run("panda", "panda-reach-sac", paper=dict(target_reached=0.879, self_collision=0.027)),
-     Run("ur5e-limited", "ur5e-reach-sac-limited", paper=dict(target_reached=0.848, self_collision=0.035))),
+    (Run("panda", "panda-reach-sac", paper=_SAC_ROWS["panda"]),
+     Run("ur5e-limited", "ur5e-reach-sac-limited", paper=_SAC_ROWS["ur5e-limited"])),
     paper="Panda 87.9 % (2.7 % self); UR5e from the 360 degree range 84.8 % (3.5 % self), against 61.6 % from the full range.",
     note="The paper's SAC settings; 8 gradient steps per env step (the paper states none: results/sac). The "
          "`sampled` rows evaluate the same policies with sampled actions: the paper does not say which it reports, "
          "and our paper-setting SAC reached far more often with them (results/sampled_actions).",
     cross=tuple(Cross(run, f"{run}-sampled", {}, label=f"{run}, sampled actions", paper=paper, stochastic=True)
-                for run, paper in (("panda", dict(target_reached=0.879, self_collision=0.027)),
-                                   ("ur5e-limited", dict(target_reached=0.848, self_collision=0.035))))))
+                for run, paper in _SAC_ROWS.items())))
 
 
 # Our own studies beyond the paper, with the paper's best rows (PPO) as the bar.
@@ -1279,8 +1303,8 @@ register(Experiment(
     note="UR5e reach-avoid trains 200M steps, not its preset's 100M: a seed of the preset was still improving at "
          "100M (results/sac/fast). `--max-seeds 1`: a 100M-step seed fits a 10 minute call, and vmapped fast-SAC "
          "seeds ran no faster in all than one (results/sac/fast). The `sampled` rows evaluate the same policies with "
-         "sampled actions (their training episodes reached more often than the deterministic evaluation); they hold "
-         "the seeds whose checkpoints were at hand when their run was done (the seeds x episodes column).",
+         "sampled actions (why: results/sac/fast); they hold the seeds whose checkpoints were at hand when their part "
+         "was done (the seeds x episodes column).",
     cross=tuple(Cross(env, f"{env}-sampled", {}, label=f"{env}, sampled actions", paper=_PPO_ROWS[env], stochastic=True)
                 for env in ("ur5e-reach", "panda-reach", "ur5e-reach-avoid", "panda-reach-avoid"))))
 
@@ -1340,7 +1364,8 @@ def main(argv=None) -> int:
                                                   "(default: 10 %% of --time-limit, at least 30)")
     p.add_argument("--parallel", action="store_true", help="run: one run per local GPU, side by side (subprocesses)")
     p.add_argument("--gpus", type=int, help="run --parallel: GPUs to use (default: nvidia-smi's count)")
-    p.add_argument("--no-build", action="store_true", help="run: train only (no record of finished parts, no tables)")
+    p.add_argument("--no-build", action="store_true", help="run: no tables (finished parts are still recorded, each "
+                   "as it finishes)")
     p.add_argument("--all", action="store_true", help="commands: also the runs done (each as a fresh run)")
     p.add_argument("--max-seeds", type=int, help="run, commands: seeds trained together in one train.py process "
                                                  "(default: all of a run's; 1 trains each seed on its own)")
@@ -1371,7 +1396,7 @@ def main(argv=None) -> int:
                                       max_seeds=args.max_seeds, out=args.out, whole_parts=args.whole_parts)
         else:
             finished = train_pending(selection, args.runs_dir, deadline, reserve, max_seeds=args.max_seeds,
-                                     record=args.out, whole_parts=args.whole_parts, record_each=not args.no_build)
+                                     record=args.out, whole_parts=args.whole_parts, record_each=True)
         if not args.no_build:
             for path in record(selection, args.runs_dir, args.out):
                 print(f"recorded {path}")

@@ -410,7 +410,8 @@ def sampled_table(ctx: Context) -> list[list[str]]:
 
 
 EXPERIMENT_HEADLINE = (
-    ("UR5e reach, fast SAC, 4,096 envs (not in the paper)", "sac-fast", "ur5e-reach", "ur5e-reach-sac"),
+    ("UR5e reach, fast SAC, 4,096 envs (not in the paper; beside the paper's SAC)", "sac-fast", "ur5e-reach",
+     "ur5e-reach-sac"),
 )
 """README rows taken from a registered experiment's table.json: (label, experiment, run, PAPER_ROWS key of the
 paper's row beside it); a row appears once every seed of its run is evaluated."""
@@ -677,7 +678,7 @@ def _experiment_ours(ctx: Context, name: str, precision: bool = False) -> str:
     for row in ctx.json(file)["rows"]:
         values = row.get("per_seed", {}).get("target_reached")
         if not values and "cross" in row:
-            continue  # a cross-evaluation not made yet: its run's row says what is missing
+            continue  # a cross-evaluation not made yet (`tools.experiments list` says which parts are left)
         if not values:
             cells.append(f"{row['label']}: not done")
         elif precision:
@@ -685,9 +686,9 @@ def _experiment_ours(ctx: Context, name: str, precision: bool = False) -> str:
             cells.append(f"{row['label']}: {mean['distance']:.3f} m, {mean['steps_in_target']:.1f}, "
                          f"{mean['times_left_target']:.2f}")
         else:
-            mean = sum(values) / len(values)
-            std = (sum((v - mean) ** 2 for v in values) / len(values)) ** 0.5
-            cells.append(f"{row['label']}: {rate(mean, std) if len(values) > 1 else f'{100 * mean:.1f} %'} reached")
+            partly = f" ({len(values)} of {row['seeds']} seeds)" if "cross" in row and len(values) < row.get("seeds", 0) else ""
+            cells.append(f"{row['label']}: {_seed_rate(values) if len(values) > 1 else f'{100 * values[0]:.1f} %'} "
+                         f"reached{partly}")
     return "; ".join(cells) + f" ({ctx.link(f'experiments/{name}/table.md')})"
 
 
