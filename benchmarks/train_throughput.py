@@ -15,7 +15,8 @@ auto-reset, vmap) and stepped with uniform random actions (`benchmarks/env_throu
 number of envs. Everything is compiled first; then `--rounds` rounds each time the env alone
 (median of three calls) and every setting once, so that a drift of the GPU's speed during the
 process (results: throughput study) falls on both sides of each round's ratio. Reported: per-round
-figures, their medians, and the fraction of env-only = the median of the rounds' ratios. With
+figures, their medians, and the fraction of env-only = the median of the rounds' ratios, written
+after every round (a run cut off by a time limit keeps the rounds it finished). With
 several device counts, each run keeps the per-device `num_envs` and `batch_size` of the preset, so
 the global batch grows with the devices (weak scaling).
 """
@@ -160,10 +161,16 @@ def main():
             rates[label].append(run.time(args.updates))
             line.append(f"{label} {rates[label][-1]:,.0f}")
         print(f"round {r + 1}: " + ", ".join(line) + " env steps/s", flush=True)
+        # After every round, so that a run stopped by a time limit keeps the rounds it finished.
+        text = write_report(Path(args.out), args, base, settings, runs, rates, env_only)
+    print(text)
     if args.trace:
         for label, run in runs.items():
             run.trace(str(Path(args.trace) / label))
 
+
+def write_report(out: Path, args, base, settings: dict, runs: dict, rates: dict, env_only: list | None) -> str:
+    """`out`.json and `out`.md from the rounds timed so far (medians over them); returns the markdown."""
     rows = []
     for label, (devices, mode, config) in settings.items():
         algo = config.algo
@@ -179,28 +186,29 @@ def main():
     for row in rows:
         row["speedup_vs_1_device"] = row["train_steps_per_s"] / rows[0]["train_steps_per_s"] if rows[0]["devices"] == 1 else None
 
+    rounds = len(next(iter(rates.values())))
     device = jax.devices()[0]
     meta = {"device": device.device_kind, "local_devices": jax.local_device_count(), "jax": jax.__version__,
             "date": datetime.date.today().isoformat(),
             "command": " ".join(["python", "-m", "benchmarks.train_throughput"] + sys.argv[1:]),
-            "preset": args.preset, "updates": args.updates, "rounds": args.rounds, "env_steps": args.env_steps,
-            "algo": dataclasses.asdict(base.algo), "env_name": base.env_name, "env": dataclasses.asdict(base.env),
-            "matmul_precision": base.matmul_precision}
-    out = Path(args.out)
+            "preset": args.preset, "updates": args.updates, "rounds": rounds, "rounds_asked": args.rounds,
+            "env_steps": args.env_steps, "algo": dataclasses.asdict(base.algo), "env_name": base.env_name,
+            "env": dataclasses.asdict(base.env), "matmul_precision": base.matmul_precision}
     out.parent.mkdir(parents=True, exist_ok=True)
     out.with_suffix(".json").write_text(json.dumps({"meta": meta, "rows": rows}, indent=2))
     lines = [f"# Training throughput: {args.preset} ({meta['device']} x{meta['local_devices']}, {meta['date']})", "",
-             f"Command: `{meta['command']}`, jax {meta['jax']}, {args.seeds} seed(s), {args.rounds} rounds of "
-             f"{args.updates} timed updates; medians over the rounds (fraction: median of the rounds' ratios).", "",
+             f"Command: `{meta['command']}`, jax {meta['jax']}, {args.seeds} seed(s), {rounds} rounds"
+             + (f" (of {args.rounds} asked)" if rounds < args.rounds else "")
+             + f" of {args.updates} timed updates; medians over the rounds (fraction: median of the rounds' ratios).", "",
              "| setting | devices | multi-device | envs | batch | env steps/update | training env steps/s | env-only env steps/s | fraction | speed-up |",
              "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|"]
     for r in rows:
         lines.append(f"| {r['setting']} | {r['devices']} | {r['multi_device'] or ''} | {r['num_envs']:,} | {r['batch_size']} | {r['env_steps_per_update']:,} | "
                      f"{r['train_steps_per_s']:,.0f} | {r.get('env_only_steps_per_s', float('nan')):,.0f} | "
                      f"{r.get('fraction_of_env_only', float('nan')):.1%} | {r['speedup_vs_1_device'] or float('nan'):.2f} |")
-    out.with_suffix(".md").write_text("\n".join(lines) + "\n")
-    print("\n".join(lines))
-
+    text = "\n".join(lines) + "\n"
+    out.with_suffix(".md").write_text(text)
+    return text
 
 if __name__ == "__main__":
     main()
