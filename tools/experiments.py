@@ -569,14 +569,17 @@ def pending_crosses(experiment: Experiment, state: RunState, record: str | None 
             if cross_path(part, cross, record_dir) is None and checkpoint_steps(part.logdir)]
 
 
-def sharing_runs(experiment: Experiment, run: Run, owner: tuple[str, str], registry: dict | None = None) -> list:
-    """(experiment, run) pairs whose parts are in the folder of `owner` (`storage`): `run` first, then the
-    registered runs with its training config, whose cross-evaluations use the same checkpoints."""
+def folder_crosses(experiment: Experiment, state: RunState, runs_dir: str, record: str | None = None,
+                   registry: dict | None = None) -> list[tuple[Run, RunState, PartState, Cross]]:
+    """(run, its state, part, cross) still to evaluate on the done parts in `state`'s folder: the crosses of
+    `state.run` and of the registered runs that train in the same folder (`storage`: the same training config),
+    which use the same checkpoints."""
     registry = EXPERIMENTS if registry is None else registry
-    pairs = [(experiment, run)]
+    pairs = [(experiment, state.run, state)]
     for exp in registry.values():
-        pairs += [(exp, r) for r in exp.runs if r is not run and storage(exp, r, registry) == owner]
-    return pairs
+        pairs += [(exp, r, run_state(exp, r, runs_dir, record, registry)) for r in exp.runs
+                  if r is not state.run and exp.cross and storage(exp, r, registry) == state.owner]
+    return [(run, st, part, cross) for exp, run, st in pairs for part, cross in pending_crosses(exp, st, record)]
 
 
 def config_difference(config, path: str) -> str:
@@ -759,11 +762,10 @@ def train_pending(selection, runs_dir: str, deadline: float | None = None, reser
     cross_seconds = 0.0  # the longest cross-evaluation of this call
     finished = True
 
-    def record_part(exp, run, name: str) -> None:
+    def record_part(state: RunState, name: str) -> None:
         if record_each and record is not None:
-            for path in record_parts(run_state(exp, run, runs_dir, record, registry), record):
-                if os.path.basename(os.path.dirname(path)) == name:
-                    log(f"recorded {path}")
+            for path in record_parts(state, record, only=name):
+                log(f"recorded {path}")
 
     for exp, runs in selection:
         for run in runs:
@@ -771,17 +773,15 @@ def train_pending(selection, runs_dir: str, deadline: float | None = None, reser
                 st = run_state(exp, run, runs_dir, record, registry)
                 # Each done part's cross-evaluations (this run's, and those of runs sharing its folder) run while
                 # its checkpoints are at hand: this machine may not keep them for the rest of the run.
-                for exp_x, run_x in sharing_runs(exp, run, st.owner, registry):
-                    st_x = st if run_x is run else run_state(exp_x, run_x, runs_dir, record, registry)
-                    for part, cross in pending_crosses(exp_x, st_x, record):
-                        if deadline is not None and deadline - time.monotonic() < max(cross_seconds, reserve / 2):
-                            log(f"[{st_x.key} {part.name}] time limit: cross-evaluation {cross.name!r} left for the next call")
-                            return False
-                        log(f"[{st_x.key} {part.name}] cross-evaluation {cross.name!r}: {cross.setting}")
-                        t0 = time.monotonic()
-                        cross_evaluate(run_x, part, cross)
-                        cross_seconds = max(cross_seconds, time.monotonic() - t0)
-                        record_part(exp_x, run_x, part.name)
+                for run_x, st_x, part, cross in folder_crosses(exp, st, runs_dir, record, registry):
+                    if deadline is not None and deadline - time.monotonic() < max(cross_seconds, reserve / 2):
+                        log(f"[{st_x.key} {part.name}] time limit: cross-evaluation {cross.name!r} left for the next call")
+                        return False
+                    log(f"[{st_x.key} {part.name}] cross-evaluation {cross.name!r}: {cross.setting}")
+                    t0 = time.monotonic()
+                    cross_evaluate(run_x, part, cross)
+                    cross_seconds = max(cross_seconds, time.monotonic() - t0)
+                    record_part(st_x, part.name)
                 if st.status == "done":
                     break
                 if st.status == "changed":
@@ -819,7 +819,7 @@ def train_pending(selection, runs_dir: str, deadline: float | None = None, reser
                 compiled.add(part.logdir)
                 log(f"{where} {result.status} at {result.env_steps:,} steps after {time.monotonic() - t0:.0f} s")
                 if result.status == "done":
-                    record_part(exp, run, part.name)
+                    record_part(run_state(exp, run, runs_dir, record, registry), part.name)
                 if result.status == "interrupted":
                     log(f"{where} interrupted: checkpoint saved at {result.env_steps:,} steps")
                     return False
@@ -864,9 +864,7 @@ def train_parallel(selection, runs_dir: str, gpus: list[str], deadline: float | 
     for exp, runs in selection:
         for r in runs:
             st = run_state(exp, r, runs_dir, out)
-            crosses_left = st.status == "done" and any(
-                pending_crosses(e, st if x is r else run_state(e, x, runs_dir, out), out)
-                for e, x in sharing_runs(exp, r, st.owner))
+            crosses_left = st.status == "done" and bool(folder_crosses(exp, st, runs_dir, out))
             if (st.status not in ("done", "changed") or crosses_left) and (st.folder not in pending or
                                                                           r.seeds > pending[st.folder].run.seeds):
                 pending[st.folder] = st
@@ -1071,13 +1069,15 @@ RECORDED_FILES = ("config.json", "eval.json", "metrics.csv")
 runs folder)."""
 
 
-def record_parts(state: RunState, record: str) -> list[str]:
-    """Copies the files of the run's finished parts into the record folder of the run whose folder it trains in
-    (`record_folder`), so that the results hold the evidence behind the table and the next checkout sees those
-    parts done."""
+def record_parts(state: RunState, record: str, only: str | None = None) -> list[str]:
+    """Copies the files of the run's finished parts (or of the part named `only`) into the record folder of the
+    run whose folder it trains in (`record_folder`), so that the results hold the evidence behind the table and
+    the next checkout sees those parts done."""
     written = []
     target_dir = record_folder(record, *state.owner)
     for part in state.done_parts:
+        if only is not None and part.name != only:
+            continue
         target = os.path.join(target_dir, part.name)
         if os.path.abspath(part.logdir) == os.path.abspath(target):
             continue
@@ -1294,9 +1294,8 @@ _PPO_ROWS = {"ur5e-reach": dict(target_reached=0.961, self_collision=0.022),
 register(Experiment(
     "sac-fast", "Fast SAC (4,096 envs, n-step returns, categorical critic) on the four tasks, against the paper's PPO",
     "not in the paper (issue 25); the paper's columns are its PPO rows",
-    tuple(Run(env, f"{env}-sac-fast", paper=_PPO_ROWS[env],
-              num_timesteps=200_000_000 if env == "ur5e-reach-avoid" else None)
-          for env in ("ur5e-reach", "panda-reach", "ur5e-reach-avoid", "panda-reach-avoid")),
+    tuple(Run(env, f"{env}-sac-fast", paper=paper, num_timesteps=200_000_000 if env == "ur5e-reach-avoid" else None)
+          for env, paper in _PPO_ROWS.items()),
     metrics=_AVOID_METRICS + ("wall_clock", "steps_per_second"), curves=_AVOID_CURVES,
     paper="PPO (the paper's best): UR5e reach 96.1 %, Panda reach 98.8 %, UR5e reach-avoid 86.8 %, Panda "
           "reach-avoid 95.2 %; the paper's own SAC reached 61.6 % (UR5e reach) and 87.9 % (Panda reach).",
@@ -1305,8 +1304,8 @@ register(Experiment(
          "seeds ran no faster in all than one (results/sac/fast). The `sampled` rows evaluate the same policies with "
          "sampled actions (why: results/sac/fast); they hold the seeds whose checkpoints were at hand when their part "
          "was done (the seeds x episodes column).",
-    cross=tuple(Cross(env, f"{env}-sampled", {}, label=f"{env}, sampled actions", paper=_PPO_ROWS[env], stochastic=True)
-                for env in ("ur5e-reach", "panda-reach", "ur5e-reach-avoid", "panda-reach-avoid"))))
+    cross=tuple(Cross(env, f"{env}-sampled", {}, label=f"{env}, sampled actions", paper=paper, stochastic=True)
+                for env, paper in _PPO_ROWS.items())))
 
 register(Experiment(
     "relative-step", "UR5e reach: a relative step of 0.6 rad instead of 0.3, to arrive sooner and stay longer in the target",

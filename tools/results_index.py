@@ -19,6 +19,7 @@ import glob
 import json
 import os
 import re
+import statistics
 import sys
 from typing import Callable
 
@@ -434,8 +435,7 @@ def _finished_experiment_row(ctx: Context, experiment: str, run: str) -> dict | 
 
 def _seed_rate(values: list[float]) -> str:
     """Mean ± std over seeds (population std, as eval.py's `std_units`)."""
-    mean = sum(values) / len(values)
-    return rate(mean, (sum((v - mean) ** 2 for v in values) / len(values)) ** 0.5)
+    return rate(statistics.mean(values), statistics.pstdev(values))
 
 
 def headline_table(ctx: Context) -> list[list[str]]:
@@ -458,7 +458,7 @@ def readme_table(ctx: Context) -> list[list[str]]:
             continue
         seeds = row["per_seed"]
         ours = [_seed_rate(seeds["target_reached"]), _seed_rate(seeds["self_collision"]) + " self"]
-        if "avoid" in run:
+        if PAPER_ROWS[paper_key][2] is not None:  # the paper's row counts obstacle collisions
             ours[1] += ", " + _seed_rate(seeds["obstacle_collision"]) + " obstacle"
         rows.append([label + ": reached / collisions",
                      " / ".join([paper_pct(PAPER_ROWS[paper_key][0]), paper_collisions(paper_key)]),
