@@ -392,6 +392,73 @@ def test_parallel_worker_commands(monkeypatch):
                         "--max-seeds", "1"]
     _, argv = ex.worker_command("action-space/relative", "0", None, "runs/experiments", 30.0, whole_parts=True)
     assert argv[-1] == "--whole-parts" and "--time-limit" not in argv
+    _, argv = ex.worker_command("action-space/relative", "2", None, "runs/experiments", 30.0, only_part="seeds-3-3")
+    assert argv[-2:] == ["--only-part", "seeds-3-3"]
+    with pytest.raises(ValueError, match=r"--only-part='seeds-0-0' needs `run` of exactly one run .*given run of 4 runs"):
+        ex.main(["run", "sac-fast", "--only-part", "seeds-0-0"])
+    with pytest.raises(ValueError, match=r"--only-part='seed-1' is not a part name: allowed is seeds-<first>-<last>"):
+        ex.main(["run", "sac-fast/panda-reach", "--only-part", "seed-1"])
+
+
+def test_parallel_spreads_the_parts_of_one_run_over_the_gpus(tmp_path, monkeypatch):
+    """`run --parallel --max-seeds 1`: each seed of a run is its own worker (`--only-part`), a done part's
+    cross-evaluation left behind is a worker too, and a worker trains and evaluates its part alone."""
+    runs_dir, out = str(tmp_path / "runs"), str(tmp_path / "out")
+    b = TOY.runs[1]
+    c = ex.Run("c", "point-mass-ppo", {**TOY_RUN, "seed": 20}, seeds=1, num_timesteps=10_240)
+    exp = dataclasses.replace(TOY, runs=(b, c), cross=(ex.Cross("b", "sampled", {}, stochastic=True),))
+    registry = {"toy": exp}
+    _part(b, runs_dir, "toy", "b", 0, 1, steps=[10240], evaluated=10240)  # done; its cross-evaluation not run
+    selection = ex.select(["toy"], registry)
+    items = ex.parallel_items(selection, runs_dir, max_seeds=1, out=out, registry=registry)
+    assert items == [("toy/b", "seeds-0-0"), ("toy/b", "seeds-1-1"), ("toy/c", "seeds-0-0")]
+    assert ex.parallel_items(selection, runs_dir, out=out, registry=registry)[1:] == [("toy/b", "seeds-1-1"),
+                                                                                     ("toy/c", "seeds-0-0")]
+    # The driver: two GPUs, three workers, each started with its part (fake processes that end at once).
+    started = []
+
+    class FakeProcess:
+        def __init__(self, argv, env, cwd):
+            started.append((env["CUDA_VISIBLE_DEVICES"], argv[argv.index("run") + 1], argv[argv.index("--only-part") + 1]))
+            self.returncode = 0
+
+        def poll(self):
+            return 0
+
+    monkeypatch.setattr(ex.subprocess, "Popen", FakeProcess)
+    monkeypatch.setattr(ex, "parallel_items", lambda *args, **kw: list(items))
+    monkeypatch.setattr(ex.time, "sleep", lambda s: None)
+    assert not ex.train_parallel(selection, runs_dir, ["0", "1"], None, 30.0, log=lambda s: None, max_seeds=1, out=out)
+    assert started == [("0", "toy/b", "seeds-0-0"), ("1", "toy/b", "seeds-1-1"), ("0", "toy/c", "seeds-0-0")]
+    monkeypatch.undo()
+    # A worker: its own part alone (trained, then cross-evaluated), never the other parts of its run.
+    events = []
+
+    def fake_train(config, learner_cls=None):
+        first = config.seed - 10
+        events.append(("train", first))
+        _part(b, runs_dir, "toy", "b", first, 1, steps=[10240], evaluated=10240, metrics=([5120, 10240], 1, 10.0, [30.0, 9.0]))
+        return driver.TrainResult(None, 10240, "done", config.logdir, config, None, None)
+
+    def fake_cross(run, part, cross):
+        events.append(("cross", part.first))
+        path = os.path.join(part.logdir, f"cross-{cross.name}.json")
+        _write(path, json.dumps({"env_steps": 10240, "eval_envs": 16, "per_seed": {"episode/target_reached": [0.5]}}))
+        return path
+
+    monkeypatch.setattr(driver, "train", fake_train)
+    monkeypatch.setattr(ex, "cross_evaluate", fake_cross)
+    worker = ex.select(["toy/b"], registry)
+    log = []
+    assert not ex.train_pending(worker, runs_dir, max_seeds=1, record=out, registry=registry, log=log.append,
+                                only_part="seeds-4-4")
+    assert events == [] and "[toy/b] no part seeds-4-4 to train: its parts are seeds-1-1 (with --max-seeds 1)" in log
+    ex.train_pending(worker, runs_dir, max_seeds=1, record=out, registry=registry, log=log.append, only_part="seeds-1-1")
+    assert events == [("train", 1), ("cross", 1)]
+    events.clear()
+    assert ex.train_pending(worker, runs_dir, max_seeds=1, record=out, registry=registry, log=log.append,
+                            only_part="seeds-0-0")
+    assert events == [("cross", 0)]
 
 
 def test_toy_experiment_trains_resumes_and_builds(tmp_path):

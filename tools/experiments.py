@@ -4,7 +4,7 @@ table (markdown and JSON) and figure from the runs' `eval.json` and `metrics.csv
 
     python -m tools.experiments list                          # every experiment: runs done, partly trained, missing
     python -m tools.experiments run action-space --time-limit 540 --max-seeds 2   # train what is missing, then build
-    python -m tools.experiments run --parallel --time-limit 3000    # one run per local GPU, side by side
+    python -m tools.experiments run sac-fast --parallel --max-seeds 1 --time-limit 540   # one part per local GPU
     python -m tools.experiments commands reward               # one train.py command per run (cluster schedulers)
     python -m tools.experiments build                         # tables and figures from what is trained
 
@@ -44,6 +44,7 @@ import functools
 import json
 import math
 import os
+import re
 import shlex
 import shutil
 import statistics
@@ -747,14 +748,17 @@ def speed_guess(state: RunState, part: PartState) -> tuple[float | None, float]:
 
 def train_pending(selection, runs_dir: str, deadline: float | None = None, reserve: float = 0.0,
                   log=print, learner_cls=None, max_seeds: int | None = None, record: str | None = None,
-                  registry: dict | None = None, whole_parts: bool = False, record_each: bool = False) -> bool:
+                  registry: dict | None = None, whole_parts: bool = False, record_each: bool = False,
+                  only_part: str | None = None) -> bool:
     """Trains the selected runs that are not done, in order, part by part (at most `max_seeds` seeds per
     train.py process), resuming unfinished parts; returns True when every selected run is done, False when
     the deadline (time.monotonic) or a changed run stopped it. `whole_parts`: with a deadline, a part is
     trained only if it is predicted to reach its budget in time (`seconds_to_finish`); the others, and parts
     of unknown speed, are left for later and the next run is tried. For a machine that will not outlive the
     call, where a part stopped half way would be lost. `record_each`: a part's files are recorded in `record`
-    as soon as it is done (`record_parts`), so a call killed later still brings them back."""
+    as soon as it is done (`record_parts`), so a call killed later still brings them back. `only_part` (a part
+    name, `seeds-<first>-<last>`, of the one selected run): that part alone, with its cross-evaluations, as a
+    `train_parallel` worker trains it beside workers training the run's other parts."""
     from agents import driver
 
     compiled: set[str] = set()
@@ -774,6 +778,8 @@ def train_pending(selection, runs_dir: str, deadline: float | None = None, reser
                 # Each done part's cross-evaluations (this run's, and those of runs sharing its folder) run while
                 # its checkpoints are at hand: this machine may not keep them for the rest of the run.
                 for run_x, st_x, part, cross in folder_crosses(exp, st, runs_dir, record, registry):
+                    if only_part is not None and part.name != only_part:
+                        continue  # another worker's part
                     if deadline is not None and deadline - time.monotonic() < max(cross_seconds, reserve / 2):
                         log(f"[{st_x.key} {part.name}] time limit: cross-evaluation {cross.name!r} left for the next call")
                         return False
@@ -788,7 +794,17 @@ def train_pending(selection, runs_dir: str, deadline: float | None = None, reser
                     log(f"[{st.key}] skipped: {st.reason}; move that part away to retrain it")
                     finished = False
                     break
-                part = pending_parts(st, max_seeds)[0]
+                pending = pending_parts(st, max_seeds)
+                if only_part is not None:
+                    if any(p.name == only_part for p in st.done_parts):
+                        break
+                    pending = [p for p in pending if p.name == only_part]
+                    if not pending:
+                        log(f"[{st.key}] no part {only_part} to train: its parts are "
+                            f"{', '.join(p.name for p in pending_parts(st, max_seeds))} (with --max-seeds {max_seeds})")
+                        finished = False
+                        break
+                part = pending[0]
                 where = f"[{st.key} {part.name}" + (f" in {st.shared}]" if st.shared else "]")
                 seconds = None if deadline is None else deadline - time.monotonic() - reserve
                 rate_guess, startup_guess = speed_guess(st, part)
@@ -841,8 +857,10 @@ def local_gpus() -> int:
 
 
 def worker_command(key: str, gpu: str, seconds: float | None, runs_dir: str, reserve: float,
-                   max_seeds: int | None = None, out: str = OUT_DIR, whole_parts: bool = False) -> tuple[dict, list[str]]:
-    """(environment, argv) of the process that trains run `key` on GPU `gpu` within `seconds`."""
+                   max_seeds: int | None = None, out: str = OUT_DIR, whole_parts: bool = False,
+                   only_part: str | None = None) -> tuple[dict, list[str]]:
+    """(environment, argv) of the process that trains run `key` (its part `only_part`, or all it has left) on GPU
+    `gpu` within `seconds`."""
     argv = [sys.executable, "-m", "tools.experiments", "run", key, "--no-build", "--runs-dir", runs_dir,
             "--out", out, "--reserve", f"{reserve:g}"]
     if seconds is not None:
@@ -851,37 +869,52 @@ def worker_command(key: str, gpu: str, seconds: float | None, runs_dir: str, res
         argv += ["--max-seeds", str(max_seeds)]
     if whole_parts:
         argv += ["--whole-parts"]
+    if only_part is not None:
+        argv += ["--only-part", only_part]
     return {**os.environ, "CUDA_VISIBLE_DEVICES": gpu}, argv
+
+
+def parallel_items(selection, runs_dir: str, max_seeds: int | None = None, out: str = OUT_DIR,
+                   registry: dict | None = None) -> list[tuple[str, str]]:
+    """(run key, part name) for each part a worker can take on its own: the done parts with cross-evaluations
+    left where their checkpoints are, then the parts still to train (`pending_parts`, at most `max_seeds` seeds
+    each). Runs that share a folder are planned once, by the one needing the most seeds, so no part is listed
+    twice."""
+    by_folder: dict[str, tuple[Experiment, RunState]] = {}
+    for exp, runs in selection:
+        for r in runs:
+            st = run_state(exp, r, runs_dir, out, registry)
+            if st.status != "changed" and (st.folder not in by_folder or r.seeds > by_folder[st.folder][1].run.seeds):
+                by_folder[st.folder] = (exp, st)
+    items: list[tuple[str, str]] = []
+    for exp, st in by_folder.values():
+        names = [part.name for _, _, part, _ in folder_crosses(exp, st, runs_dir, out, registry)]
+        if st.status != "done":
+            names += [part.name for part in pending_parts(st, max_seeds)]
+        items += [(st.key, name) for name in dict.fromkeys(names)]
+    return items
 
 
 def train_parallel(selection, runs_dir: str, gpus: list[str], deadline: float | None, reserve: float, log=print,
                    max_seeds: int | None = None, out: str = OUT_DIR, whole_parts: bool = False) -> bool:
-    """Trains the runs not done (and runs done with cross-evaluations left where their checkpoints are) one per
-    GPU side by side (a subprocess each, CUDA_VISIBLE_DEVICES=gpu); a GPU that finishes takes the next run. Runs
-    that share a folder go to one worker (the one needing the most seeds), so no two processes train one folder.
-    Returns True when every run is done."""
-    pending: dict[str, RunState] = {}
-    for exp, runs in selection:
-        for r in runs:
-            st = run_state(exp, r, runs_dir, out)
-            crosses_left = st.status == "done" and bool(folder_crosses(exp, st, runs_dir, out))
-            if (st.status not in ("done", "changed") or crosses_left) and (st.folder not in pending or
-                                                                          r.seeds > pending[st.folder].run.seeds):
-                pending[st.folder] = st
-    queue = [st.key for st in pending.values()]
+    """Trains the parts not done (and evaluates done parts with cross-evaluations left where their checkpoints
+    are) one per GPU side by side (a subprocess each, CUDA_VISIBLE_DEVICES=gpu, `--only-part`); a GPU that
+    finishes takes the next part. A run's parts (its seeds, at most `max_seeds` a part) spread over the GPUs, so
+    `--max-seeds 1` trains up to one seed per GPU. Returns True when every run is done."""
+    queue = parallel_items(selection, runs_dir, max_seeds, out)
     running: dict[str, tuple[subprocess.Popen, str]] = {}
     while queue or running:
         for gpu in [g for g in gpus if g not in running]:
             seconds = None if deadline is None else deadline - time.monotonic()
             if not queue or (seconds is not None and seconds <= reserve):
                 break
-            key = queue.pop(0)
-            env, argv = worker_command(key, gpu, seconds, runs_dir, reserve, max_seeds, out, whole_parts)
-            log(f"GPU {gpu}: {key}")
-            running[gpu] = (subprocess.Popen(argv, env=env, cwd=ROOT), key)
-        for gpu, (proc, key) in list(running.items()):
+            key, part = queue.pop(0)
+            env, argv = worker_command(key, gpu, seconds, runs_dir, reserve, max_seeds, out, whole_parts, part)
+            log(f"GPU {gpu}: {key} {part}")
+            running[gpu] = (subprocess.Popen(argv, env=env, cwd=ROOT), f"{key} {part}")
+        for gpu, (proc, what) in list(running.items()):
             if proc.poll() is not None:
-                log(f"GPU {gpu}: {key} exited with status {proc.returncode}")
+                log(f"GPU {gpu}: {what} exited with status {proc.returncode}")
                 del running[gpu]
         if deadline is not None and time.monotonic() > deadline - reserve:
             queue.clear()
@@ -1361,13 +1394,15 @@ def main(argv=None) -> int:
     p.add_argument("--time-limit", type=float, help="run: return within this many seconds of the start")
     p.add_argument("--reserve", type=float, help="run: seconds kept for the last checkpoint, evaluation and exit "
                                                   "(default: 10 %% of --time-limit, at least 30)")
-    p.add_argument("--parallel", action="store_true", help="run: one run per local GPU, side by side (subprocesses)")
+    p.add_argument("--parallel", action="store_true", help="run: one part per local GPU, side by side (subprocesses)")
     p.add_argument("--gpus", type=int, help="run --parallel: GPUs to use (default: nvidia-smi's count)")
     p.add_argument("--no-build", action="store_true", help="run: no tables (finished parts are still recorded, each "
                    "as it finishes)")
     p.add_argument("--all", action="store_true", help="commands: also the runs done (each as a fresh run)")
     p.add_argument("--max-seeds", type=int, help="run, commands: seeds trained together in one train.py process "
                                                  "(default: all of a run's; 1 trains each seed on its own)")
+    p.add_argument("--only-part", help="run: train only this part (seeds-<first>-<last>, as `list` and --max-seeds "
+                   "plan them) of the one run named, and its cross-evaluations: what --parallel's workers do")
     p.add_argument("--whole-parts", action="store_true", help="run --time-limit: train only the parts predicted to "
                    "finish in time (measured speeds), for a last call on a machine that will not keep its runs/")
     args = p.parse_args(argv)
@@ -1378,6 +1413,14 @@ def main(argv=None) -> int:
                          "--time-limit S (every part fits no limit).")
     start = time.monotonic()
     selection = select(args.names)
+    if args.only_part is not None:
+        runs = [r for _, rs in selection for r in rs]
+        if args.action != "run" or args.parallel or len(runs) != 1:
+            raise ValueError(f"--only-part={args.only_part!r} needs `run` of exactly one run (experiment/run) without "
+                             f"--parallel: given {args.action} of {len(runs)} runs" + (" with --parallel" if args.parallel else ""))
+        if not re.fullmatch(r"seeds-\d+-\d+", args.only_part):
+            raise ValueError(f"--only-part={args.only_part!r} is not a part name: allowed is seeds-<first>-<last>, "
+                             "as `list` and `commands` name them.")
     if args.action == "list":
         print(listing(selection, args.runs_dir, args.out))
     elif args.action == "commands":
@@ -1395,7 +1438,8 @@ def main(argv=None) -> int:
                                       max_seeds=args.max_seeds, out=args.out, whole_parts=args.whole_parts)
         else:
             finished = train_pending(selection, args.runs_dir, deadline, reserve, max_seeds=args.max_seeds,
-                                     record=args.out, whole_parts=args.whole_parts, record_each=True)
+                                     record=args.out, whole_parts=args.whole_parts, record_each=True,
+                                     only_part=args.only_part)
         if not args.no_build:
             for path in record(selection, args.runs_dir, args.out):
                 print(f"recorded {path}")
