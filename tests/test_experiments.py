@@ -170,6 +170,34 @@ def test_a_cross_row_holds_the_parts_evaluated(tmp_path):
     assert (row["status"], row["seeds_evaluated"], row["per_seed"]["target_reached"]) == ("partly evaluated", 1, [0.75])
 
 
+def test_a_partial_run_builds_a_row_of_its_done_seeds(tmp_path):
+    """A run with one of two seeds done: its row and its cross row hold that seed and say how many are planned;
+    a run with no seed done stays empty."""
+    runs_dir, out = str(tmp_path / "runs"), str(tmp_path / "out")
+    a, b = TOY.runs
+    exp = dataclasses.replace(TOY, cross=(ex.Cross("b", "sampled", {}, stochastic=True),))
+    done = _part(b, runs_dir, "toy", "b", 1, 1, steps=[10240], evaluated=10240, metrics=([5120, 10240], 1, 10.0, [30.0, 9.0]))
+    _part(b, runs_dir, "toy", "b", 0, 1, steps=[5120])
+    _write(os.path.join(done, "cross-sampled.json"), json.dumps(
+        {"env_steps": 10240, "eval_envs": 16, "per_seed": {"episode/target_reached": [0.25]}}))
+    assert ex.run_state(exp, b, runs_dir).status == "partial"
+    assert "cross sampled: b with sampled actions: 1 of 1 parts evaluated" in ex.listing([(exp, [b])], runs_dir, "")
+    written = ex.build([(exp, list(exp.runs))], runs_dir, out, registry={"toy": exp}, log=lambda s: None)
+    assert os.path.join(out, "toy", "table.md") in written
+    with open(os.path.join(out, "toy", "table.json")) as f:
+        rows = {(r["run"], r.get("cross")): r for r in json.load(f)["rows"]}
+    row, cross, empty = rows[("b", None)], rows[("b", "sampled")], rows[("a", None)]
+    assert (row["status"], row["seeds_evaluated"], row["per_seed"]["target_reached"]) == ("partial", 1, [0.1])
+    assert row["wall_seconds"] == pytest.approx(39.0)
+    assert (cross["status"], cross["seeds_evaluated"], cross["per_seed"]["target_reached"]) == ("partly evaluated", 1, [0.25])
+    assert empty["status"] == "missing" and "per_seed" not in empty
+    with open(os.path.join(out, "toy", "table.md")) as f:
+        table = f.read()
+    assert table.count("| 1 x 16 (2 planned) |") == 2 and "| not done (missing) | 2 x - |" in table
+    assert not ex.build([(exp, list(exp.runs))], runs_dir, str(tmp_path / "other"), complete_only=True,
+                        registry={"toy": exp}, log=lambda s: None)
+
+
 def test_pending_parts_split_the_missing_seeds():
     run = ex.Run("r", "point-mass-ppo", seeds=5, num_timesteps=10_240)
     part = lambda first, count, status, steps=0: ex.PartState(f"f/{ex.part_name(first, count)}", first, count, status,

@@ -661,7 +661,7 @@ def listing(selection, runs_dir: str, out: str, registry: dict | None = None) ->
             files = cross_files(st, cross, out)
             left = [p for p in st.done_parts if p.name not in files]
             here = sum(bool(checkpoint_steps(p.logdir)) for p in left)
-            status = ("after training" if st.status != "done" else "done" if not left else
+            status = ("after training" if not st.done_parts else "done" if st.status == "done" and not left else
                       f"{len(files)} of {len(st.done_parts)} parts evaluated; {here} to evaluate here (`run`), "
                       f"{len(left) - here} without checkpoints here (evaluated where they are, or retrained)")
             lines.append(f"  cross {cross.name}: {cross.run} with {cross.setting}: {status}")
@@ -968,10 +968,8 @@ def merged_evaluation(state: RunState, files: dict[str, str] | None = None) -> d
 
 
 def cross_files(state: RunState, cross: Cross, record: str | None) -> dict[str, str]:
-    """{part name: its cross-<name>.json} for the done parts of a done run that have one ({} before the run is
-    done). Fewer than the done parts: the others were not evaluated where their checkpoints were."""
-    if state.status != "done":
-        return {}
+    """{part name: its cross-<name>.json} for the done parts that have one (of a done or a partial run). Fewer
+    than the done parts: the others were not evaluated where their checkpoints were."""
     record_dir = record_folder(record, *state.owner) if record else None
     paths = {part.name: cross_path(part, cross, record_dir) for part in state.done_parts}
     return {name: path for name, path in paths.items() if path is not None}
@@ -1018,7 +1016,8 @@ def build_default(experiment: Experiment, states: list[RunState], out_dir: str, 
                 row["mean"][m] = sum(values) / len(values)
         if ev is None:
             cells[-1] = f"not done ({row['status']})"
-        cells.append(f"{ev['seeds']} x {ev['eval_envs']}" if ev is not None else f"{planned} x -")
+        seeds = f"{ev['seeds']} x {ev['eval_envs']}" if ev is not None else f"{planned} x -"
+        cells.append(seeds + (f" ({planned} planned)" if ev is not None and ev["seeds"] < planned else ""))
         rows.append(cells)
         table.append(row)
 
@@ -1027,19 +1026,19 @@ def build_default(experiment: Experiment, states: list[RunState], out_dir: str, 
         row = {"run": run.name, "label": run.title, "preset": run.preset, "overrides": run.overrides,
                "seeds": run.seeds, "num_timesteps": st.budget, "status": st.status, "folder": st.folder,
                "shared": st.shared, "paper": run.paper}
-        if st.status == "done":
+        if st.done_parts:  # a partial run's row holds its done seeds (the seeds x episodes column says how many)
             row.update(wall_seconds=st.wall_seconds, steps_per_second=st.rate,
                        parts=[{"seeds": p.name, "env_steps": p.steps, "wall_seconds": p.wall_seconds,
                                "steps_per_second_per_seed": p.rate} for p in st.done_parts])
         cells = [run.title, f"`{run.preset}`" + (f" {describe_overrides(run)}" if run.overrides else "")]
-        add(cells, row, run.paper, merged_evaluation(st) if st.status == "done" else None, st, run.seeds)
+        add(cells, row, run.paper, merged_evaluation(st) if st.done_parts else None, st, run.seeds)
     by_name = {st.run.name: st for st in states}
     for cross in experiment.cross:
         st = by_name[cross.run]
         files = cross_files(st, cross, os.path.dirname(out_dir))
         label = cross.label or f"{st.run.title} on {cross.name}"
-        status = (st.status if st.status != "done" else "not evaluated" if not files else
-                  "done" if len(files) == len(st.done_parts) else "partly evaluated")
+        status = ("not evaluated" if not files and st.done_parts else st.status if not files else
+                  "done" if st.status == "done" and len(files) == len(st.done_parts) else "partly evaluated")
         row = {"run": cross.run, "cross": cross.name, "label": label, "env": cross.env, "paper": cross.paper,
                "stochastic": cross.stochastic, "seeds": st.run.seeds, "status": status}
         cells = [label, f"`{cross.run}`'s policies, evaluated with {cross.setting}"]
@@ -1139,7 +1138,7 @@ def build(selection, runs_dir: str, out: str, complete_only: bool = False, log=p
     written, code = [], code_version()  # once: the first table written would mark the tree modified
     for exp, _ in selection:
         states = [run_state(exp, r, runs_dir, out, registry) for r in exp.runs]
-        if not any(st.status == "done" for st in states) or (complete_only and any(st.status != "done" for st in states)):
+        if not any(st.done_parts for st in states) or (complete_only and any(st.status != "done" for st in states)):
             continue
         files = [f for st in states for f in record_parts(st, out)]
         states = [run_state(exp, r, runs_dir, out, registry) for r in exp.runs]

@@ -413,6 +413,12 @@ def sampled_table(ctx: Context) -> list[list[str]]:
 EXPERIMENT_HEADLINE = (
     ("UR5e reach, fast SAC, 4,096 envs (not in the paper; beside the paper's SAC)", "sac-fast", "ur5e-reach",
      "ur5e-reach-sac"),
+    ("Panda reach, fast SAC, 4,096 envs (not in the paper; beside the paper's SAC)", "sac-fast", "panda-reach",
+     "panda-reach-sac"),
+    ("UR5e reach-avoid, fast SAC, 4,096 envs (not in the paper; beside the paper's PPO)", "sac-fast",
+     "ur5e-reach-avoid", "ur5e-reach-avoid-ppo"),
+    ("Panda reach-avoid, fast SAC, 4,096 envs (not in the paper; beside the paper's PPO)", "sac-fast",
+     "panda-reach-avoid", "panda-reach-avoid-ppo"),
 )
 """README rows taken from a registered experiment's table.json: (label, experiment, run, PAPER_ROWS key of the
 paper's row beside it); a row appears once every seed of its run is evaluated."""
