@@ -412,7 +412,11 @@ def test_whole_parts_leaves_a_part_that_cannot_finish(tmp_path):
 
 def test_parallel_worker_commands(monkeypatch):
     monkeypatch.setenv("CUDA_VISIBLE_DEVICES", "0,1,2")
-    assert ex.local_gpus() == 3
+    assert ex.local_gpus() == ["0", "1", "2"]
+    monkeypatch.setenv("CUDA_VISIBLE_DEVICES", "2, 3")  # a second driver on the same host: its workers get 2 and 3
+    assert ex.local_gpus() == ["2", "3"]
+    with pytest.raises(ValueError, match=r"--gpus=0 is impossible"):
+        ex.main(["run", "sac-fast", "--parallel", "--gpus", "0"])
     env, argv = ex.worker_command("action-space/relative", "1", 530.7, "runs/experiments", 53.0, max_seeds=1)
     assert env["CUDA_VISIBLE_DEVICES"] == "1"
     assert argv[1:] == ["-m", "tools.experiments", "run", "action-space/relative", "--no-build", "--runs-dir",

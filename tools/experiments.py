@@ -844,16 +844,19 @@ def train_pending(selection, runs_dir: str, deadline: float | None = None, reser
     return finished
 
 
-def local_gpus() -> int:
-    """GPUs of this host, counted without initialising jax (its GPU allocation would starve the workers)."""
+def local_gpus() -> list[str]:
+    """The GPUs this process may use, as CUDA_VISIBLE_DEVICES names them for its workers: that variable's
+    entries where it is set (so two drivers can share a host: `CUDA_VISIBLE_DEVICES=2,3 ... run --parallel`),
+    else every GPU `nvidia-smi -L` lists. Read without initialising jax (its GPU allocation would starve the
+    workers)."""
     visible = os.environ.get("CUDA_VISIBLE_DEVICES")
     if visible is not None:
-        return len([d for d in visible.split(",") if d.strip()])
+        return [d.strip() for d in visible.split(",") if d.strip()]
     try:
         out = subprocess.run(["nvidia-smi", "-L"], capture_output=True, text=True, timeout=30).stdout
     except (OSError, subprocess.SubprocessError):
-        return 0
-    return sum(line.startswith("GPU ") for line in out.splitlines())
+        return []
+    return [str(i) for i in range(sum(line.startswith("GPU ") for line in out.splitlines()))]
 
 
 def worker_command(key: str, gpu: str, seconds: float | None, runs_dir: str, reserve: float,
@@ -1394,7 +1397,8 @@ def main(argv=None) -> int:
     p.add_argument("--reserve", type=float, help="run: seconds kept for the last checkpoint, evaluation and exit "
                                                   "(default: 10 %% of --time-limit, at least 30)")
     p.add_argument("--parallel", action="store_true", help="run: one part per local GPU, side by side (subprocesses)")
-    p.add_argument("--gpus", type=int, help="run --parallel: GPUs to use (default: nvidia-smi's count)")
+    p.add_argument("--gpus", type=int, help="run --parallel: GPUs 0..N-1 (default: those CUDA_VISIBLE_DEVICES "
+                                            "names, else all nvidia-smi lists)")
     p.add_argument("--no-build", action="store_true", help="run: no tables (finished parts are still recorded, each "
                    "as it finishes)")
     p.add_argument("--all", action="store_true", help="commands: also the runs done (each as a fresh run)")
@@ -1407,6 +1411,8 @@ def main(argv=None) -> int:
     args = p.parse_args(argv)
     if args.max_seeds is not None and args.max_seeds < 1:
         raise ValueError(f"--max-seeds={args.max_seeds} is impossible: allowed is 1 or more (or leave it out).")
+    if args.gpus is not None and args.gpus < 1:
+        raise ValueError(f"--gpus={args.gpus} is impossible: allowed is 1 or more (or leave it out).")
     if args.whole_parts and args.time_limit is None:
         raise ValueError("--whole-parts without --time-limit is meaningless: allowed is --whole-parts with "
                          "--time-limit S (every part fits no limit).")
@@ -1430,10 +1436,10 @@ def main(argv=None) -> int:
         deadline = None if args.time_limit is None else start + args.time_limit
         reserve = args.reserve if args.reserve is not None else (max(30.0, 0.1 * args.time_limit) if args.time_limit else 0.0)
         if args.parallel:
-            gpus = args.gpus or local_gpus()
-            if gpus < 1:
+            gpus = local_gpus() if args.gpus is None else [str(i) for i in range(args.gpus)]
+            if not gpus:
                 raise ValueError("--parallel found no GPU: allowed is a host with GPUs (or --gpus N).")
-            finished = train_parallel(selection, args.runs_dir, [str(i) for i in range(gpus)], deadline, reserve,
+            finished = train_parallel(selection, args.runs_dir, gpus, deadline, reserve,
                                       max_seeds=args.max_seeds, out=args.out, whole_parts=args.whole_parts)
         else:
             finished = train_pending(selection, args.runs_dir, deadline, reserve, max_seeds=args.max_seeds,
