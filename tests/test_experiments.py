@@ -426,7 +426,7 @@ def test_parallel_worker_commands(monkeypatch):
     assert argv[-1] == "--whole-parts" and "--time-limit" not in argv
     _, argv = ex.worker_command("action-space/relative", "2", None, "runs/experiments", 30.0, only_part="seeds-3-3")
     assert argv[-2:] == ["--only-part", "seeds-3-3"]
-    with pytest.raises(ValueError, match=r"--only-part='seeds-0-0' needs `run` of exactly one run .*given run of 4 runs"):
+    with pytest.raises(ValueError, match=r"--only-part='seeds-0-0' needs `run` of exactly one run .*given run of 5 runs"):
         ex.main(["run", "sac-fast", "--only-part", "seeds-0-0"])
     with pytest.raises(ValueError, match=r"--only-part='seed-1' is not a part name: allowed is seeds-<first>-<last>"):
         ex.main(["run", "sac-fast/panda-reach", "--only-part", "seed-1"])

@@ -415,6 +415,8 @@ EXPERIMENT_HEADLINE = (
      "ur5e-reach-sac"),
     ("Panda reach, fast SAC, 4,096 envs (not in the paper; beside the paper's SAC)", "sac-fast", "panda-reach",
      "panda-reach-sac"),
+    ("Panda reach, fast SAC trained 100M steps (not in the paper; beside the paper's SAC)", "sac-fast",
+     "panda-reach-100m", "panda-reach-sac"),
     ("UR5e reach-avoid, fast SAC, 4,096 envs (not in the paper; beside the paper's PPO)", "sac-fast",
      "ur5e-reach-avoid", "ur5e-reach-avoid-ppo"),
     ("Panda reach-avoid, fast SAC, 4,096 envs (not in the paper; beside the paper's PPO)", "sac-fast",
