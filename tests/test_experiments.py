@@ -450,8 +450,9 @@ def test_parallel_spreads_the_parts_of_one_run_over_the_gpus(tmp_path, monkeypat
     started = []
 
     class FakeProcess:
-        def __init__(self, argv, env, cwd):
+        def __init__(self, argv, env, cwd, stdout=None, stderr=None):
             started.append((env["CUDA_VISIBLE_DEVICES"], argv[argv.index("run") + 1], argv[argv.index("--only-part") + 1]))
+            stdout.write(f"worker of {argv[argv.index('--only-part') + 1]}\n")
             self.returncode = 0
 
         def poll(self):
@@ -460,8 +461,15 @@ def test_parallel_spreads_the_parts_of_one_run_over_the_gpus(tmp_path, monkeypat
     monkeypatch.setattr(ex.subprocess, "Popen", FakeProcess)
     monkeypatch.setattr(ex, "parallel_items", lambda *args, **kw: list(items))
     monkeypatch.setattr(ex.time, "sleep", lambda s: None)
-    assert not ex.train_parallel(selection, runs_dir, ["0", "1"], None, 30.0, log=lambda s: None, max_seeds=1, out=out)
+    logs = str(tmp_path / "logs")
+    assert not ex.train_parallel(selection, runs_dir, ["0", "1"], None, 30.0, log=lambda s: None, max_seeds=1, out=out,
+                                 worker_logs=logs)
     assert started == [("0", "toy/b", "seeds-0-0"), ("1", "toy/b", "seeds-1-1"), ("0", "toy/c", "seeds-0-0")]
+    assert sorted(os.listdir(logs)) == ["toy_b_seeds-0-0.log", "toy_b_seeds-1-1.log", "toy_c_seeds-0-0.log"]
+    with open(os.path.join(logs, "toy_b_seeds-1-1.log")) as f:
+        assert f.read() == "worker of seeds-1-1\n"
+    with pytest.raises(ValueError, match=r"--worker-logs without --parallel is meaningless"):
+        ex.main(["run", "sac-fast", "--worker-logs", logs])
     monkeypatch.undo()
     # A worker: its own part alone (trained, then cross-evaluated), never the other parts of its run.
     events = []

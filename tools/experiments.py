@@ -899,13 +899,18 @@ def parallel_items(selection, runs_dir: str, max_seeds: int | None = None, out: 
 
 
 def train_parallel(selection, runs_dir: str, gpus: list[str], deadline: float | None, reserve: float, log=print,
-                   max_seeds: int | None = None, out: str = OUT_DIR, whole_parts: bool = False) -> bool:
+                   max_seeds: int | None = None, out: str = OUT_DIR, whole_parts: bool = False,
+                   worker_logs: str | None = None) -> bool:
     """Trains the parts not done (and evaluates done parts with cross-evaluations left where their checkpoints
     are) one per GPU side by side (a subprocess each, CUDA_VISIBLE_DEVICES=gpu, `--only-part`); a GPU that
     finishes takes the next part. A run's parts (its seeds, at most `max_seeds` a part) spread over the GPUs, so
-    `--max-seeds 1` trains up to one seed per GPU. Returns True when every run is done."""
+    `--max-seeds 1` trains up to one seed per GPU. `worker_logs`: a folder where each worker writes its output
+    (`<experiment>_<run>_<part>.log`, appended) instead of this process's stdout, where they would interleave.
+    Returns True when every run is done."""
     queue = parallel_items(selection, runs_dir, max_seeds, out)
     running: dict[str, tuple[subprocess.Popen, str]] = {}
+    if worker_logs is not None:
+        os.makedirs(worker_logs, exist_ok=True)
     while queue or running:
         for gpu in [g for g in gpus if g not in running]:
             seconds = None if deadline is None else deadline - time.monotonic()
@@ -913,8 +918,14 @@ def train_parallel(selection, runs_dir: str, gpus: list[str], deadline: float | 
                 break
             key, part = queue.pop(0)
             env, argv = worker_command(key, gpu, seconds, runs_dir, reserve, max_seeds, out, whole_parts, part)
-            log(f"GPU {gpu}: {key} {part}")
-            running[gpu] = (subprocess.Popen(argv, env=env, cwd=ROOT), f"{key} {part}")
+            output = {}
+            if worker_logs is not None:
+                path = os.path.join(worker_logs, f"{key.replace('/', '_')}_{part}.log")
+                output = dict(stdout=open(path, "a"), stderr=subprocess.STDOUT)
+            log(f"GPU {gpu}: {key} {part}" + (f" (output: {path})" if output else ""))
+            running[gpu] = (subprocess.Popen(argv, env=env, cwd=ROOT, **output), f"{key} {part}")
+            if output:
+                output["stdout"].close()  # the worker holds its own copy
         for gpu, (proc, what) in list(running.items()):
             if proc.poll() is not None:
                 log(f"GPU {gpu}: {what} exited with status {proc.returncode}")
@@ -1400,6 +1411,8 @@ def main(argv=None) -> int:
     p.add_argument("--reserve", type=float, help="run: seconds kept for the last checkpoint, evaluation and exit "
                                                   "(default: 10 %% of --time-limit, at least 30)")
     p.add_argument("--parallel", action="store_true", help="run: one part per local GPU, side by side (subprocesses)")
+    p.add_argument("--worker-logs", help="run --parallel: a folder for each worker's output (one file per part) "
+                   "instead of this process's stdout")
     p.add_argument("--gpus", type=int, help="run --parallel: GPUs 0..N-1 (default: those CUDA_VISIBLE_DEVICES "
                                             "names, else all nvidia-smi lists)")
     p.add_argument("--no-build", action="store_true", help="run: no tables (finished parts are still recorded, each "
@@ -1414,6 +1427,9 @@ def main(argv=None) -> int:
     args = p.parse_args(argv)
     if args.max_seeds is not None and args.max_seeds < 1:
         raise ValueError(f"--max-seeds={args.max_seeds} is impossible: allowed is 1 or more (or leave it out).")
+    if (args.worker_logs is not None or args.gpus is not None) and not args.parallel:
+        raise ValueError(f"--{'worker-logs' if args.worker_logs is not None else 'gpus'} without --parallel is "
+                         "meaningless: allowed is `run --parallel` with it.")
     if args.gpus is not None and args.gpus < 1:
         raise ValueError(f"--gpus={args.gpus} is impossible: allowed is 1 or more (or leave it out).")
     if args.whole_parts and args.time_limit is None:
@@ -1443,7 +1459,8 @@ def main(argv=None) -> int:
             if not gpus:
                 raise ValueError("--parallel found no GPU: allowed is a host with GPUs (or --gpus N).")
             finished = train_parallel(selection, args.runs_dir, gpus, deadline, reserve,
-                                      max_seeds=args.max_seeds, out=args.out, whole_parts=args.whole_parts)
+                                      max_seeds=args.max_seeds, out=args.out, whole_parts=args.whole_parts,
+                                      worker_logs=args.worker_logs)
         else:
             finished = train_pending(selection, args.runs_dir, deadline, reserve, max_seeds=args.max_seeds,
                                      record=args.out, whole_parts=args.whole_parts, record_each=True,
