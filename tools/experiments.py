@@ -1349,8 +1349,8 @@ register(Experiment(
           "reach-avoid 95.2 %; the paper's own SAC reached 61.6 % (UR5e reach) and 87.9 % (Panda reach).",
     note="UR5e reach-avoid trains 200M steps, not its preset's 100M: a seed of the preset was still improving at "
          "100M (results/sac/fast). Panda reach at 100M steps: the preset's 60M left every seed 1-2 points short of "
-         "98.8 % with training episodes still improving (0.98 at 40M, 0.983-0.991 at 60M). `--max-seeds 1`: a 100M-step seed fits a 10 minute call, and vmapped fast-SAC "
-         "seeds ran no faster in all than one (results/sac/fast). The `sampled` rows evaluate the same policies with "
+         "98.8 % with training episodes still improving (0.98 at 40M, 0.983-0.991 at 60M). `--max-seeds 1`: a "
+         "100M-step seed fits a 10 minute call, and vmapped fast-SAC seeds ran no faster in all than one (results/sac/fast). The `sampled` rows evaluate the same policies with "
          "sampled actions (why: results/sac/fast); they hold the seeds whose checkpoints were at hand when their part "
          "was done (the seeds x episodes column).",
     cross=tuple(Cross(env, f"{env}-sampled", {}, label=f"{env}, sampled actions", paper=paper, stochastic=True)
