@@ -117,5 +117,6 @@ def test_experiment_rows_for_the_readme_only_when_every_seed_is_evaluated(tmp_pa
     assert ri._finished_experiment_row(ctx, "not-built", "done") is None
     assert ri._seed_rate([0.96, 0.97]) == "96.5 ± 0.5 %"  # population std, as eval.py's std_units
     # The index's cell: every run row, and the cross rows that hold numbers.
-    assert ri._experiment_ours(ctx, "x") == ("done: 96.5 ± 0.5 % reached; half: 90.0 % reached; done, sampled: "
-                                             "100.0 % reached (1 of 2 seeds) ([table.md](experiments/x/table.md))")
+    assert ri._experiment_ours(ctx, "x") == ("done: 96.5 ± 0.5 % reached; half: 90.0 % reached (1 of 2 seeds); "
+                                             "done, sampled: 100.0 % reached (1 of 2 seeds) "
+                                             "([table.md](experiments/x/table.md))")
