@@ -31,6 +31,15 @@ def _nonempty_leaves(tree) -> dict:
     return out
 
 
+def write_atomic(path: str, text: str) -> None:
+    """Writes `text` to `path` through a temporary file and a rename: a reader (another worker of
+    `tools.experiments run --parallel` reading the run's parts) sees the old file or the whole new one."""
+    tmp = f"{path}.tmp-{os.getpid()}"
+    with open(tmp, "w") as f:
+        f.write(text)
+    os.replace(tmp, path)
+
+
 class Checkpointer:
     """Saves and restores `TrainState`s under `<directory>`, keeping the newest `keep`."""
 

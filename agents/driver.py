@@ -32,7 +32,7 @@ import numpy as np
 
 import envs
 from agents import export, registry
-from agents.checkpoint import Checkpointer
+from agents.checkpoint import Checkpointer, write_atomic
 from agents.config import (TrainConfig, config_from_json, config_json, env_steps_per_update, merge_resume_config,
                            num_devices, total_updates, validate)
 from agents.logger import Logger
@@ -124,8 +124,7 @@ def _train(config: TrainConfig, learner_cls: type | None = None) -> TrainResult:
         else:
             programs = programs_for(config, learner_cls)
             state = programs.init(seed_keys(config))
-        with open(os.path.join(logdir, "config.json"), "w") as f:
-            json.dump(config_json(config), f, indent=2)
+        write_atomic(os.path.join(logdir, "config.json"), json.dumps(config_json(config), indent=2))
     except BaseException:
         ckpt.close()
         if created:
@@ -195,8 +194,7 @@ def _train(config: TrainConfig, learner_cls: type | None = None) -> TrainResult:
             text = json.dumps({"env_steps": step, "eval_envs": config.eval_envs, "per_seed": eval_metrics,
                                "mean": {k: float(np.mean(v)) for k, v in eval_metrics.items()}}, indent=2)
             for path in (os.path.join(ckpt.step_dir(step), "eval.json"), os.path.join(logdir, "eval.json")):
-                with open(path, "w") as f:
-                    f.write(text)
+                write_atomic(path, text)
     except NonFiniteLossError:
         if created and last_saved is None:  # nothing worth keeping: leave no half-made run directory
             logger.close()

@@ -413,10 +413,15 @@ def test_whole_parts_leaves_a_part_that_cannot_finish(tmp_path):
 def test_parallel_worker_commands(monkeypatch):
     monkeypatch.setenv("CUDA_VISIBLE_DEVICES", "0,1,2")
     assert ex.local_gpus() == ["0", "1", "2"]
-    monkeypatch.setenv("CUDA_VISIBLE_DEVICES", "2, 3")  # a second driver on the same host: its workers get 2 and 3
+    monkeypatch.setenv("CUDA_VISIBLE_DEVICES", "2, 3,2")  # a second driver on the same host: its workers get 2 and 3
     assert ex.local_gpus() == ["2", "3"]
     with pytest.raises(ValueError, match=r"--gpus=0 is impossible"):
         ex.main(["run", "sac-fast", "--parallel", "--gpus", "0"])
+    given = []
+    monkeypatch.setattr(ex, "train_parallel", lambda selection, runs_dir, gpus, *args, **kw: given.append(gpus) or True)
+    ex.main(["run", "sac-fast", "--parallel", "--gpus", "1", "--no-build"])
+    ex.main(["run", "sac-fast", "--parallel", "--no-build"])
+    assert given == [["2"], ["2", "3"]]  # --gpus N takes the first N of the visible GPUs
     env, argv = ex.worker_command("action-space/relative", "1", 530.7, "runs/experiments", 53.0, max_seeds=1)
     assert env["CUDA_VISIBLE_DEVICES"] == "1"
     assert argv[1:] == ["-m", "tools.experiments", "run", "action-space/relative", "--no-build", "--runs-dir",
@@ -426,26 +431,29 @@ def test_parallel_worker_commands(monkeypatch):
     assert argv[-1] == "--whole-parts" and "--time-limit" not in argv
     _, argv = ex.worker_command("action-space/relative", "2", None, "runs/experiments", 30.0, only_part="seeds-3-3")
     assert argv[-2:] == ["--only-part", "seeds-3-3"]
+    nowhere = ["--time-limit", "0", "--no-build", "--runs-dir", "/nonexistent/runs", "--out", "/nonexistent/out"]
     with pytest.raises(ValueError, match=r"--only-part='seeds-0-0' needs `run` of exactly one run .*given run of 5 runs"):
-        ex.main(["run", "sac-fast", "--only-part", "seeds-0-0"])
-    with pytest.raises(ValueError, match=r"--only-part='seed-1' is not a part name: allowed is seeds-<first>-<last>"):
-        ex.main(["run", "sac-fast/panda-reach", "--only-part", "seed-1"])
+        ex.main(["run", "sac-fast", "--only-part", "seeds-0-0", *nowhere])
+    for name in ("seed-1", "seeds-3-1", "seeds-01-2"):
+        with pytest.raises(ValueError, match=rf"--only-part='{name}' is not a part name: allowed is seeds-<first>-<last>"):
+            ex.main(["run", "sac-fast/panda-reach", "--only-part", name, *nowhere])
 
 
 def test_parallel_spreads_the_parts_of_one_run_over_the_gpus(tmp_path, monkeypatch):
-    """`run --parallel --max-seeds 1`: each seed of a run is its own worker (`--only-part`), a done part's
-    cross-evaluation left behind is a worker too, and a worker trains and evaluates its part alone."""
+    """`run --parallel --max-seeds 1`: each seed of a run is its own worker (`--only-part`), the done parts'
+    cross-evaluations left behind are workers too (first, while their checkpoints are here), and a worker
+    trains and evaluates its part alone."""
     runs_dir, out = str(tmp_path / "runs"), str(tmp_path / "out")
     b = TOY.runs[1]
-    c = ex.Run("c", "point-mass-ppo", {**TOY_RUN, "seed": 20}, seeds=1, num_timesteps=10_240)
-    exp = dataclasses.replace(TOY, runs=(b, c), cross=(ex.Cross("b", "sampled", {}, stochastic=True),))
+    c = ex.Run("c", "point-mass-ppo", {**TOY_RUN, "seed": 20}, seeds=2, num_timesteps=10_240)
+    exp = dataclasses.replace(TOY, runs=(b, c), cross=(ex.Cross("b", "sampled", {}, stochastic=True),
+                                                        ex.Cross("c", "sampled-c", {}, stochastic=True)))
     registry = {"toy": exp}
-    _part(b, runs_dir, "toy", "b", 0, 1, steps=[10240], evaluated=10240)  # done; its cross-evaluation not run
+    for run in (b, c):  # seed 0 of each done, its cross-evaluation not run
+        _part(run, runs_dir, "toy", run.name, 0, 1, steps=[10240], evaluated=10240)
     selection = ex.select(["toy"], registry)
     items = ex.parallel_items(selection, runs_dir, max_seeds=1, out=out, registry=registry)
-    assert items == [("toy/b", "seeds-0-0"), ("toy/b", "seeds-1-1"), ("toy/c", "seeds-0-0")]
-    assert ex.parallel_items(selection, runs_dir, out=out, registry=registry)[1:] == [("toy/b", "seeds-1-1"),
-                                                                                     ("toy/c", "seeds-0-0")]
+    assert items == [("toy/b", "seeds-0-0"), ("toy/c", "seeds-0-0"), ("toy/b", "seeds-1-1"), ("toy/c", "seeds-1-1")]
     # The driver: two GPUs, three workers, each started with its part (fake processes that end at once).
     started = []
 
@@ -464,8 +472,10 @@ def test_parallel_spreads_the_parts_of_one_run_over_the_gpus(tmp_path, monkeypat
     logs = str(tmp_path / "logs")
     assert not ex.train_parallel(selection, runs_dir, ["0", "1"], None, 30.0, log=lambda s: None, max_seeds=1, out=out,
                                  worker_logs=logs)
-    assert started == [("0", "toy/b", "seeds-0-0"), ("1", "toy/b", "seeds-1-1"), ("0", "toy/c", "seeds-0-0")]
-    assert sorted(os.listdir(logs)) == ["toy_b_seeds-0-0.log", "toy_b_seeds-1-1.log", "toy_c_seeds-0-0.log"]
+    assert started == [("0", "toy/b", "seeds-0-0"), ("1", "toy/c", "seeds-0-0"), ("0", "toy/b", "seeds-1-1"),
+                       ("1", "toy/c", "seeds-1-1")]
+    assert sorted(os.listdir(logs)) == ["toy_b_seeds-0-0.log", "toy_b_seeds-1-1.log", "toy_c_seeds-0-0.log",
+                                        "toy_c_seeds-1-1.log"]
     with open(os.path.join(logs, "toy_b_seeds-1-1.log")) as f:
         assert f.read() == "worker of seeds-1-1\n"
     with pytest.raises(ValueError, match=r"--worker-logs without --parallel is meaningless"):
@@ -493,12 +503,14 @@ def test_parallel_spreads_the_parts_of_one_run_over_the_gpus(tmp_path, monkeypat
     assert not ex.train_pending(worker, runs_dir, max_seeds=1, record=out, registry=registry, log=log.append,
                                 only_part="seeds-4-4")
     assert events == [] and "[toy/b] no part seeds-4-4 to train: its parts are seeds-1-1 (with --max-seeds 1)" in log
-    ex.train_pending(worker, runs_dir, max_seeds=1, record=out, registry=registry, log=log.append, only_part="seeds-1-1")
-    assert events == [("train", 1), ("cross", 1)]
-    events.clear()
+    # True: its part is done and evaluated, while the run is not.
     assert ex.train_pending(worker, runs_dir, max_seeds=1, record=out, registry=registry, log=log.append,
                             only_part="seeds-0-0")
-    assert events == [("cross", 0)]
+    assert events == [("cross", 0)] and ex.run_state(exp, b, runs_dir, out, registry).status == "partial"
+    events.clear()
+    assert ex.train_pending(worker, runs_dir, max_seeds=1, record=out, registry=registry, log=log.append,
+                            only_part="seeds-1-1")
+    assert events == [("train", 1), ("cross", 1)] and ex.run_state(exp, b, runs_dir, out, registry).status == "done"
 
 
 def test_toy_experiment_trains_resumes_and_builds(tmp_path):

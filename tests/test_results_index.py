@@ -102,10 +102,14 @@ def test_check_fails_after_a_cell_is_edited(tmp_path):
 
 
 def test_experiment_rows_for_the_readme_only_when_every_seed_is_evaluated(tmp_path):
-    rows = [{"run": "done", "label": "done", "seeds": 2, "seeds_evaluated": 2, "per_seed": {"target_reached": [0.96, 0.97]}},
-            {"run": "half", "label": "half", "seeds": 2, "seeds_evaluated": 1, "per_seed": {"target_reached": [0.9]}},
+    precise = {"distance": 0.005, "steps_in_target": 99.0, "times_left_target": 0.05}
+    rows = [{"run": "done", "label": "done", "seeds": 2, "seeds_evaluated": 2, "per_seed": {"target_reached": [0.96, 0.97]},
+             "mean": precise},
+            {"run": "half", "label": "half", "seeds": 2, "seeds_evaluated": 1, "per_seed": {"target_reached": [0.9]},
+             "mean": precise},
+            {"run": "none", "label": "none", "seeds": 2, "status": "missing"},
             {"run": "done", "label": "done, sampled", "cross": "sampled", "seeds": 2, "seeds_evaluated": 1,
-             "per_seed": {"target_reached": [1.0]}},
+             "per_seed": {"target_reached": [1.0]}, "mean": precise},
             {"run": "half", "label": "half, sampled", "cross": "sampled", "seeds": 2}]
     folder = tmp_path / "results" / "experiments" / "x"
     folder.mkdir(parents=True)
@@ -118,5 +122,7 @@ def test_experiment_rows_for_the_readme_only_when_every_seed_is_evaluated(tmp_pa
     assert ri._seed_rate([0.96, 0.97]) == "96.5 ± 0.5 %"  # population std, as eval.py's std_units
     # The index's cell: every run row, and the cross rows that hold numbers.
     assert ri._experiment_ours(ctx, "x") == ("done: 96.5 ± 0.5 % reached; half: 90.0 % reached (1 of 2 seeds); "
-                                             "done, sampled: 100.0 % reached (1 of 2 seeds) "
+                                             "none: not done; done, sampled: 100.0 % reached (1 of 2 seeds) "
                                              "([table.md](experiments/x/table.md))")
+    assert ri._experiment_ours(ctx, "x", precision=True).startswith(
+        "done: 0.005 m, 99.0, 0.05; half: 0.005 m, 99.0, 0.05 (1 of 2 seeds); none: not done; ")

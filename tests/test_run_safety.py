@@ -246,3 +246,16 @@ def test_ctrl_c_saves_a_checkpoint_and_exits_130(tmp_path, monkeypatch, capsys):
     assert code == train_cli.INTERRUPTED == 130
     assert "interrupted after 5,120 env steps" in capsys.readouterr().out
     assert Checkpointer(str(logdir / "checkpoints")).manager.all_steps() == [5120]
+
+
+def test_run_files_are_replaced_whole(tmp_path):
+    """config.json, eval.json and cross-*.json are written through a rename: a reader that opened the old file
+    (another `run --parallel` worker) reads it whole, the next reader the whole new one, no temporary is left."""
+    from agents.checkpoint import write_atomic
+
+    path = tmp_path / "eval.json"
+    path.write_text("old " * 1000)
+    with open(path) as reader:
+        write_atomic(str(path), "new")
+        assert reader.read() == "old " * 1000  # written in place, this handle would see the truncated new text
+    assert path.read_text() == "new" and os.listdir(tmp_path) == ["eval.json"]

@@ -37,6 +37,7 @@ cheaply; configs, training and plots import jax on use.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import csv
 import dataclasses
 import datetime
@@ -44,7 +45,6 @@ import functools
 import json
 import math
 import os
-import re
 import shlex
 import shutil
 import statistics
@@ -549,6 +549,7 @@ def cross_evaluate(run: Run, part: PartState, cross: Cross) -> str:
     eval_seed; the policy's mode unless `cross.stochastic`) and writes `cross-<name>.json` in eval.json's format;
     returns the path."""
     from agents import evaluation
+    from agents.checkpoint import write_atomic
 
     config = run.config(part.logdir, first_seed=part.first, seeds=part.count)
     result = evaluation.run(evaluation.checkpoint_policy(part.logdir), config.env_name, cross_env(run, cross),
@@ -556,10 +557,10 @@ def cross_evaluate(run: Run, part: PartState, cross: Cross) -> str:
     per_seed = {key: [u["metrics"][name] for u in result.units] for name, key in evaluation.PAPER_METRICS.items()
                 if all(name in u["metrics"] for u in result.units)}
     path = os.path.join(part.logdir, f"cross-{cross.name}.json")
-    with open(path, "w") as f:
-        json.dump({"env_steps": part.steps, "eval_envs": config.eval_envs, "env": cross.env,
-                   "actions": "stochastic" if cross.stochastic else "deterministic", "per_seed": per_seed,
-                   "mean": {k: sum(v) / len(v) for k, v in per_seed.items()}}, f, indent=2)
+    write_atomic(path, json.dumps({"env_steps": part.steps, "eval_envs": config.eval_envs, "env": cross.env,
+                                   "actions": "stochastic" if cross.stochastic else "deterministic",
+                                   "per_seed": per_seed, "mean": {k: sum(v) / len(v) for k, v in per_seed.items()}},
+                                  indent=2))
     return path
 
 
@@ -758,7 +759,8 @@ def train_pending(selection, runs_dir: str, deadline: float | None = None, reser
     call, where a part stopped half way would be lost. `record_each`: a part's files are recorded in `record`
     as soon as it is done (`record_parts`), so a call killed later still brings them back. `only_part` (a part
     name, `seeds-<first>-<last>`, of the one selected run): that part alone, with its cross-evaluations, as a
-    `train_parallel` worker trains it beside workers training the run's other parts."""
+    `train_parallel` worker trains it beside workers training the run's other parts; then True means that part
+    is done and evaluated (not the whole run), False that it is not (or that no such part is planned)."""
     from agents import driver
 
     compiled: set[str] = set()
@@ -801,7 +803,8 @@ def train_pending(selection, runs_dir: str, deadline: float | None = None, reser
                     pending = [p for p in pending if p.name == only_part]
                     if not pending:
                         log(f"[{st.key}] no part {only_part} to train: its parts are "
-                            f"{', '.join(p.name for p in pending_parts(st, max_seeds))} (with --max-seeds {max_seeds})")
+                            f"{', '.join(p.name for p in pending_parts(st, max_seeds))}"
+                            + (f" (with --max-seeds {max_seeds})" if max_seeds is not None else ""))
                         finished = False
                         break
                 part = pending[0]
@@ -851,7 +854,7 @@ def local_gpus() -> list[str]:
     workers)."""
     visible = os.environ.get("CUDA_VISIBLE_DEVICES")
     if visible is not None:
-        return [d.strip() for d in visible.split(",") if d.strip()]
+        return list(dict.fromkeys(d.strip() for d in visible.split(",") if d.strip()))
     try:
         out = subprocess.run(["nvidia-smi", "-L"], capture_output=True, text=True, timeout=30).stdout
     except (OSError, subprocess.SubprocessError):
@@ -889,13 +892,11 @@ def parallel_items(selection, runs_dir: str, max_seeds: int | None = None, out: 
             st = run_state(exp, r, runs_dir, out, registry)
             if st.status != "changed" and (st.folder not in by_folder or r.seeds > by_folder[st.folder][1].run.seeds):
                 by_folder[st.folder] = (exp, st)
-    items: list[tuple[str, str]] = []
-    for exp, st in by_folder.values():
-        names = [part.name for _, _, part, _ in folder_crosses(exp, st, runs_dir, out, registry)]
-        if st.status != "done":
-            names += [part.name for part in pending_parts(st, max_seeds)]
-        items += [(st.key, name) for name in dict.fromkeys(names)]
-    return items
+    crosses = [(st.key, part.name) for exp, st in by_folder.values()
+               for _, _, part, _ in folder_crosses(exp, st, runs_dir, out, registry)]
+    training = [(st.key, part.name) for _, st in by_folder.values() if st.status != "done"
+                for part in pending_parts(st, max_seeds)]
+    return list(dict.fromkeys(crosses + training))
 
 
 def train_parallel(selection, runs_dir: str, gpus: list[str], deadline: float | None, reserve: float, log=print,
@@ -918,14 +919,11 @@ def train_parallel(selection, runs_dir: str, gpus: list[str], deadline: float | 
                 break
             key, part = queue.pop(0)
             env, argv = worker_command(key, gpu, seconds, runs_dir, reserve, max_seeds, out, whole_parts, part)
-            output = {}
-            if worker_logs is not None:
-                path = os.path.join(worker_logs, f"{key.replace('/', '_')}_{part}.log")
-                output = dict(stdout=open(path, "a"), stderr=subprocess.STDOUT)
-            log(f"GPU {gpu}: {key} {part}" + (f" (output: {path})" if output else ""))
-            running[gpu] = (subprocess.Popen(argv, env=env, cwd=ROOT, **output), f"{key} {part}")
-            if output:
-                output["stdout"].close()  # the worker holds its own copy
+            path = None if worker_logs is None else os.path.join(worker_logs, f"{key.replace('/', '_')}_{part}.log")
+            log(f"GPU {gpu}: {key} {part}" + (f" (output: {path})" if path else ""))
+            with contextlib.ExitStack() as stack:  # the worker keeps its own copy of the log file's handle
+                output = {} if path is None else dict(stdout=stack.enter_context(open(path, "a")), stderr=subprocess.STDOUT)
+                running[gpu] = (subprocess.Popen(argv, env=env, cwd=ROOT, **output), f"{key} {part}")
         for gpu, (proc, what) in list(running.items()):
             if proc.poll() is not None:
                 log(f"GPU {gpu}: {what} exited with status {proc.returncode}")
@@ -1131,7 +1129,9 @@ def record_parts(state: RunState, record: str, only: str | None = None) -> list[
         crosses = sorted(n for n in os.listdir(part.logdir) if n.startswith("cross-") and n.endswith(".json"))
         for name in RECORDED_FILES + tuple(crosses):
             if os.path.isfile(os.path.join(part.logdir, name)):
-                shutil.copyfile(os.path.join(part.logdir, name), os.path.join(target, name))
+                tmp = os.path.join(target, f".{name}.tmp-{os.getpid()}")  # readers see the old file or the new
+                shutil.copyfile(os.path.join(part.logdir, name), tmp)
+                os.replace(tmp, os.path.join(target, name))
                 written.append(os.path.join(target, name))
     return written
 
@@ -1348,9 +1348,9 @@ register(Experiment(
     paper="PPO (the paper's best): UR5e reach 96.1 %, Panda reach 98.8 %, UR5e reach-avoid 86.8 %, Panda "
           "reach-avoid 95.2 %; the paper's own SAC reached 61.6 % (UR5e reach) and 87.9 % (Panda reach).",
     note="UR5e reach-avoid trains 200M steps, not its preset's 100M: a seed of the preset was still improving at "
-         "100M (results/sac/fast). Panda reach at 100M steps: the preset's 60M left every seed 1-2 points short of "
-         "98.8 % with training episodes still improving (0.98 at 40M, 0.983-0.991 at 60M). `--max-seeds 1`: a "
-         "100M-step seed fits a 10 minute call, and vmapped fast-SAC seeds ran no faster in all than one (results/sac/fast). The `sampled` rows evaluate the same policies with "
+         "100M (results/sac/fast). Panda reach also at 100M: at the preset's 60M every seed was short of 98.8 % "
+         "and still improving (results/experiments/README.md). `--max-seeds 1`: a 100M-step seed fits a 10 minute "
+         "call, and vmapped fast-SAC seeds ran no faster in all than one (results/sac/fast). The `sampled` rows evaluate the same policies with "
          "sampled actions (why: results/sac/fast); they hold the seeds whose checkpoints were at hand when their part "
          "was done (the seeds x episodes column).",
     cross=tuple(Cross(env, f"{env}-sampled", {}, label=f"{env}, sampled actions", paper=paper, stochastic=True)
@@ -1413,15 +1413,16 @@ def main(argv=None) -> int:
     p.add_argument("--parallel", action="store_true", help="run: one part per local GPU, side by side (subprocesses)")
     p.add_argument("--worker-logs", help="run --parallel: a folder for each worker's output (one file per part) "
                    "instead of this process's stdout")
-    p.add_argument("--gpus", type=int, help="run --parallel: GPUs 0..N-1 (default: those CUDA_VISIBLE_DEVICES "
-                                            "names, else all nvidia-smi lists)")
+    p.add_argument("--gpus", type=int, help="run --parallel: the first N of the GPUs CUDA_VISIBLE_DEVICES names, "
+                                            "else of those nvidia-smi lists (default: all of them)")
     p.add_argument("--no-build", action="store_true", help="run: no tables (finished parts are still recorded, each "
                    "as it finishes)")
     p.add_argument("--all", action="store_true", help="commands: also the runs done (each as a fresh run)")
     p.add_argument("--max-seeds", type=int, help="run, commands: seeds trained together in one train.py process "
                                                  "(default: all of a run's; 1 trains each seed on its own)")
-    p.add_argument("--only-part", help="run: train only this part (seeds-<first>-<last>, as `list` and --max-seeds "
-                   "plan them) of the one run named, and its cross-evaluations: what --parallel's workers do")
+    p.add_argument("--only-part", help="run: train only this part (seeds-<first>-<last>, as --max-seeds plans them "
+                   "and `commands` names them) of the one run named, and its cross-evaluations: what --parallel's "
+                   "workers do")
     p.add_argument("--whole-parts", action="store_true", help="run --time-limit: train only the parts predicted to "
                    "finish in time (measured speeds), for a last call on a machine that will not keep its runs/")
     args = p.parse_args(argv)
@@ -1442,9 +1443,10 @@ def main(argv=None) -> int:
         if args.action != "run" or args.parallel or len(runs) != 1:
             raise ValueError(f"--only-part={args.only_part!r} needs `run` of exactly one run (experiment/run) without "
                              f"--parallel: given {args.action} of {len(runs)} runs" + (" with --parallel" if args.parallel else ""))
-        if not re.fullmatch(r"seeds-\d+-\d+", args.only_part):
-            raise ValueError(f"--only-part={args.only_part!r} is not a part name: allowed is seeds-<first>-<last>, "
-                             "as `list` and `commands` name them.")
+        parsed = parse_part(args.only_part)
+        if parsed is None or part_name(*parsed) != args.only_part:
+            raise ValueError(f"--only-part={args.only_part!r} is not a part name: allowed is seeds-<first>-<last> "
+                             "(first <= last, no leading zeros), as the logdirs of `commands` name them.")
     if args.action == "list":
         print(listing(selection, args.runs_dir, args.out))
     elif args.action == "commands":
@@ -1455,7 +1457,7 @@ def main(argv=None) -> int:
         deadline = None if args.time_limit is None else start + args.time_limit
         reserve = args.reserve if args.reserve is not None else (max(30.0, 0.1 * args.time_limit) if args.time_limit else 0.0)
         if args.parallel:
-            gpus = local_gpus() if args.gpus is None else [str(i) for i in range(args.gpus)]
+            gpus = local_gpus() if args.gpus is None else (local_gpus() or [str(i) for i in range(args.gpus)])[:args.gpus]
             if not gpus:
                 raise ValueError("--parallel found no GPU: allowed is a host with GPUs (or --gpus N).")
             finished = train_parallel(selection, args.runs_dir, gpus, deadline, reserve,

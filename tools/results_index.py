@@ -689,12 +689,13 @@ def _experiment_ours(ctx: Context, name: str, precision: bool = False) -> str:
             continue  # a cross-evaluation not made yet (`tools.experiments list` says which parts are left)
         if not values:
             cells.append(f"{row['label']}: not done")
-        elif precision:
+            continue
+        partly = f" ({len(values)} of {row['seeds']} seeds)" if len(values) < row.get("seeds", 0) else ""
+        if precision:
             mean = row["mean"]
             cells.append(f"{row['label']}: {mean['distance']:.3f} m, {mean['steps_in_target']:.1f}, "
-                         f"{mean['times_left_target']:.2f}")
+                         f"{mean['times_left_target']:.2f}{partly}")
         else:
-            partly = f" ({len(values)} of {row['seeds']} seeds)" if len(values) < row.get("seeds", 0) else ""
             cells.append(f"{row['label']}: {_seed_rate(values) if len(values) > 1 else f'{100 * values[0]:.1f} %'} "
                          f"reached{partly}")
     return "; ".join(cells) + f" ({ctx.link(f'experiments/{name}/table.md')})"
