@@ -1,6 +1,7 @@
-"""tools/experiments.py: every registered run builds a valid config (and its train.py command parses back to
-it), the state listing and command list on a hand-made runs folder, the time-limit plan, and a two-run toy
-experiment on the point mass that trains, resumes after an interruption and builds its table."""
+"""tools/experiments.py and tools/experiment_registry.py: every registered run builds a valid config (and its
+train.py command parses back to it), the state listing and command list on a hand-made runs folder, the
+time-limit plan, and a two-run toy experiment on the point mass that trains, resumes after an interruption and
+builds its table."""
 
 import dataclasses
 import importlib.util

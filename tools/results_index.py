@@ -673,7 +673,7 @@ def index_table(ctx: Context) -> list[list[str]]:
 
 
 # ------------------------------------------------------------------------------------------------
-# The registered experiments (tools/experiments.py): their budgets, the paper's finding and ours from the
+# The registered experiments (tools/experiment_registry.py): their budgets, the paper's finding and ours from the
 # table.json each build writes under results/experiments/<name>/.
 
 def _experiment_ours(ctx: Context, name: str, precision: bool = False) -> str:
