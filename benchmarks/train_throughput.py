@@ -210,5 +210,6 @@ def write_report(out: Path, args, base, settings: dict, runs: dict, rates: dict,
     out.with_suffix(".md").write_text(text)
     return text
 
+
 if __name__ == "__main__":
     main()

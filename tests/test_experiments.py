@@ -104,6 +104,18 @@ def _part(run, runs_dir, exp, run_name, first, count, steps=(), evaluated=None, 
     return logdir
 
 
+def _fake_cross(events: list):
+    """A stand-in for `ex.cross_evaluate`: notes ("cross", first seed, cross name) in `events` and writes the part's
+    cross-<name>.json as the real one would."""
+    def cross_evaluate(run, part, cross):
+        events.append(("cross", part.first, cross.name))
+        path = os.path.join(part.logdir, f"cross-{cross.name}.json")
+        _write(path, json.dumps({"env_steps": 10240, "eval_envs": 16, "per_seed": {"episode/target_reached": [0.5]}}))
+        return path
+
+    return cross_evaluate
+
+
 def test_listing_and_commands_on_a_hand_made_runs_folder(tmp_path):
     runs_dir, out = str(tmp_path / "runs"), str(tmp_path / "out")
     extra = ex.Run("c", "point-mass-ppo", {**TOY_RUN, "seed": 20}, seeds=1, num_timesteps=10_240)
@@ -340,14 +352,8 @@ def test_each_part_is_cross_evaluated_and_recorded_before_the_next_trains(tmp_pa
         _part(b, runs_dir, "toy", "b", first, 1, steps=[10240], evaluated=10240, metrics=([5120, 10240], 1, 10.0, [30.0, 9.0]))
         return driver.TrainResult(None, 10240, "done", config.logdir, config, None, None)
 
-    def fake_cross(run, part, cross):
-        events.append(("cross", part.first, cross.name))
-        path = os.path.join(part.logdir, f"cross-{cross.name}.json")
-        _write(path, json.dumps({"env_steps": 10240, "eval_envs": 16, "per_seed": {"episode/target_reached": [0.5]}}))
-        return path
-
     monkeypatch.setattr(driver, "train", fake_train)
-    monkeypatch.setattr(ex, "cross_evaluate", fake_cross)
+    monkeypatch.setattr(ex, "cross_evaluate", _fake_cross(events))
     assert ex.train_pending(ex.select(["toy"], registry), runs_dir, log=lambda s: None, max_seeds=1, record=out,
                             registry=registry, record_each=True)
     assert [e[:2] for e in events] == [("train", 0), ("cross", 0), ("cross", 0), ("train", 1), ("cross", 1), ("cross", 1)]
@@ -491,14 +497,8 @@ def test_parallel_spreads_the_parts_of_one_run_over_the_gpus(tmp_path, monkeypat
         _part(b, runs_dir, "toy", "b", first, 1, steps=[10240], evaluated=10240, metrics=([5120, 10240], 1, 10.0, [30.0, 9.0]))
         return driver.TrainResult(None, 10240, "done", config.logdir, config, None, None)
 
-    def fake_cross(run, part, cross):
-        events.append(("cross", part.first))
-        path = os.path.join(part.logdir, f"cross-{cross.name}.json")
-        _write(path, json.dumps({"env_steps": 10240, "eval_envs": 16, "per_seed": {"episode/target_reached": [0.5]}}))
-        return path
-
     monkeypatch.setattr(driver, "train", fake_train)
-    monkeypatch.setattr(ex, "cross_evaluate", fake_cross)
+    monkeypatch.setattr(ex, "cross_evaluate", _fake_cross(events))
     worker = ex.select(["toy/b"], registry)
     log = []
     assert not ex.train_pending(worker, runs_dir, max_seeds=1, record=out, registry=registry, log=log.append,
@@ -507,11 +507,11 @@ def test_parallel_spreads_the_parts_of_one_run_over_the_gpus(tmp_path, monkeypat
     # True: its part is done and evaluated, while the run is not.
     assert ex.train_pending(worker, runs_dir, max_seeds=1, record=out, registry=registry, log=log.append,
                             only_part="seeds-0-0")
-    assert events == [("cross", 0)] and ex.run_state(exp, b, runs_dir, out, registry).status == "partial"
+    assert events == [("cross", 0, "sampled")] and ex.run_state(exp, b, runs_dir, out, registry).status == "partial"
     events.clear()
     assert ex.train_pending(worker, runs_dir, max_seeds=1, record=out, registry=registry, log=log.append,
                             only_part="seeds-1-1")
-    assert events == [("train", 1), ("cross", 1)] and ex.run_state(exp, b, runs_dir, out, registry).status == "done"
+    assert events == [("train", 1), ("cross", 1, "sampled")] and ex.run_state(exp, b, runs_dir, out, registry).status == "done"
 
 
 def test_toy_experiment_trains_resumes_and_builds(tmp_path):

@@ -47,7 +47,6 @@ import json
 import math
 import os
 import shlex
-import shutil
 import statistics
 import subprocess
 import sys
@@ -515,22 +514,27 @@ def listing(selection, runs_dir: str, out: str, registry: dict | None = None) ->
     return "\n".join(lines)
 
 
-def commands(selection, runs_dir: str, everything: bool = False, max_seeds: int | None = None,
-             record: str | None = None, registry: dict | None = None) -> list[str]:
-    """One `python train.py ...` per part still to train (with `everything`, every part of every run, each as a
-    fresh run); unfinished parts get --resume. Runs sharing a folder are planned once, by the one needing the
-    most seeds, so no seed is listed twice."""
-    by_folder: dict[str, RunState] = {}
+def planners(selection, runs_dir: str, record: str | None = None, registry: dict | None = None,
+             with_changed: bool = False) -> list[tuple[Experiment, RunState]]:
+    """(experiment, state) of the run that plans each selected folder's parts: of runs sharing a folder, the one
+    needing the most seeds, so no seed is planned twice. Changed runs only `with_changed`."""
+    by_folder: dict[str, tuple[Experiment, RunState]] = {}
     for exp, runs in selection:
         for run in runs:
             st = run_state(exp, run, runs_dir, record, registry)
-            if st.status == "changed" and not everything:
+            if st.status == "changed" and not with_changed:
                 continue
-            # Runs sharing a folder: the one needing the most seeds plans its parts, once.
-            if st.folder not in by_folder or run.seeds > by_folder[st.folder].run.seeds:
-                by_folder[st.folder] = st
+            if st.folder not in by_folder or run.seeds > by_folder[st.folder][1].run.seeds:
+                by_folder[st.folder] = (exp, st)
+    return list(by_folder.values())
+
+
+def commands(selection, runs_dir: str, everything: bool = False, max_seeds: int | None = None,
+             record: str | None = None, registry: dict | None = None) -> list[str]:
+    """One `python train.py ...` per part still to train (with `everything`, every part of every run, each as a
+    fresh run); unfinished parts get --resume. Runs sharing a folder are planned once (`planners`)."""
     lines = []
-    for st in by_folder.values():
+    for _, st in planners(selection, runs_dir, record, registry, with_changed=everything):
         if everything:
             st = dataclasses.replace(st, parts=[])
         for part in pending_parts(st, max_seeds):
@@ -639,14 +643,14 @@ def train_pending(selection, runs_dir: str, deadline: float | None = None, reser
                     log(f"[{st.key}] skipped: {st.reason}; move that part away to retrain it")
                     finished = False
                     break
-                pending = pending_parts(st, max_seeds)
+                planned = pending = pending_parts(st, max_seeds)
                 if only_part is not None:
                     if any(p.name == only_part for p in st.done_parts):
                         break
-                    pending = [p for p in pending if p.name == only_part]
+                    pending = [p for p in planned if p.name == only_part]
                     if not pending:
                         log(f"[{st.key}] no part {only_part} to train: its parts are "
-                            f"{', '.join(p.name for p in pending_parts(st, max_seeds))}"
+                            f"{', '.join(p.name for p in planned)}"
                             + (f" (with --max-seeds {max_seeds})" if max_seeds is not None else ""))
                         finished = False
                         break
@@ -727,18 +731,11 @@ def parallel_items(selection, runs_dir: str, max_seeds: int | None = None, out: 
                    registry: dict | None = None) -> list[tuple[str, str]]:
     """(run key, part name) for each part a worker can take on its own: the done parts with cross-evaluations
     left where their checkpoints are, then the parts still to train (`pending_parts`, at most `max_seeds` seeds
-    each). Runs that share a folder are planned once, by the one needing the most seeds, so no part is listed
-    twice."""
-    by_folder: dict[str, tuple[Experiment, RunState]] = {}
-    for exp, runs in selection:
-        for r in runs:
-            st = run_state(exp, r, runs_dir, out, registry)
-            if st.status != "changed" and (st.folder not in by_folder or r.seeds > by_folder[st.folder][1].run.seeds):
-                by_folder[st.folder] = (exp, st)
-    crosses = [(st.key, part.name) for exp, st in by_folder.values()
+    each). Runs that share a folder are planned once (`planners`), so no part is listed twice."""
+    plans = planners(selection, runs_dir, out, registry)
+    crosses = [(st.key, part.name) for exp, st in plans
                for _, _, part, _ in folder_crosses(exp, st, runs_dir, out, registry)]
-    training = [(st.key, part.name) for _, st in by_folder.values() if st.status != "done"
-                for part in pending_parts(st, max_seeds)]
+    training = [(st.key, part.name) for _, st in plans if st.status != "done" for part in pending_parts(st, max_seeds)]
     return list(dict.fromkeys(crosses + training))
 
 
@@ -960,6 +957,8 @@ def record_parts(state: RunState, record: str, only: str | None = None) -> list[
     """Copies the files of the run's finished parts (or of the part named `only`) into the record folder of the
     run whose folder it trains in (`record_folder`), so that the results hold the evidence behind the table and
     the next checkout sees those parts done."""
+    from agents.checkpoint import write_atomic
+
     written = []
     target_dir = record_folder(record, *state.owner)
     for part in state.done_parts:
@@ -972,9 +971,8 @@ def record_parts(state: RunState, record: str, only: str | None = None) -> list[
         crosses = sorted(n for n in os.listdir(part.logdir) if n.startswith("cross-") and n.endswith(".json"))
         for name in RECORDED_FILES + tuple(crosses):
             if os.path.isfile(os.path.join(part.logdir, name)):
-                tmp = os.path.join(target, f".{name}.tmp-{os.getpid()}")  # readers see the old file or the new
-                shutil.copyfile(os.path.join(part.logdir, name), tmp)
-                os.replace(tmp, os.path.join(target, name))
+                with open(os.path.join(part.logdir, name)) as f:
+                    write_atomic(os.path.join(target, name), f.read())  # readers see the old file or the new
                 written.append(os.path.join(target, name))
     return written
 
@@ -1067,7 +1065,8 @@ def main(argv=None) -> int:
         deadline = None if args.time_limit is None else start + args.time_limit
         reserve = args.reserve if args.reserve is not None else (max(30.0, 0.1 * args.time_limit) if args.time_limit else 0.0)
         if args.parallel:
-            gpus = local_gpus() if args.gpus is None else (local_gpus() or [str(i) for i in range(args.gpus)])[:args.gpus]
+            visible = local_gpus()
+            gpus = visible if args.gpus is None else (visible or [str(i) for i in range(args.gpus)])[:args.gpus]
             if not gpus:
                 raise ValueError("--parallel found no GPU: allowed is a host with GPUs (or --gpus N).")
             finished = train_parallel(selection, args.runs_dir, gpus, deadline, reserve,
