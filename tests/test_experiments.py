@@ -10,6 +10,7 @@ import os
 import shutil
 import time
 
+import jax
 import pytest
 
 import train
@@ -297,9 +298,16 @@ def test_time_limit_plan():
     assert ex.may_start(st, 20.0, compiled=True) and not ex.may_start(st, 19.9, compiled=True)
     near_end = dataclasses.replace(st, steps=99_500)  # 500 steps left: 5 s of training
     assert ex.may_start(near_end, 25.0, compiled=False) and not ex.may_start(near_end, 24.9, compiled=False)
+    # A start-up of 60 s is paid again at the resume: at least 60 s of training (not one 20 s interval).
+    slow_start = dataclasses.replace(st, startup=60.0)
+    assert ex.may_start(slow_start, 120.0, compiled=False) and not ex.may_start(slow_start, 119.9, compiled=False)
+    assert ex.may_start(dataclasses.replace(slow_start, steps=99_500), 65.0, compiled=False)  # it finishes in 5 s
     fresh = ex.PartState("", 0, 1, "missing", steps=0, budget=100_000)
-    assert ex.may_start(fresh, 5.0, compiled=False)  # no speed measured: the driver's clock stops it
-    assert not ex.may_start(fresh, 5.0, compiled=False, startup_guess=20.0)  # less than a compilation left
+    # No speed measured: twice the start-up (guessed from a comparable program, else ASSUMED_STARTUP) must be left.
+    assert ex.ASSUMED_STARTUP == 60.0
+    assert ex.may_start(fresh, 120.1, compiled=False) and not ex.may_start(fresh, 119.9, compiled=False)
+    assert ex.may_start(fresh, 40.1, compiled=False, startup_guess=20.0)
+    assert not ex.may_start(fresh, 39.9, compiled=False, startup_guess=20.0)
     assert not ex.may_start(fresh, 0.0, compiled=False)
     assert ex.may_start(fresh, 30.0, compiled=False, startup_guess=10.0, rate_guess=100.0)  # a sibling's speed
     assert not ex.may_start(fresh, 29.9, compiled=False, startup_guess=10.0, rate_guess=100.0)
@@ -308,6 +316,9 @@ def test_time_limit_plan():
     state = ex.RunState("e", run, "", "partial", 0, 100_000, [sibling(0, 2, 300.0), sibling(2, 1, 900.0)])
     assert ex.speed_guess(state, fresh) == (300.0, 7.0)  # the slower per seed of the parts with >= 1 seed
     assert ex.speed_guess(state, ex.PartState("x", 0, 3, "missing", 0, 100_000)) == (None, 0.0)
+    peer = ex.PartState("q", 0, 3, "done", 100_000, 100_000, 250.0, 9.0)  # a comparable run's 3-seed part
+    assert ex.speed_guess(state, ex.PartState("x", 0, 3, "missing", 0, 100_000), [peer]) == (250.0, 9.0)
+    assert ex.speed_guess(state, fresh, [peer]) == (250.0, 9.0)  # slower per seed than the run's own parts
 
 
 def test_a_time_limited_call_trains_one_part_until_the_clock_stops_it(tmp_path, monkeypatch):
@@ -392,6 +403,42 @@ def test_whole_parts_prediction():
     assert ex.seconds_to_finish(fresh, compiled=False, startup_guess=45.0, rate_guess=500.0) == 245.0
 
 
+def test_a_part_with_one_logged_chunk_takes_its_speed_from_a_comparable_run(tmp_path, monkeypatch):
+    """A part stopped after its first chunk (compilation inside) has no speed of its own; --whole-parts then
+    predicts from a run training the same config to another budget, not from that chunk."""
+    runs_dir = str(tmp_path / "runs")
+    short = ex.Run("short", "point-mass-ppo", dict(TOY_RUN), seeds=1, num_timesteps=10_240)
+    long = ex.Run("long", "point-mass-ppo", {**TOY_RUN, "seed": 5}, seeds=1, num_timesteps=20_480)
+    other = ex.Run("other", "point-mass-ppo", {**TOY_RUN, "env.dt": 0.2}, seeds=1, num_timesteps=10_240)
+    exp = ex.Experiment("toy2", "point mass: budgets", "not in the paper", (short, long, other))
+    registry = {"toy2": exp}
+    # short: 100 env steps/s after 10 s of start-up; other (another env): 1,000/s; long: one chunk of 2,560
+    # steps in 40 s, which alone would say 64 env steps/s.
+    measured = _part(short, runs_dir, "toy2", "short", 0, 1, steps=[10240], evaluated=10240,
+                     metrics=([5120, 10240], 1, 100.0, [61.2, 51.2]))
+    _part(other, runs_dir, "toy2", "other", 0, 1, steps=[10240], evaluated=10240,
+          metrics=([5120, 10240], 1, 1000.0, [15.12, 5.12]))
+    _part(long, runs_dir, "toy2", "long", 0, 1, steps=[2560], metrics=([2560], 1, 64.0, [40.0]))
+    part = ex.run_state(exp, long, runs_dir, registry=registry).parts[0]
+    assert (part.rate, part.startup, part.wall_seconds) == (None, 40.0, 40.0)
+    assert [p.logdir for p in ex.comparable_parts(long, runs_dir, registry=registry)] == [measured]
+    calls, log = [], []
+
+    def fake_train(config, learner_cls=None):
+        calls.append(config.logdir)
+        return driver.TrainResult(None, 2560, "stopped", config.logdir, config, None, None)  # no progress: returns
+
+    monkeypatch.setattr(driver, "train", fake_train)
+    selection = ex.select(["toy2/long"], registry)
+    # 17,920 steps left at 100/s after at most 40 s of start-up: 219.2 s. 210 s after the reserve: left.
+    assert not ex.train_pending(selection, runs_dir, deadline=time.monotonic() + 240.0, reserve=30.0, log=log.append,
+                                registry=registry, whole_parts=True)
+    assert calls == [] and any("left for a later call: it needs ~219 s" in line for line in log), log
+    assert not ex.train_pending(selection, runs_dir, deadline=time.monotonic() + 255.0, reserve=30.0, log=log.append,
+                                registry=registry, whole_parts=True)
+    assert calls == [os.path.join(runs_dir, "toy2", "long", "seeds-0-0")], log
+
+
 def test_whole_parts_leaves_a_part_that_cannot_finish(tmp_path):
     runs_dir = str(tmp_path / "runs")
     b = TOY.runs[1]
@@ -400,24 +447,37 @@ def test_whole_parts_leaves_a_part_that_cannot_finish(tmp_path):
     before = ex.checkpoint_steps(logdir)
     selection = ex.select(["toy/b"], {"toy": TOY})
     log = []
-    # 1 s left after the reserve cannot finish the remaining 5,120 steps with a compilation first.
+    # 1 s left after the reserve cannot finish the remaining 5,120 steps with a compilation first (nor can a speed
+    # be promised: its one logged chunk holds the compilation).
     assert not ex.train_pending(selection, runs_dir, deadline=time.monotonic() + 31.0, reserve=30.0, log=log.append,
                                 whole_parts=True)
-    assert any("[toy/b seeds-0-1] left for a later call: it needs ~" in line for line in log), log
+    assert any("[toy/b seeds-0-1] left for a later call: it needs an unknown time" in line for line in log), log
     assert ex.checkpoint_steps(logdir) == before == [5120]
-    # With time to spare, run a (never started: no speed measured) is left and run b is finished.
+    # With time to spare and the speed of a run that trains a's and b's config (seeds apart) to another budget (c,
+    # made by hand: 2,048 env steps/s per seed), a (never started) and b are predicted to finish, and do.
+    c = ex.Run("c", "point-mass-ppo", {**TOY_RUN, "seed": 30}, seeds=2, num_timesteps=20_480)
+    registry = {"toy": dataclasses.replace(TOY, runs=TOY.runs + (c,))}
+    _part(c, runs_dir, "toy", "c", 0, 2, steps=[20480], evaluated=20480, metrics=([10240, 20480], 2, 2048.0, [15.0, 5.0]))
     log.clear()
-    both = ex.select(None, {"toy": TOY})
-    assert not ex.train_pending(both, runs_dir, deadline=time.monotonic() + 600.0, reserve=30.0, log=log.append,
-                                whole_parts=True)
-    assert any("[toy/a seeds-0-1] left for a later call: it needs an unknown time" in line for line in log), log
-    assert ex.run_state(TOY, TOY.runs[0], runs_dir).status == "missing"
-    assert ex.run_state(TOY, b, runs_dir).status == "done"
+    both = ex.select(["toy/a", "toy/b"], registry)
+    assert ex.train_pending(both, runs_dir, deadline=time.monotonic() + 600.0, reserve=30.0, log=log.append,
+                            whole_parts=True, registry=registry), log
+    assert not any("left for a later call" in line for line in log), log
+    assert ex.run_state(TOY, TOY.runs[0], runs_dir).status == ex.run_state(TOY, b, runs_dir).status == "done"
     with pytest.raises(ValueError, match=r"--whole-parts without --time-limit"):
         ex.main(["run", "toy", "--whole-parts"])
 
 
-def test_parallel_worker_commands(monkeypatch):
+@pytest.fixture
+def jax_platforms_unset():
+    """jax_platforms cleared for the test (so that a test can see who sets it) and restored after it."""
+    before = jax.config.jax_platforms
+    jax.config.update("jax_platforms", None)
+    yield
+    jax.config.update("jax_platforms", before)
+
+
+def test_parallel_worker_commands(monkeypatch, jax_platforms_unset):
     monkeypatch.setenv("CUDA_VISIBLE_DEVICES", "0,1,2")
     assert ex.local_gpus() == ["0", "1", "2"]
     monkeypatch.setenv("CUDA_VISIBLE_DEVICES", "2, 3,2")  # a second driver on the same host: its workers get 2 and 3
@@ -429,6 +489,7 @@ def test_parallel_worker_commands(monkeypatch):
     ex.main(["run", "sac-fast", "--parallel", "--gpus", "1", "--no-build"])
     ex.main(["run", "sac-fast", "--parallel", "--no-build"])
     assert given == [["2"], ["2", "3"]]  # --gpus N takes the first N of the visible GPUs
+    assert jax.config.jax_platforms == "cpu"  # the driver's own jax stays off the workers' GPUs
     env, argv = ex.worker_command("action-space/relative", "1", 530.7, "runs/experiments", 53.0, max_seeds=1)
     assert env["CUDA_VISIBLE_DEVICES"] == "1"
     assert argv[1:] == ["-m", "tools.experiments", "run", "action-space/relative", "--no-build", "--runs-dir",

@@ -136,7 +136,8 @@ class PartState:
     """Env steps per seed of the newest checkpoint (0 if none)."""
     budget: int
     rate: float | None = None
-    """Measured env steps per second per seed (median over logged chunks after the first), None if none logged."""
+    """Measured env steps per second per seed (median over logged chunks after the first), None with fewer
+    than two chunks logged."""
     startup: float = 0.0
     """Seconds the first logged chunk took beyond its steps at `rate` (compilation, restore)."""
     wall_seconds: float = 0.0
@@ -221,7 +222,8 @@ def checkpoint_steps(logdir: str) -> list[int]:
 
 def read_timing(logdir: str, seeds: int) -> tuple[float | None, float, float]:
     """(env steps/s per seed, startup seconds, wall-clock seconds) from metrics.csv: one row per logged
-    chunk (the seeds' rows share the speed); a resumed run's re-logged steps count once."""
+    chunk (the seeds' rows share the speed); a resumed run's re-logged steps count once. The speed is the
+    median over the chunks after the first (which holds the compilation): None with one chunk only."""
     path = os.path.join(logdir, "metrics.csv")
     if not os.path.isfile(path):
         return None, 0.0, 0.0
@@ -235,10 +237,12 @@ def read_timing(logdir: str, seeds: int) -> tuple[float | None, float, float]:
     if not chunks:
         return None, 0.0, 0.0
     steps = sorted(chunks)
-    rates = [chunks[s][0] / seeds for s in steps]
-    rate = statistics.median(rates[1:]) if len(rates) > 1 else rates[0]
+    wall = sum(w for _, w in chunks.values())
+    if len(steps) == 1:  # the first chunk holds the start-up: no speed, and at most its time of start-up
+        return None, chunks[steps[0]][1], wall
+    rate = statistics.median(chunks[s][0] / seeds for s in steps[1:])
     startup = max(0.0, chunks[steps[0]][1] - steps[0] / rate) if rate > 0 else 0.0
-    return rate, startup, sum(w for _, w in chunks.values())
+    return rate, startup, wall
 
 
 def part_state(run: Run, logdir: str, first: int, count: int) -> PartState:
@@ -550,23 +554,31 @@ def commands(selection, runs_dir: str, everything: bool = False, max_seeds: int 
 # Training within a time limit.
 
 
+ASSUMED_STARTUP = 60.0
+"""Seconds of start-up assumed for a part whose start-up was never measured (nor a comparable part's):
+compilation and, for an off-policy learner, the replay buffer's first fill (fast SAC: 55-67 s on an H200)."""
+
+
 def may_start(part: PartState, seconds: float | None, compiled: bool, startup_guess: float = 0.0,
               rate_guess: float | None = None) -> bool:
-    """Whether a training call of `part` with `seconds` left (None: no limit) makes progress: one log interval
-    fits after the start-up at its measured speed (its own, else `rate_guess`); without a speed, the time left
-    exceeds the start-up seen (`startup_guess`: compilation of a comparable program). The call then trains to
-    its budget or until the driver's clock (`stop_after_seconds`) stops it, never to a predicted step: a
-    prediction from a slower start-up (one compiled without the cache) would end it early, and each restart
-    costs a compilation and, for an off-policy learner, a refill of its replay buffer."""
+    """Whether a training call of `part` with `seconds` left (None: no limit) is worth its start-up, which a
+    part stopped half way pays again at its resume: it must train at least as long as it starts up, and at
+    least one log interval, at its measured speed (its own, else `rate_guess`), unless it finishes sooner;
+    without a speed, the time left must exceed twice the start-up (measured, guessed from a comparable part,
+    else `ASSUMED_STARTUP`). The call then trains to its budget or until the driver's clock
+    (`stop_after_seconds`) stops it, never to a predicted step: a prediction from a slower start-up (one
+    compiled without the cache) would end it early, and each restart costs a compilation and, for an
+    off-policy learner, a refill of its replay buffer."""
     if seconds is None:
         return True
     if seconds <= 0:
         return False
     rate, startup = _speed(part, compiled, startup_guess, rate_guess)
     if rate is None:
-        return seconds > startup
+        return seconds > 2 * startup
     interval = max(1, part.budget // 50)  # the driver's default log interval
-    return rate * (seconds - startup) >= min(interval, part.budget - part.steps)
+    to_finish = (part.budget - part.steps) / rate
+    return seconds - startup >= min(to_finish, max(startup, interval / rate))
 
 
 def seconds_to_finish(part: PartState, compiled: bool, startup_guess: float = 0.0,
@@ -578,20 +590,47 @@ def seconds_to_finish(part: PartState, compiled: bool, startup_guess: float = 0.
 
 
 def _speed(part: PartState, compiled: bool, startup_guess: float, rate_guess: float | None) -> tuple[float | None, float]:
-    """(env steps/s per seed, startup seconds) of `part`'s next call: its own measurements, else the guesses;
-    no startup once its program is compiled in this process."""
+    """(env steps/s per seed, startup seconds) of `part`'s next call: its own measurements, else the guesses
+    (else `ASSUMED_STARTUP`); no startup once its program is compiled in this process."""
     rate = part.rate if part.rate is not None else rate_guess
-    return rate, 0.0 if compiled else (part.startup or startup_guess)
+    return rate, 0.0 if compiled else (part.startup or startup_guess or ASSUMED_STARTUP)
 
 
-def speed_guess(state: RunState, part: PartState) -> tuple[float | None, float]:
-    """(env steps/s per seed, startup s) measured on another part of the run with at least as many seeds
-    (seeds trained together run no faster per seed than fewer), or (None, 0)."""
-    measured = [p for p in state.parts if p.rate is not None and p.count >= part.count and p.logdir != part.logdir]
+def speed_guess(state: RunState, part: PartState, peers=()) -> tuple[float | None, float]:
+    """(env steps/s per seed, startup s) measured on another part of the run (or among `peers`, parts of
+    comparable runs: `comparable_parts`) with at least as many seeds (seeds trained together run no faster per
+    seed than fewer), the slowest such, or (None, 0)."""
+    measured = [p for p in [*state.parts, *peers]
+                if p.rate is not None and p.count >= part.count and p.logdir != part.logdir]
     if not measured:
         return None, 0.0
     slowest = min(measured, key=lambda p: p.rate)
     return slowest.rate, slowest.startup
+
+
+_SPEED_KEYS: dict[int, tuple[Run, str]] = {}
+
+
+def speed_key(run: Run) -> str:
+    """The run's training config as canonical JSON without its budget, seeds and logdir: runs with equal keys
+    train at the same speed."""
+    cached = _SPEED_KEYS.get(id(run))
+    if cached is None or cached[0] is not run:
+        from agents.config import config_json
+
+        fields = config_json(dataclasses.replace(run.config(), seeds=1))
+        fields.pop("num_timesteps"), fields.pop("seed")
+        cached = _SPEED_KEYS[id(run)] = (run, json.dumps(fields, sort_keys=True))
+    return cached[1]
+
+
+def comparable_parts(run: Run, runs_dir: str, record: str | None = None, registry: dict | None = None) -> list:
+    """The parts of the other registered runs that train what `run` trains, budget apart (`speed_key`): their
+    measured speeds stand in for a run that has none of its own yet (`speed_guess`)."""
+    registry = EXPERIMENTS if registry is None else registry
+    key = speed_key(run)
+    return [part for exp in registry.values() for other in exp.runs if other is not run and speed_key(other) == key
+            for part in run_state(exp, other, runs_dir, record, registry).parts]
 
 
 def train_pending(selection, runs_dir: str, deadline: float | None = None, reserve: float = 0.0,
@@ -658,6 +697,8 @@ def train_pending(selection, runs_dir: str, deadline: float | None = None, reser
                 where = f"[{st.key} {part.name}" + (f" in {st.shared}]" if st.shared else "]")
                 seconds = None if deadline is None else deadline - time.monotonic() - reserve
                 rate_guess, startup_guess = speed_guess(st, part)
+                if part.rate is None and rate_guess is None:
+                    rate_guess, startup_guess = speed_guess(st, part, comparable_parts(run, runs_dir, record, registry))
                 is_compiled, startup_guess = part.logdir in compiled, max(startup_seen, startup_guess)
                 if whole_parts and seconds is not None:
                     need = seconds_to_finish(part, is_compiled, startup_guess, rate_guess)
@@ -707,6 +748,15 @@ def local_gpus() -> list[str]:
     except (OSError, subprocess.SubprocessError):
         return []
     return [str(i) for i in range(sum(line.startswith("GPU ") for line in out.splitlines()))]
+
+
+def keep_off_the_gpus() -> None:
+    """Puts this process's jax (the planning builds configs) on the CPU before it starts a backend: on a GPU it
+    would take most of the first GPU's memory from the worker training there. Workers keep the environment's
+    platforms (their environment is os.environ's)."""
+    import jax
+
+    jax.config.update("jax_platforms", "cpu")
 
 
 def worker_command(key: str, gpu: str, seconds: float | None, runs_dir: str, reserve: float,
@@ -1065,6 +1115,7 @@ def main(argv=None) -> int:
         deadline = None if args.time_limit is None else start + args.time_limit
         reserve = args.reserve if args.reserve is not None else (max(30.0, 0.1 * args.time_limit) if args.time_limit else 0.0)
         if args.parallel:
+            keep_off_the_gpus()
             visible = local_gpus()
             gpus = visible if args.gpus is None else (visible or [str(i) for i in range(args.gpus)])[:args.gpus]
             if not gpus:
