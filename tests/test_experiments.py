@@ -536,6 +536,7 @@ def test_parallel_spreads_the_parts_of_one_run_over_the_gpus(tmp_path, monkeypat
 
     monkeypatch.setattr(ex.subprocess, "Popen", FakeProcess)
     monkeypatch.setattr(ex, "parallel_items", lambda *args, **kw: list(items))
+    original_worker_command = ex.worker_command
     monkeypatch.setattr(ex.time, "sleep", lambda s: None)
     logs = str(tmp_path / "logs")
     assert not ex.train_parallel(selection, runs_dir, ["0", "1"], None, 30.0, log=lambda s: None, max_seeds=1, out=out,
@@ -548,6 +549,21 @@ def test_parallel_spreads_the_parts_of_one_run_over_the_gpus(tmp_path, monkeypat
         assert f.read() == "worker of seeds-1-1\n"
     with pytest.raises(ValueError, match=r"--worker-logs without --parallel is meaningless"):
         ex.main(["run", "sac-fast", "--worker-logs", logs])
+    # Two workers on one GPU, each with 45 % of its memory.
+    started.clear()
+    fractions = []
+    monkeypatch.setattr(ex, "worker_command", lambda *args: fractions.append(
+        original_worker_command(*args)[0].get("XLA_PYTHON_CLIENT_MEM_FRACTION")) or original_worker_command(*args))
+    lines = []
+    assert not ex.train_parallel(selection, runs_dir, ["3"], None, 30.0, log=lines.append, max_seeds=1, out=out,
+                                 worker_logs=logs, workers_per_gpu=2)
+    assert [gpu for gpu, _, _ in started] == ["3"] * 4 and fractions == ["0.450"] * 4
+    assert [line.split(" (output")[0] for line in lines[:3]] == [  # both started before either ended
+        "GPU 3 worker 0: toy/b seeds-0-0", "GPU 3 worker 1: toy/c seeds-0-0", "GPU 3 worker 0: toy/b seeds-0-0 exited with status 0"]
+    with pytest.raises(ValueError, match=r"--workers-per-gpu without --parallel is meaningless"):
+        ex.main(["run", "sac-fast", "--workers-per-gpu", "2"])
+    with pytest.raises(ValueError, match=r"--workers-per-gpu=0 is impossible"):
+        ex.main(["run", "sac-fast", "--parallel", "--workers-per-gpu", "0"])
     monkeypatch.undo()
     # A worker: its own part alone (trained, then cross-evaluated), never the other parts of its run.
     events = []

@@ -761,9 +761,10 @@ def keep_off_the_gpus() -> None:
 
 def worker_command(key: str, gpu: str, seconds: float | None, runs_dir: str, reserve: float,
                    max_seeds: int | None = None, out: str = OUT_DIR, whole_parts: bool = False,
-                   only_part: str | None = None) -> tuple[dict, list[str]]:
+                   only_part: str | None = None, workers_per_gpu: int = 1) -> tuple[dict, list[str]]:
     """(environment, argv) of the process that trains run `key` (its part `only_part`, or all it has left) on GPU
-    `gpu` within `seconds`."""
+    `gpu` within `seconds`; with several workers per GPU, each may take 90 % of the GPU's memory divided among
+    them (XLA's preallocation would otherwise give the first one 75 %)."""
     argv = [sys.executable, "-m", "tools.experiments", "run", key, "--no-build", "--runs-dir", runs_dir,
             "--out", out, "--reserve", f"{reserve:g}"]
     if seconds is not None:
@@ -774,7 +775,10 @@ def worker_command(key: str, gpu: str, seconds: float | None, runs_dir: str, res
         argv += ["--whole-parts"]
     if only_part is not None:
         argv += ["--only-part", only_part]
-    return {**os.environ, "CUDA_VISIBLE_DEVICES": gpu}, argv
+    env = {**os.environ, "CUDA_VISIBLE_DEVICES": gpu}
+    if workers_per_gpu > 1:
+        env["XLA_PYTHON_CLIENT_MEM_FRACTION"] = f"{0.9 / workers_per_gpu:.3f}"
+    return env, argv
 
 
 def parallel_items(selection, runs_dir: str, max_seeds: int | None = None, out: str = OUT_DIR,
@@ -791,33 +795,37 @@ def parallel_items(selection, runs_dir: str, max_seeds: int | None = None, out: 
 
 def train_parallel(selection, runs_dir: str, gpus: list[str], deadline: float | None, reserve: float, log=print,
                    max_seeds: int | None = None, out: str = OUT_DIR, whole_parts: bool = False,
-                   worker_logs: str | None = None) -> bool:
+                   worker_logs: str | None = None, workers_per_gpu: int = 1) -> bool:
     """Trains the parts not done (and evaluates done parts with cross-evaluations left where their checkpoints
     are) one per GPU side by side (a subprocess each, CUDA_VISIBLE_DEVICES=gpu, `--only-part`); a GPU that
     finishes takes the next part. A run's parts (its seeds, at most `max_seeds` a part) spread over the GPUs, so
     `--max-seeds 1` trains up to one seed per GPU. `worker_logs`: a folder where each worker writes its output
     (`<experiment>_<run>_<part>.log`, appended) instead of this process's stdout, where they would interleave.
-    Returns True when every run is done."""
+    `workers_per_gpu`: workers sharing each GPU, for programs too small to fill one (the paper's SAC: 128 envs,
+    batch 256), each GPU's first worker before any second one. Returns True when every run is done."""
     queue = parallel_items(selection, runs_dir, max_seeds, out)
-    running: dict[str, tuple[subprocess.Popen, str]] = {}
+    running: dict[tuple[int, str], tuple[subprocess.Popen, str]] = {}
+    slots = [(k, gpu) for k in range(workers_per_gpu) for gpu in gpus]
+    name = lambda slot: f"GPU {slot[1]}" + (f" worker {slot[0]}" if workers_per_gpu > 1 else "")
     if worker_logs is not None:
         os.makedirs(worker_logs, exist_ok=True)
     while queue or running:
-        for gpu in [g for g in gpus if g not in running]:
+        for slot in [s for s in slots if s not in running]:
             seconds = None if deadline is None else deadline - time.monotonic()
             if not queue or (seconds is not None and seconds <= reserve):
                 break
             key, part = queue.pop(0)
-            env, argv = worker_command(key, gpu, seconds, runs_dir, reserve, max_seeds, out, whole_parts, part)
+            env, argv = worker_command(key, slot[1], seconds, runs_dir, reserve, max_seeds, out, whole_parts, part,
+                                       workers_per_gpu)
             path = None if worker_logs is None else os.path.join(worker_logs, f"{key.replace('/', '_')}_{part}.log")
-            log(f"GPU {gpu}: {key} {part}" + (f" (output: {path})" if path else ""))
+            log(f"{name(slot)}: {key} {part}" + (f" (output: {path})" if path else ""))
             with contextlib.ExitStack() as stack:  # the worker keeps its own copy of the log file's handle
                 output = {} if path is None else dict(stdout=stack.enter_context(open(path, "a")), stderr=subprocess.STDOUT)
-                running[gpu] = (subprocess.Popen(argv, env=env, cwd=ROOT, **output), f"{key} {part}")
-        for gpu, (proc, what) in list(running.items()):
+                running[slot] = (subprocess.Popen(argv, env=env, cwd=ROOT, **output), f"{key} {part}")
+        for slot, (proc, what) in list(running.items()):
             if proc.poll() is not None:
-                log(f"GPU {gpu}: {what} exited with status {proc.returncode}")
-                del running[gpu]
+                log(f"{name(slot)}: {what} exited with status {proc.returncode}")
+                del running[slot]
         if deadline is not None and time.monotonic() > deadline - reserve:
             queue.clear()
         time.sleep(2)
@@ -1073,6 +1081,9 @@ def main(argv=None) -> int:
                    "instead of this process's stdout")
     p.add_argument("--gpus", type=int, help="run --parallel: the first N of the GPUs CUDA_VISIBLE_DEVICES names, "
                                             "else of those nvidia-smi lists (default: all of them)")
+    p.add_argument("--workers-per-gpu", type=int, default=1, help="run --parallel: workers sharing each GPU "
+                   "(default 1), for runs too small to fill a GPU (the paper's SAC); each may use 90 %% of its "
+                   "memory divided among them")
     p.add_argument("--no-build", action="store_true", help="run: no tables (finished parts are still recorded, each "
                    "as it finishes)")
     p.add_argument("--all", action="store_true", help="commands: also the runs done (each as a fresh run)")
@@ -1086,9 +1097,12 @@ def main(argv=None) -> int:
     args = p.parse_args(argv)
     if args.max_seeds is not None and args.max_seeds < 1:
         raise ValueError(f"--max-seeds={args.max_seeds} is impossible: allowed is 1 or more (or leave it out).")
-    if (args.worker_logs is not None or args.gpus is not None) and not args.parallel:
-        raise ValueError(f"--{'worker-logs' if args.worker_logs is not None else 'gpus'} without --parallel is "
-                         "meaningless: allowed is `run --parallel` with it.")
+    lone = [flag for flag, given in (("worker-logs", args.worker_logs is not None), ("gpus", args.gpus is not None),
+                                     ("workers-per-gpu", args.workers_per_gpu != 1)) if given]
+    if lone and not args.parallel:
+        raise ValueError(f"--{lone[0]} without --parallel is meaningless: allowed is `run --parallel` with it.")
+    if args.workers_per_gpu < 1:
+        raise ValueError(f"--workers-per-gpu={args.workers_per_gpu} is impossible: allowed is 1 or more.")
     if args.gpus is not None and args.gpus < 1:
         raise ValueError(f"--gpus={args.gpus} is impossible: allowed is 1 or more (or leave it out).")
     if args.whole_parts and args.time_limit is None:
@@ -1122,7 +1136,7 @@ def main(argv=None) -> int:
                 raise ValueError("--parallel found no GPU: allowed is a host with GPUs (or --gpus N).")
             finished = train_parallel(selection, args.runs_dir, gpus, deadline, reserve,
                                       max_seeds=args.max_seeds, out=args.out, whole_parts=args.whole_parts,
-                                      worker_logs=args.worker_logs)
+                                      worker_logs=args.worker_logs, workers_per_gpu=args.workers_per_gpu)
         else:
             finished = train_pending(selection, args.runs_dir, deadline, reserve, max_seeds=args.max_seeds,
                                      record=args.out, whole_parts=args.whole_parts, record_each=True,
