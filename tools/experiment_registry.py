@@ -182,13 +182,16 @@ register(Experiment(
     tuple(Run(env, f"{env}-sac-fast", paper=paper, num_timesteps=200_000_000 if env == "ur5e-reach-avoid" else None)
           for env, paper in _PPO_ROWS.items())
     + (Run("panda-reach-100m", "panda-reach-sac-fast", label="panda-reach, 100M steps", paper=_PPO_ROWS["panda-reach"],
-           num_timesteps=100_000_000),),
+           num_timesteps=100_000_000),
+       Run("ur5e-reach-avoid-300m", "ur5e-reach-avoid-sac-fast", label="ur5e-reach-avoid, 300M steps",
+           paper=_PPO_ROWS["ur5e-reach-avoid"], num_timesteps=300_000_000)),
     metrics=_AVOID_METRICS + ("wall_clock", "steps_per_second"), curves=_AVOID_CURVES,
     paper="PPO (the paper's best): UR5e reach 96.1 %, Panda reach 98.8 %, UR5e reach-avoid 86.8 %, Panda "
           "reach-avoid 95.2 %; the paper's own SAC reached 61.6 % (UR5e reach) and 87.9 % (Panda reach).",
     note="UR5e reach-avoid trains 200M steps, not its preset's 100M: a seed of the preset was still improving at "
          "100M (results/sac/fast). Panda reach also at 100M: at the preset's 60M every seed was short of 98.8 % "
-         "and still improving (results/experiments/README.md). `--max-seeds 1`: a 100M-step seed fits a 10 minute "
+         "and still improving (results/experiments/README.md); UR5e reach-avoid also at 300M: every seed was still "
+         "improving at 200M (results/experiments/README.md). `--max-seeds 1`: a 100M-step seed fits a 10 minute "
          "call, and vmapped fast-SAC seeds ran no faster in all than one (results/sac/fast). The `sampled` rows evaluate the same policies with "
          "sampled actions (why: results/sac/fast); they hold the seeds whose checkpoints were at hand when their part "
          "was done (the seeds x episodes column).",
