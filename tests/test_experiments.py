@@ -117,6 +117,19 @@ def _fake_cross(events: list):
     return cross_evaluate
 
 
+def test_read_timing_takes_the_speed_after_the_first_chunk(tmp_path):
+    """The first chunk holds the compilation: the speed is the median after it, the start-up its excess; rows of
+    no positive, finite speed (a hand-edited or corrupt file) are skipped; one chunk gives no speed."""
+    rows = ["env_steps,seed,steps_per_second,wall_seconds", "2560,0,1000,12.56", "5120,0,0,1.0", "7680,0,nan,1.0",
+            "10240,0,-5,1.0", "12800,0,1000,2.56", "15360,0,500,5.12"]
+    _write(str(tmp_path / "a" / "metrics.csv"), "\n".join(rows) + "\n")
+    rate, startup, wall = ex.read_timing(str(tmp_path / "a"), 1)
+    assert rate == 750.0 and startup == pytest.approx(12.56 - 2560 / 750.0) and wall == pytest.approx(20.24)
+    _write(str(tmp_path / "b" / "metrics.csv"), "\n".join(rows[:2]) + "\n")
+    assert ex.read_timing(str(tmp_path / "b"), 1) == (None, 12.56, 12.56)
+    assert ex.read_timing(str(tmp_path / "c"), 1) == (None, None, 0.0)
+
+
 def test_listing_and_commands_on_a_hand_made_runs_folder(tmp_path):
     runs_dir, out = str(tmp_path / "runs"), str(tmp_path / "out")
     extra = ex.Run("c", "point-mass-ppo", {**TOY_RUN, "seed": 20}, seeds=1, num_timesteps=10_240)
@@ -315,10 +328,15 @@ def test_time_limit_plan():
     sibling = lambda first, count, rate: ex.PartState(f"p{first}", first, count, "done", 100_000, 100_000, rate, 7.0)
     state = ex.RunState("e", run, "", "partial", 0, 100_000, [sibling(0, 2, 300.0), sibling(2, 1, 900.0)])
     assert ex.speed_guess(state, fresh) == (300.0, 7.0)  # the slower per seed of the parts with >= 1 seed
-    assert ex.speed_guess(state, ex.PartState("x", 0, 3, "missing", 0, 100_000)) == (None, 0.0)
+    assert ex.speed_guess(state, ex.PartState("x", 0, 3, "missing", 0, 100_000)) == (None, None)
     peer = ex.PartState("q", 0, 3, "done", 100_000, 100_000, 250.0, 9.0)  # a comparable run's 3-seed part
     assert ex.speed_guess(state, ex.PartState("x", 0, 3, "missing", 0, 100_000), [peer]) == (250.0, 9.0)
     assert ex.speed_guess(state, fresh, [peer]) == (250.0, 9.0)  # slower per seed than the run's own parts
+    outdated = dataclasses.replace(peer, rate=50.0, status="changed")  # trained under another config: no measure
+    assert ex.speed_guess(state, fresh, [peer, outdated]) == (250.0, 9.0)
+    # A start-up measured as 0 s (a cached compilation) is a measurement, not a missing one.
+    cached = ex.PartState("", 0, 1, "partial", steps=0, budget=100_000, rate=1000.0, startup=0.0)
+    assert ex.seconds_to_finish(cached, compiled=False) == 100.0 and ex.may_start(cached, 100.0, compiled=False)
 
 
 def test_a_time_limited_call_trains_one_part_until_the_clock_stops_it(tmp_path, monkeypatch):
@@ -500,7 +518,7 @@ def test_parallel_worker_commands(monkeypatch, jax_platforms_unset):
     _, argv = ex.worker_command("action-space/relative", "2", None, "runs/experiments", 30.0, only_part="seeds-3-3")
     assert argv[-2:] == ["--only-part", "seeds-3-3"]
     nowhere = ["--time-limit", "0", "--no-build", "--runs-dir", "/nonexistent/runs", "--out", "/nonexistent/out"]
-    with pytest.raises(ValueError, match=r"--only-part='seeds-0-0' needs `run` of exactly one run .*given run of 5 runs"):
+    with pytest.raises(ValueError, match=rf"--only-part='seeds-0-0' needs `run` of exactly one run .*given run of {len(ex.EXPERIMENTS['sac-fast'].runs)} runs"):
         ex.main(["run", "sac-fast", "--only-part", "seeds-0-0", *nowhere])
     for name in ("seed-1", "seeds-3-1", "seeds-01-2"):
         with pytest.raises(ValueError, match=rf"--only-part='{name}' is not a part name: allowed is seeds-<first>-<last>"):

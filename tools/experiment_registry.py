@@ -192,7 +192,7 @@ register(Experiment(
          "100M (results/sac/fast). Panda reach also at 100M: at the preset's 60M every seed was short of 98.8 % "
          "and still improving (results/experiments/README.md); UR5e reach-avoid also at 300M: every seed was still "
          "improving at 200M (results/experiments/README.md). `--max-seeds 1`: a 100M-step seed fits a 10 minute "
-         "call, and vmapped fast-SAC seeds ran no faster in all than one (results/sac/fast). The `sampled` rows evaluate the same policies with "
+         "call (a 200M or 300M one takes two or three, each resume refilling the replay buffer), and vmapped fast-SAC seeds ran no faster in all than one (results/sac/fast). The `sampled` rows evaluate the same policies with "
          "sampled actions (why: results/sac/fast); they hold the seeds whose checkpoints were at hand when their part "
          "was done (the seeds x episodes column).",
     cross=tuple(Cross(env, f"{env}-sampled", {}, label=f"{env}, sampled actions", paper=paper, stochastic=True)

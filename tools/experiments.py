@@ -138,8 +138,9 @@ class PartState:
     rate: float | None = None
     """Measured env steps per second per seed (median over logged chunks after the first), None with fewer
     than two chunks logged."""
-    startup: float = 0.0
-    """Seconds the first logged chunk took beyond its steps at `rate` (compilation, restore)."""
+    startup: float | None = None
+    """Seconds the first logged chunk took beyond its steps at `rate` (compilation, restore); with one chunk
+    logged, that chunk's whole time (an upper bound); None if none logged."""
     wall_seconds: float = 0.0
     """Training wall-clock summed over logged chunks (compilation included)."""
     reason: str = ""
@@ -220,29 +221,33 @@ def checkpoint_steps(logdir: str) -> list[int]:
     return sorted(int(d) for d in os.listdir(directory) if d.isdigit() and os.path.isdir(os.path.join(directory, d)))
 
 
-def read_timing(logdir: str, seeds: int) -> tuple[float | None, float, float]:
+def read_timing(logdir: str, seeds: int) -> tuple[float | None, float | None, float]:
     """(env steps/s per seed, startup seconds, wall-clock seconds) from metrics.csv: one row per logged
-    chunk (the seeds' rows share the speed); a resumed run's re-logged steps count once. The speed is the
-    median over the chunks after the first (which holds the compilation): None with one chunk only."""
+    chunk (the seeds' rows share the speed; rows of no positive, finite speed are skipped); a resumed run's
+    re-logged steps count once. The speed is the median over the chunks after the first (which holds the
+    compilation; the first chunk of each later call, a resume, stays in: with many chunks a call it moves the
+    median little): None with one chunk only, whose time then bounds the start-up. None, None, 0 without
+    chunks."""
     path = os.path.join(logdir, "metrics.csv")
     if not os.path.isfile(path):
-        return None, 0.0, 0.0
+        return None, None, 0.0
     chunks: dict[int, tuple[float, float]] = {}
     with open(path, newline="") as f:
         for row in csv.DictReader(f):
             try:
-                chunks[int(float(row["env_steps"]))] = (float(row["steps_per_second"]), float(row["wall_seconds"]))
+                rate, wall = float(row["steps_per_second"]), float(row["wall_seconds"])
+                if math.isfinite(rate) and rate > 0 and math.isfinite(wall):
+                    chunks[int(float(row["env_steps"]))] = (rate, wall)
             except (KeyError, TypeError, ValueError):
                 continue
     if not chunks:
-        return None, 0.0, 0.0
+        return None, None, 0.0
     steps = sorted(chunks)
     wall = sum(w for _, w in chunks.values())
-    if len(steps) == 1:  # the first chunk holds the start-up: no speed, and at most its time of start-up
+    if len(steps) == 1:
         return None, chunks[steps[0]][1], wall
     rate = statistics.median(chunks[s][0] / seeds for s in steps[1:])
-    startup = max(0.0, chunks[steps[0]][1] - steps[0] / rate) if rate > 0 else 0.0
-    return rate, startup, wall
+    return rate, max(0.0, chunks[steps[0]][1] - steps[0] / rate), wall
 
 
 def part_state(run: Run, logdir: str, first: int, count: int) -> PartState:
@@ -559,7 +564,7 @@ ASSUMED_STARTUP = 60.0
 compilation and, for an off-policy learner, the replay buffer's first fill (fast SAC: 55-67 s on an H200)."""
 
 
-def may_start(part: PartState, seconds: float | None, compiled: bool, startup_guess: float = 0.0,
+def may_start(part: PartState, seconds: float | None, compiled: bool, startup_guess: float | None = None,
               rate_guess: float | None = None) -> bool:
     """Whether a training call of `part` with `seconds` left (None: no limit) is worth its start-up, which a
     part stopped half way pays again at its resume: it must train at least as long as it starts up, and at
@@ -581,7 +586,7 @@ def may_start(part: PartState, seconds: float | None, compiled: bool, startup_gu
     return seconds - startup >= min(to_finish, max(startup, interval / rate))
 
 
-def seconds_to_finish(part: PartState, compiled: bool, startup_guess: float = 0.0,
+def seconds_to_finish(part: PartState, compiled: bool, startup_guess: float | None = None,
                       rate_guess: float | None = None) -> float | None:
     """Predicted seconds to train `part` from its checkpoint to its budget (startup included unless `compiled`),
     at its own measured speed per seed, else `rate_guess`; None without a speed."""
@@ -589,21 +594,25 @@ def seconds_to_finish(part: PartState, compiled: bool, startup_guess: float = 0.
     return startup + (part.budget - part.steps) / rate if rate else None
 
 
-def _speed(part: PartState, compiled: bool, startup_guess: float, rate_guess: float | None) -> tuple[float | None, float]:
+def _speed(part: PartState, compiled: bool, startup_guess: float | None,
+           rate_guess: float | None) -> tuple[float | None, float]:
     """(env steps/s per seed, startup seconds) of `part`'s next call: its own measurements, else the guesses
     (else `ASSUMED_STARTUP`); no startup once its program is compiled in this process."""
     rate = part.rate if part.rate is not None else rate_guess
-    return rate, 0.0 if compiled else (part.startup or startup_guess or ASSUMED_STARTUP)
+    if compiled:
+        return rate, 0.0
+    known = [x for x in (part.startup, startup_guess) if x is not None]
+    return rate, known[0] if known else ASSUMED_STARTUP
 
 
-def speed_guess(state: RunState, part: PartState, peers=()) -> tuple[float | None, float]:
+def speed_guess(state: RunState, part: PartState, peers=()) -> tuple[float | None, float | None]:
     """(env steps/s per seed, startup s) measured on another part of the run (or among `peers`, parts of
     comparable runs: `comparable_parts`) with at least as many seeds (seeds trained together run no faster per
-    seed than fewer), the slowest such, or (None, 0)."""
-    measured = [p for p in [*state.parts, *peers]
-                if p.rate is not None and p.count >= part.count and p.logdir != part.logdir]
+    seed than fewer; parts trained under a changed config left out), the slowest such, or (None, None)."""
+    measured = [p for p in [*state.parts, *peers] if p.rate is not None and p.count >= part.count
+                and p.logdir != part.logdir and p.status != "changed"]
     if not measured:
-        return None, 0.0
+        return None, None
     slowest = min(measured, key=lambda p: p.rate)
     return slowest.rate, slowest.startup
 
@@ -650,7 +659,7 @@ def train_pending(selection, runs_dir: str, deadline: float | None = None, reser
     from agents import driver
 
     compiled: set[str] = set()
-    startup_seen = 0.0
+    startup_seen: float | None = None  # the longest start-up measured in this call
     cross_seconds = 0.0  # the longest cross-evaluation of this call
     finished = True
 
@@ -699,7 +708,9 @@ def train_pending(selection, runs_dir: str, deadline: float | None = None, reser
                 rate_guess, startup_guess = speed_guess(st, part)
                 if part.rate is None and rate_guess is None:
                     rate_guess, startup_guess = speed_guess(st, part, comparable_parts(run, runs_dir, record, registry))
-                is_compiled, startup_guess = part.logdir in compiled, max(startup_seen, startup_guess)
+                is_compiled = part.logdir in compiled
+                seen = [x for x in (startup_seen, startup_guess) if x is not None]
+                startup_guess = max(seen) if seen else None
                 if whole_parts and seconds is not None:
                     need = seconds_to_finish(part, is_compiled, startup_guess, rate_guess)
                     if need is None or need > seconds:
@@ -722,7 +733,9 @@ def train_pending(selection, runs_dir: str, deadline: float | None = None, reser
                                     overwrite=fresh_over, stop_after_steps=0, stop_after_seconds=seconds or 0.0)
                 result = driver.train(config, learner_cls)
                 if part.logdir not in compiled:
-                    startup_seen = max(startup_seen, part_state(run, part.logdir, part.first, part.count).startup)
+                    measured = part_state(run, part.logdir, part.first, part.count).startup
+                    if measured is not None:
+                        startup_seen = max(startup_seen or 0.0, measured)
                 compiled.add(part.logdir)
                 log(f"{where} {result.status} at {result.env_steps:,} steps after {time.monotonic() - t0:.0f} s")
                 if result.status == "done":
