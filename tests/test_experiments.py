@@ -62,6 +62,12 @@ def test_bad_overrides_and_names_raise():
         ex.validate_experiment(ex.Experiment("bad", "", "", (ex.Run("x", "point-mass-ppo", {"env.goal_radius": -1.0}),)))
     with pytest.raises(ValueError, match="registered twice"):
         ex.register(TOY, {"toy": TOY})
+    with pytest.raises(ValueError, match=r"curve_groups row 'r' names runs \['a', 'zzz'\]: allowed are one or more of a, b"):
+        ex.register(dataclasses.replace(TOY, curve_groups=(("r", ("a", "zzz")),)), {})
+    with pytest.raises(ValueError, match=r"curve_axes=\('minutes',\) holds 'minutes': allowed are one or more of env_steps, wall_clock"):
+        ex.register(dataclasses.replace(TOY, curve_axes=("minutes",)), {})
+    with pytest.raises(ValueError, match=r"curve_axes=\(\) holds '\(\)'"):
+        ex.register(dataclasses.replace(TOY, curve_axes=()), {})
     with pytest.raises(ValueError, match="run 'zzz' is not in experiment 'toy'"):
         ex.select(["toy/zzz"], {"toy": TOY})
     with pytest.raises(ValueError, match="experiment 'zzz' is unknown"):
@@ -223,6 +229,44 @@ def test_a_partial_run_builds_a_row_of_its_done_seeds(tmp_path):
     assert table.count("| 1 x 16 (2 planned) |") == 2 and "| not done (missing) | 2 x - |" in table
     assert not ex.build([(exp, list(exp.runs))], runs_dir, str(tmp_path / "other"), complete_only=True,
                         registry={"toy": exp}, log=lambda s: None)
+
+
+def test_the_figure_draws_each_group_of_runs_on_its_own_row_against_both_axes(tmp_path):
+    """curve_groups: one row of panels per group (its runs drawn together), a panel per curve and axis; each line
+    the mean over the run's seeds (hand-made logs: 0.2 and 0.6 at 5,120 steps) against env steps or against the
+    running sum of the chunk times."""
+    runs_dir, out = str(tmp_path / "runs"), str(tmp_path / "out")
+    a, b = TOY.runs
+    c = ex.Run("c", "point-mass-ppo", {**TOY_RUN, "seed": 20}, seeds=1, num_timesteps=10_240)
+    exp = dataclasses.replace(TOY, runs=(a, b, c), cross=(), curves=("episode/target_reached",),
+                              curve_groups=(("first", ("a", "c")), ("second", ("b",))),
+                              curve_axes=("env_steps", "wall_clock"))
+    ex.register(exp, {})
+    for run, first in ((a, 0), (a, 1), (b, 0), (b, 1), (c, 0)):
+        logdir = _part(run, runs_dir, "toy", run.name, first, 1, steps=[10240], evaluated=10240)
+        value = 0.2 if first == 0 else 0.6
+        _write(os.path.join(logdir, "metrics.csv"), "env_steps,seed,steps_per_second,wall_seconds,episode/target_reached\n"
+               f"5120,{first},100,51.2,{value}\n10240,{first},100,51.2,{value + 0.1}\n")
+    states = [ex.run_state(exp, r, runs_dir) for r in exp.runs]
+    path = ex.training_figure(exp, states, os.path.join(out, "curves.png"))
+    assert path and os.path.isfile(path)
+    from tools import plots
+
+    groups = {"first": {"a": [p.logdir for p in states[0].done_parts], "c": [states[2].done_parts[0].logdir]},
+              "second": {"b": [p.logdir for p in states[1].done_parts]}}
+    fig = plots.curve_grid(groups, ["episode/target_reached"], ("env_steps", "wall_clock"))
+    assert [ax.get_title() for ax in fig.axes] == ["first: " + plots.CURVE_METRICS["episode/target_reached"]] * 2 + [
+        "second: " + plots.CURVE_METRICS["episode/target_reached"]] * 2
+    assert [ax.get_xlabel() for ax in fig.axes] == [plots.X_AXES["env_steps"], plots.X_AXES["wall_clock"]] * 2
+    line_a, line_c = fig.axes[0].get_lines()
+    assert list(line_a.get_xdata()) == [5120, 10240] and list(line_a.get_ydata()) == pytest.approx([0.4, 0.5])
+    assert list(line_c.get_ydata()) == pytest.approx([0.2, 0.3]) and line_a.get_label() == "a (2 seeds)"
+    assert list(fig.axes[1].get_lines()[0].get_xdata()) == pytest.approx([51.2, 102.4])
+    with pytest.raises(ValueError, match=r"holds 'minutes': allowed are env_steps, wall_clock"):
+        plots.curve_grid(groups, ["episode/target_reached"], ("minutes",))
+    from tools.experiment_spec import CURVE_AXES
+
+    assert CURVE_AXES == tuple(plots.X_AXES)  # the registry (standard library only) spells plots' axes
 
 
 def test_pending_parts_split_the_missing_seeds():

@@ -184,8 +184,14 @@ register(Experiment(
     + (Run("panda-reach-100m", "panda-reach-sac-fast", label="panda-reach, 100M steps", paper=_PPO_ROWS["panda-reach"],
            num_timesteps=100_000_000),
        Run("ur5e-reach-avoid-300m", "ur5e-reach-avoid-sac-fast", label="ur5e-reach-avoid, 300M steps",
-           paper=_PPO_ROWS["ur5e-reach-avoid"], num_timesteps=300_000_000)),
-    metrics=_AVOID_METRICS + ("wall_clock", "steps_per_second"), curves=_AVOID_CURVES,
+           paper=_PPO_ROWS["ur5e-reach-avoid"], num_timesteps=300_000_000))
+    + tuple(Run(f"{env}-ppo", f"{env}-ppo", label=f"{env}, PPO", paper=paper) for env, paper in _PPO_ROWS.items()),
+    metrics=_AVOID_METRICS + ("wall_clock", "steps_per_second"), curves=("episode/target_reached",),
+    curve_groups=(("UR5e reach", ("ur5e-reach", "ur5e-reach-ppo")),
+                  ("Panda reach", ("panda-reach", "panda-reach-100m", "panda-reach-ppo")),
+                  ("UR5e reach-avoid", ("ur5e-reach-avoid", "ur5e-reach-avoid-300m", "ur5e-reach-avoid-ppo")),
+                  ("Panda reach-avoid", ("panda-reach-avoid", "panda-reach-avoid-ppo"))),
+    curve_axes=("env_steps", "wall_clock"),
     paper="PPO (the paper's best): UR5e reach 96.1 %, Panda reach 98.8 %, UR5e reach-avoid 86.8 %, Panda "
           "reach-avoid 95.2 %; the paper's own SAC reached 61.6 % (UR5e reach) and 87.9 % (Panda reach).",
     note="UR5e reach-avoid trains 200M steps, not its preset's 100M: a seed of the preset was still improving at "
@@ -194,7 +200,9 @@ register(Experiment(
          "improving at 200M (results/experiments/README.md). `--max-seeds 1`: a 100M-step seed fits a 10 minute "
          "call (a 200M or 300M one takes two or three, each resume refilling the replay buffer), and vmapped fast-SAC seeds ran no faster in all than one (results/sac/fast). The `sampled` rows evaluate the same policies with "
          "sampled actions (why: results/sac/fast); they hold the seeds whose checkpoints were at hand when their part "
-         "was done (the seeds x episodes column).",
+         "was done (the seeds x episodes column). The `-ppo` rows are our PPO presets (their runs shared with "
+         "other experiments), for the training curves on the same axes, env steps and wall-clock (curves.png: "
+         "training episodes, stochastic policies; wall-clock compares only runs of one GPU model).",
     cross=tuple(Cross(env, f"{env}-sampled", {}, label=f"{env}, sampled actions", paper=paper, stochastic=True)
                 for env, paper in _PPO_ROWS.items())))
 

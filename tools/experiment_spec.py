@@ -109,6 +109,11 @@ class Experiment:
     """Table columns: keys of agents.evaluation.PAPER_METRICS, or wall_clock / steps_per_second (metrics.csv)."""
     curves: tuple[str, ...] = ("episode/target_reached", "episode/self_collision")
     """metrics.csv columns drawn in the figure (() = no figure)."""
+    curve_groups: tuple[tuple[str, tuple[str, ...]], ...] = ()
+    """Rows of the figure, (row title, names of the runs drawn together): runs to compare on shared panels (fast
+    SAC and PPO on one task); () = one row of every run."""
+    curve_axes: tuple[str, ...] = ("env_steps",)
+    """Horizontal axes of the figure's panels, side by side: env_steps and/or wall_clock (CURVE_AXES)."""
     paper: str = ""
     """The paper's finding in one line (shown in the results index)."""
     note: str = ""
@@ -125,6 +130,9 @@ class Experiment:
         raise ValueError(f"run {name!r} is not in experiment {self.name!r}: allowed are {', '.join(r.name for r in self.runs)}.")
 
 
+CURVE_AXES = ("env_steps", "wall_clock")
+"""Horizontal axes a figure can have (tools.plots.X_AXES)."""
+
 EXPERIMENTS: dict[str, Experiment] = {}
 
 
@@ -136,6 +144,15 @@ def register(experiment: Experiment, registry: dict | None = None) -> Experiment
     names = [r.name for r in experiment.runs]
     if len(set(names)) != len(names) or not names:
         raise ValueError(f"experiment {experiment.name!r} has runs {names}: allowed are one or more distinct names.")
+    for title, group in experiment.curve_groups:
+        unknown = [name for name in group if name not in names]
+        if unknown or not group:
+            raise ValueError(f"experiment {experiment.name!r}: curve_groups row {title!r} names runs {list(group)}: "
+                             f"allowed are one or more of {', '.join(names)}.")
+    bad = [x for x in experiment.curve_axes if x not in CURVE_AXES] or ([] if experiment.curve_axes else ["()"])
+    if bad:
+        raise ValueError(f"experiment {experiment.name!r}: curve_axes={experiment.curve_axes!r} holds {bad[0]!r}: "
+                         f"allowed are one or more of {', '.join(CURVE_AXES)}.")
     registry[experiment.name] = experiment
     return experiment
 

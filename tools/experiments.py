@@ -997,22 +997,27 @@ def build_default(experiment: Experiment, states: list[RunState], out_dir: str, 
 
 
 def training_figure(experiment: Experiment, states: list[RunState], path: str) -> str | None:
-    """curves.png of the runs with a metrics.csv (None without matplotlib, curves or logs)."""
+    """curves.png of the runs with a metrics.csv, a row per `curve_groups` row (else one), a panel per curve and
+    axis (None without matplotlib, curves or logs)."""
     try:
         import matplotlib  # noqa: F401
     except ImportError:
         return None
     from tools import plots
 
-    logged = {st.run.title: [p.logdir for p in st.done_parts if os.path.isfile(os.path.join(p.logdir, "metrics.csv"))]
-              for st in states}
-    logged = {title: logdirs for title, logdirs in logged.items() if logdirs}
-    if not experiment.curves or not logged:
+    logged = {st.run.name: (st.run.title, [p.logdir for p in st.done_parts
+                                           if os.path.isfile(os.path.join(p.logdir, "metrics.csv"))]) for st in states}
+    rows = experiment.curve_groups or (("", tuple(logged)),)
+    groups = {title: {logged[name][0]: logged[name][1] for name in names if name in logged and logged[name][1]}
+              for title, names in rows}
+    groups = {title: runs for title, runs in groups.items() if runs}
+    if not experiment.curves or not groups:
         return None
-    present = [m for m in experiment.curves if all(m in plots.read_metrics(d) for ds in logged.values() for d in ds)]
+    present = [m for m in experiment.curves
+               if all(m in plots.read_metrics(d) for runs in groups.values() for ds in runs.values() for d in ds)]
     if not present:
         return None
-    fig = plots.training_curves(logged, present, path, experiment.title)
+    fig = plots.curve_grid(groups, present, experiment.curve_axes, path, experiment.title)
     import matplotlib.pyplot as plt
 
     plt.close(fig)

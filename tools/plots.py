@@ -103,26 +103,39 @@ def training_curves(runs: dict, metrics=None, out: str | None = None, title: str
     """One panel per metric, one line per run (label -> logdir or list of logdirs): the mean over
     seeds against env steps (or x="wall_clock", see X_AXES), with a band of `band` standard
     deviations across seeds."""
+    defaults = list(CURVE_METRICS)[:4]
+    metrics = metrics or [m for m in defaults if all(m in read_metrics(_first(d)) for d in runs.values())]
+    return curve_grid({"": runs}, metrics, (x,), out, title, band)
+
+
+def curve_grid(groups: dict, metrics, axes=("env_steps",), out: str | None = None, title: str | None = None,
+               band: float = 1.0):
+    """One row of panels per group (row title -> {label: logdir or list of logdirs}), one panel per metric and
+    horizontal axis (X_AXES) in each row: runs that belong together (fast SAC and PPO on one task) share their
+    panels, against env steps and against wall-clock side by side."""
     plt = _pyplot()
     from matplotlib.ticker import EngFormatter
 
-    defaults = list(CURVE_METRICS)[:4]
-    metrics = metrics or [m for m in defaults if all(m in read_metrics(_first(d)) for d in runs.values())]
-    fig, axes = plt.subplots(1, len(metrics), figsize=(4.2 * len(metrics), 3.4), squeeze=False)
-    for ax, metric in zip(axes[0], metrics):
-        for name, logdirs in runs.items():
-            steps, mean, std, n = curve(logdirs, metric, x)
-            line, = ax.plot(steps, mean, label=f"{name} ({n} seed{'s' if n > 1 else ''})")
-            if n > 1 and band > 0:
-                ax.fill_between(steps, mean - band * std, mean + band * std, color=line.get_color(), alpha=0.2, lw=0)
-        ax.set_title(CURVE_METRICS.get(metric, metric))
-        ax.set_xlabel(X_AXES[x])
-        if x == "env_steps":
-            ax.xaxis.set_major_formatter(EngFormatter(sep=""))
-        ax.grid(alpha=0.3)
-        if metric in ("episode/target_reached", "episode/self_collision", "episode/obstacle_collision"):
-            ax.set_ylim(-0.02, 1.02)
-    axes[0][0].legend(fontsize=8)
+    for x in axes:
+        if x not in X_AXES:
+            raise ValueError(f"axes={tuple(axes)!r} holds {x!r}: allowed are {', '.join(X_AXES)}.")
+    columns = [(metric, x) for metric in metrics for x in axes]
+    fig, grid = plt.subplots(len(groups), len(columns), figsize=(4.2 * len(columns), 3.4 * len(groups)), squeeze=False)
+    for row, (group, runs) in zip(grid, groups.items()):
+        for ax, (metric, x) in zip(row, columns):
+            for name, logdirs in runs.items():
+                steps, mean, std, n = curve(logdirs, metric, x)
+                line, = ax.plot(steps, mean, label=f"{name} ({n} seed{'s' if n > 1 else ''})")
+                if n > 1 and band > 0:
+                    ax.fill_between(steps, mean - band * std, mean + band * std, color=line.get_color(), alpha=0.2, lw=0)
+            ax.set_title(": ".join(t for t in (group, CURVE_METRICS.get(metric, metric)) if t))
+            ax.set_xlabel(X_AXES[x])
+            if x == "env_steps":
+                ax.xaxis.set_major_formatter(EngFormatter(sep=""))
+            ax.grid(alpha=0.3)
+            if metric in ("episode/target_reached", "episode/self_collision", "episode/obstacle_collision"):
+                ax.set_ylim(-0.02, 1.02)
+        row[0].legend(fontsize=8)
     if title:
         fig.suptitle(title)
     fig.tight_layout()
