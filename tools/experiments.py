@@ -628,7 +628,8 @@ def speed_key(run: Run) -> str:
         from agents.config import config_json
 
         fields = config_json(dataclasses.replace(run.config(), seeds=1))
-        fields.pop("num_timesteps"), fields.pop("seed")
+        for name in ("num_timesteps", "seed"):
+            del fields[name]
         cached = _SPEED_KEYS[id(run)] = (run, json.dumps(fields, sort_keys=True))
     return cached[1]
 
@@ -819,7 +820,10 @@ def train_parallel(selection, runs_dir: str, gpus: list[str], deadline: float | 
     queue = parallel_items(selection, runs_dir, max_seeds, out)
     running: dict[tuple[int, str], tuple[subprocess.Popen, str]] = {}
     slots = [(k, gpu) for k in range(workers_per_gpu) for gpu in gpus]
-    name = lambda slot: f"GPU {slot[1]}" + (f" worker {slot[0]}" if workers_per_gpu > 1 else "")
+
+    def name(slot: tuple[int, str]) -> str:
+        return f"GPU {slot[1]}" + (f" worker {slot[0]}" if workers_per_gpu > 1 else "")
+
     if worker_logs is not None:
         os.makedirs(worker_logs, exist_ok=True)
     while queue or running:
