@@ -132,7 +132,7 @@ def brax_comparable(config, algo_name: str, action_size: int):
     return config
 
 
-def main():
+def main(argv=None):
     parser = argparse.ArgumentParser(prog="python -m benchmarks.brax_reference", description=__doc__.split("\n\n")[0])
     parser.add_argument("--preset", default="ur5e-reach-ppo")
     parser.add_argument("--evals", type=int, default=8, help="evaluations after the initial one")
@@ -141,7 +141,15 @@ def main():
     parser.add_argument("--eval-envs", type=int, default=4096)
     parser.add_argument("--skip", choices=["ours", "brax"], default=None)
     parser.add_argument("--out", default="results/throughput/brax_reference")
-    args = parser.parse_args()
+    parser.add_argument("--trace", metavar="DIR", help="also write profiler traces of one evaluation period of "
+                        "training (--updates-per-eval updates) to DIR/ours (after the timed training, with the "
+                        "program's HLO) and DIR/brax (its second training epoch and the evaluations after it: Brax's, and for "
+                        "PPO ours of its parameters, so keep --eval-envs small): "
+                        "`python -m benchmarks.trace_summary DIR/ours`")
+    args = parser.parse_args(argv)
+    if args.trace and args.skip != "brax" and args.evals < 2:
+        raise ValueError(f"--evals={args.evals} with --trace: allowed is 2 or more (Brax's second training epoch is "
+                         "traced; its first compiles).")
 
     config = presets.make_config(args.preset, eval_envs=args.eval_envs, progress=False, tensorboard=False)
     algo_name = registry.of_config(config.algo).name
@@ -156,7 +164,7 @@ def main():
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     device = jax.devices()[0]
-    command = " ".join(["python", "-m", "benchmarks.brax_reference"] + sys.argv[1:])
+    command = " ".join(["python", "-m", "benchmarks.brax_reference"] + (sys.argv[1:] if argv is None else list(argv)))
     report = {"meta": {"device": device.device_kind, "jax": jax.__version__, "date": datetime.date.today().isoformat(),
                        "command": command, "preset": args.preset, "env_name": config.env_name,
                        "num_timesteps": total, "eval_envs": args.eval_envs, "algo": dataclasses.asdict(config.algo)},
@@ -190,6 +198,16 @@ def main():
             save()
         report["ours"]["steps_per_s"] = total / train_seconds
         save()
+        if args.trace:
+            trace_dir = Path(args.trace) / "ours"
+            trace_dir.mkdir(parents=True, exist_ok=True)
+            n = jnp.int32(updates_per_eval)
+            (trace_dir / "chunk.hlo.txt").write_text(programs.chunk.lower(state, n).compile().as_text())
+            with jax.profiler.trace(str(trace_dir), create_perfetto_trace=True):
+                state, metrics = programs.chunk(state, n)
+                jax.block_until_ready(metrics)
+            report["ours"]["trace"] = {"dir": str(trace_dir), "vector_steps": updates_per_eval}
+            save()
 
     if args.skip != "brax":
         evaluate = None
@@ -205,7 +223,17 @@ def main():
             print("brax", row, flush=True)
             save()
 
+        progress_calls = []
+
         def on_progress(step, metrics):
+            # Brax calls this at step 0, then after each training epoch: trace the second epoch (the first compiles).
+            progress_calls.append(int(step))
+            if args.trace and len(progress_calls) == 2:
+                jax.profiler.start_trace(str(Path(args.trace) / "brax"), create_perfetto_trace=True)
+            elif args.trace and len(progress_calls) == 3:
+                jax.profiler.stop_trace()
+                report["brax"]["trace"] = {"dir": str(Path(args.trace) / "brax"),
+                                           "vector_steps": (progress_calls[2] - progress_calls[1]) // config.algo.num_envs}
             report["brax"]["last_step"] = int(step)
             if "training/sps" in metrics:
                 sps.append(float(metrics["training/sps"]))

@@ -50,3 +50,13 @@ def test_brax_sac_comparison_takes_brax_settings_or_refuses():
         brax_comparable(presets.make_config("ur5e-reach-sac-fast"), "sac", action_size=6)
     ppo = presets.make_config("ur5e-reach-ppo")
     assert brax_comparable(ppo, "ppo", action_size=6) is ppo
+
+
+def test_brax_reference_trace_needs_a_second_brax_epoch(tmp_path):
+    """Brax's first training epoch compiles, so --trace traces its second: one evaluation period is refused
+    before anything is built."""
+    from benchmarks import brax_reference
+
+    with pytest.raises(ValueError, match=r"--evals=1 with --trace: allowed is 2 or more"):
+        brax_reference.main(["--preset", "point-mass-sac", "--evals", "1", "--trace", str(tmp_path)])
+    assert not any(tmp_path.iterdir())
