@@ -71,9 +71,16 @@ class Logger:
         names = sorted(metrics)
         if self.columns is None:
             self.columns = ["env_steps", "seed", *sorted(extra), *names]
-            if not os.path.exists(self.csv_path):
+            header = self._existing_header()
+            if header is None:
                 with open(self.csv_path, "w", newline="") as f:
                     csv.writer(f).writerow(self.columns)
+            else:  # a resumed run appends under the file's own header, whatever this code logs
+                left_out = [c for c in self.columns if c not in header]
+                if left_out:
+                    print(f"{self.csv_path} has no column for {', '.join(left_out)} (the run began with other "
+                          "code): not written there (TensorBoard still gets them).", file=sys.stderr)
+                self.columns = header
         with open(self.csv_path, "a", newline="") as f:
             w = csv.writer(f)
             for i in range(self.seeds):
@@ -85,6 +92,13 @@ class Logger:
             for k, v in extra.items():
                 writer.add_scalar("perf/" + k, v, step)
             writer.flush()
+
+    def _existing_header(self) -> list[str] | None:
+        """The header row of an existing, non-empty metrics.csv (a resumed run's), else None."""
+        if not os.path.exists(self.csv_path):
+            return None
+        with open(self.csv_path, newline="") as f:
+            return next(csv.reader(f), None) or None
 
     def progress(self, step: int, total: int, rate: float, metrics: dict) -> None:
         eta = datetime.timedelta(seconds=int((total - step) / rate)) if rate > 0 else "?"

@@ -361,3 +361,26 @@ def test_two_devices_match_one_device(tmp_path):
         assert r["moved"] and r["env_shards"] == 2, name  # the environments really were split over both devices
         assert r["max_diff"] < 1e-4, (name, r)  # relative to each leaf's scale
         np.testing.assert_allclose(r["returns"][0], r["returns"][1], rtol=1e-4)
+
+
+def test_a_resumed_run_logs_under_its_files_header(tmp_path, capsys):
+    """A run resumed by code that logs other metrics appends rows under the header its metrics.csv began with
+    (before: rows of another width, misaligned under it); a fresh file gets this code's columns."""
+    import csv
+
+    from agents.logger import Logger
+
+    path = tmp_path / "metrics.csv"
+    path.write_text("env_steps,seed,steps_per_second,loss/a\n10,0,5.0,1.5\n")
+    logger = Logger(str(tmp_path), seed=0, seeds=2, label="x", tensorboard=False, progress=False)
+    logger.log(20, {"loss/a": np.array([2.0, 3.0]), "loss/b": np.array([7.0, 8.0])},
+               {"steps_per_second": 9.0, "wall_seconds": 1.0})
+    with open(path, newline="") as f:
+        assert list(csv.reader(f)) == [["env_steps", "seed", "steps_per_second", "loss/a"], ["10", "0", "5.0", "1.5"],
+                                       ["20", "0", "9.0", "2.0"], ["20", "1", "9.0", "3.0"]]
+    assert "has no column for wall_seconds, loss/b" in capsys.readouterr().err
+    fresh = tmp_path / "fresh"
+    fresh.mkdir()
+    Logger(str(fresh), seed=3, seeds=1, label="x", tensorboard=False, progress=False).log(
+        5, {"loss/b": np.array([1.0])}, {"wall_seconds": 2.0})
+    assert (fresh / "metrics.csv").read_text().splitlines() == ["env_steps,seed,wall_seconds,loss/b", "5,3,2.0,1.0"]
