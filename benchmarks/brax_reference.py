@@ -37,6 +37,7 @@ import jax.numpy as jnp
 import envs
 from agents import driver, presets, registry
 from agents.loop import make_evaluate
+from benchmarks.train_throughput import trace_chunk
 
 if not hasattr(jax, "device_put_replicated"):
     # brax 0.14.2 still calls this; jax >= 0.10 removed it. Same result for our single-host use.
@@ -199,14 +200,9 @@ def main(argv=None):
         report["ours"]["steps_per_s"] = total / train_seconds
         save()
         if args.trace:
-            trace_dir = Path(args.trace) / "ours"
-            trace_dir.mkdir(parents=True, exist_ok=True)
-            n = jnp.int32(updates_per_eval)
-            (trace_dir / "chunk.hlo.txt").write_text(programs.chunk.lower(state, n).compile().as_text())
-            with jax.profiler.trace(str(trace_dir), create_perfetto_trace=True):
-                state, metrics = programs.chunk(state, n)
-                jax.block_until_ready(metrics)
-            report["ours"]["trace"] = {"dir": str(trace_dir), "vector_steps": updates_per_eval}
+            trace_dir = str(Path(args.trace) / "ours")
+            state = trace_chunk(programs, state, updates_per_eval, trace_dir)
+            report["ours"]["trace"] = {"dir": trace_dir, "vector_steps": updates_per_eval}
             save()
 
     if args.skip != "brax":

@@ -62,15 +62,21 @@ class Training:
         return updates * config_lib.env_steps_per_update(self.config) * self.config.seeds / seconds
 
     def trace(self, trace_dir: str) -> None:
-        """One more update under the JAX profiler (TensorBoard / Perfetto trace of where an update's
-        time goes; not part of the timing), with the compiled program's HLO beside it, which maps
-        kernel names to JAX name scopes (benchmarks/trace_summary.py)."""
-        Path(trace_dir).mkdir(parents=True, exist_ok=True)
-        hlo = self.programs.chunk.lower(self.state, jnp.int32(1)).compile().as_text()
-        (Path(trace_dir) / "chunk.hlo.txt").write_text(hlo)
-        with jax.profiler.trace(trace_dir, create_perfetto_trace=True):
-            self.state, metrics = self.programs.chunk(self.state, jnp.int32(1))
-            jax.block_until_ready(metrics)
+        """One more update under the JAX profiler (not part of the timing): `trace_chunk`."""
+        self.state = trace_chunk(self.programs, self.state, 1, trace_dir)
+
+
+def trace_chunk(programs, state, updates: int, trace_dir: str):
+    """Runs `updates` updates of `programs.chunk` under the JAX profiler (TensorBoard / Perfetto trace of where
+    their time goes) and writes the compiled program's HLO beside it, which maps kernel names to JAX name scopes
+    (benchmarks/trace_summary.py); returns the state after them."""
+    Path(trace_dir).mkdir(parents=True, exist_ok=True)
+    n = jnp.int32(updates)
+    (Path(trace_dir) / "chunk.hlo.txt").write_text(programs.chunk.lower(state, n).compile().as_text())
+    with jax.profiler.trace(trace_dir, create_perfetto_trace=True):
+        state, metrics = programs.chunk(state, n)
+        jax.block_until_ready(metrics)
+    return state
 
 
 def parse_variant(text: str, algo) -> dict:

@@ -617,21 +617,11 @@ def speed_guess(state: RunState, part: PartState, peers=()) -> tuple[float | Non
     return slowest.rate, slowest.startup
 
 
-_SPEED_KEYS: dict[int, tuple[Run, str]] = {}
-
-
 def speed_key(run: Run) -> str:
-    """The run's training config as canonical JSON without its budget, seeds and logdir: runs with equal keys
-    train at the same speed."""
-    cached = _SPEED_KEYS.get(id(run))
-    if cached is None or cached[0] is not run:
-        from agents.config import config_json
-
-        fields = config_json(dataclasses.replace(run.config(), seeds=1))
-        for name in ("num_timesteps", "seed"):
-            del fields[name]
-        cached = _SPEED_KEYS[id(run)] = (run, json.dumps(fields, sort_keys=True))
-    return cached[1]
+    """The run's `recipe` without its budget and seed: runs with equal keys train at the same speed."""
+    fields = json.loads(recipe(run))
+    del fields["num_timesteps"], fields["seed"]
+    return json.dumps(fields, sort_keys=True)
 
 
 def comparable_parts(run: Run, runs_dir: str, record: str | None = None, registry: dict | None = None) -> list:
