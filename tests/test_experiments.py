@@ -609,6 +609,19 @@ def test_parallel_spreads_the_parts_of_one_run_over_the_gpus(tmp_path, monkeypat
                                         "toy_c_seeds-1-1.log"]
     with open(os.path.join(logs, "toy_b_seeds-1-1.log")) as f:
         assert f.read() == "worker of seeds-1-1\n"
+    # 100 s to the deadline, 30 of them the reserve: the parts to train (no speed measured) would need twice the
+    # assumed 60 s start-up, so the driver starts no worker for them (one would stop at once, its process start
+    # overrunning the call); the cross-evaluations of the done parts still get theirs.
+    started.clear()
+    lines = []
+    assert not ex.train_parallel(selection, runs_dir, ["0", "1"], time.monotonic() + 100.0, 30.0, log=lines.append,
+                                 max_seeds=1, out=out, worker_logs=logs)
+    assert started == [("0", "toy/b", "seeds-0-0"), ("1", "toy/c", "seeds-0-0")]
+    assert sum("not started: time limit: stopped at 0 of 10,240 steps" in line for line in lines) == 2, lines
+    started.clear()  # with 200 s they start
+    assert not ex.train_parallel(selection, runs_dir, ["0", "1"], time.monotonic() + 200.0, 30.0, log=lambda s: None,
+                                 max_seeds=1, out=out, worker_logs=logs)
+    assert len(started) == 4
     with pytest.raises(ValueError, match=r"--worker-logs without --parallel is meaningless"):
         ex.main(["run", "sac-fast", "--worker-logs", logs])
     # Two workers on one GPU, each with 45 % of its memory.

@@ -10,6 +10,8 @@ from tools.experiment_spec import Cross, Experiment, Run, register
 
 _REACH_OBS = ("joint_pos", "ee_pos", "target_pos", "ee_to_target")
 _AVOID_OBS = _REACH_OBS + ("obstacle_pos", "link_obstacle_dist")
+# The `-plus` presets' observation (not in the paper): joint sin/cos and self-collision distances added.
+_PLUS_OBS = ("joint_pos", "joint_sin_cos", "ee_pos", "target_pos", "ee_to_target", "self_dist")
 _DEPARTS = ("Relative control is `ur5e-reach-ppo` (action scale 0.3, discount 0.99, joint-limit penalty 0.05: "
             "results/headline says why); absolute control is `ur5e-reach-absolute-ppo` (the paper's 4x256, 7 epochs, "
             "discount 0.97).")
@@ -184,20 +186,39 @@ register(Experiment(
     + (Run("panda-reach-100m", "panda-reach-sac-fast", label="panda-reach, 100M steps", paper=_PPO_ROWS["panda-reach"],
            num_timesteps=100_000_000),
        Run("ur5e-reach-avoid-300m", "ur5e-reach-avoid-sac-fast", label="ur5e-reach-avoid, 300M steps",
-           paper=_PPO_ROWS["ur5e-reach-avoid"], num_timesteps=300_000_000))
+           paper=_PPO_ROWS["ur5e-reach-avoid"], num_timesteps=300_000_000),
+       Run("panda-reach-f32-100m", "panda-reach-sac-fast", {"algo.compute_dtype": "float32"},
+           label="panda-reach, float32, 100M steps", paper=_PPO_ROWS["panda-reach"], num_timesteps=100_000_000),
+       Run("panda-reach-avoid-f32", "panda-reach-avoid-sac-fast", {"algo.compute_dtype": "float32"},
+           label="panda-reach-avoid, float32", paper=_PPO_ROWS["panda-reach-avoid"]),
+       Run("ur5e-reach-avoid-plus", "ur5e-reach-avoid-sac-fast",
+           {"env.observation": _PLUS_OBS + ("obstacle_pos", "link_obstacle_dist")},
+           label="ur5e-reach-avoid, plus observation", paper=_PPO_ROWS["ur5e-reach-avoid"], num_timesteps=200_000_000),
+       Run("panda-reach-plus", "panda-reach-sac-fast", {"env.observation": _PLUS_OBS},
+           label="panda-reach, plus observation, 100M steps", paper=_PPO_ROWS["panda-reach"], num_timesteps=100_000_000),
+       Run("panda-reach-avoid-plus", "panda-reach-avoid-sac-fast",
+           {"env.observation": _PLUS_OBS + ("obstacle_pos", "link_obstacle_dist")},
+           label="panda-reach-avoid, plus observation", paper=_PPO_ROWS["panda-reach-avoid"]))
     + tuple(Run(f"{env}-ppo", f"{env}-ppo", label=f"{env}, PPO", paper=paper) for env, paper in _PPO_ROWS.items()),
     metrics=_AVOID_METRICS + ("wall_clock", "steps_per_second"), curves=("episode/target_reached",),
     curve_groups=(("UR5e reach", ("ur5e-reach", "ur5e-reach-ppo")),
-                  ("Panda reach", ("panda-reach", "panda-reach-100m", "panda-reach-ppo")),
-                  ("UR5e reach-avoid", ("ur5e-reach-avoid", "ur5e-reach-avoid-300m", "ur5e-reach-avoid-ppo")),
-                  ("Panda reach-avoid", ("panda-reach-avoid", "panda-reach-avoid-ppo"))),
+                  ("Panda reach", ("panda-reach", "panda-reach-100m", "panda-reach-f32-100m", "panda-reach-plus",
+                                   "panda-reach-ppo")),
+                  ("UR5e reach-avoid", ("ur5e-reach-avoid", "ur5e-reach-avoid-300m", "ur5e-reach-avoid-plus",
+                                        "ur5e-reach-avoid-ppo")),
+                  ("Panda reach-avoid", ("panda-reach-avoid", "panda-reach-avoid-f32", "panda-reach-avoid-plus",
+                                         "panda-reach-avoid-ppo"))),
     curve_axes=("env_steps", "wall_clock"),
     paper="PPO (the paper's best): UR5e reach 96.1 %, Panda reach 98.8 %, UR5e reach-avoid 86.8 %, Panda "
           "reach-avoid 95.2 %; the paper's own SAC reached 61.6 % (UR5e reach) and 87.9 % (Panda reach).",
     note="UR5e reach-avoid trains 200M steps, not its preset's 100M: a seed of the preset was still improving at "
          "100M (results/sac/fast). Panda reach also at 100M: at the preset's 60M every seed was short of 98.8 % "
          "and still improving (results/experiments/README.md); UR5e reach-avoid also at 300M: every seed was still "
-         "improving at 200M (results/experiments/README.md). `--max-seeds 1`: a 100M-step seed fits a 10 minute "
+         "improving at 200M (results/experiments/README.md). The `f32` rows train the Panda presets in float32 instead of their "
+         "bfloat16 hidden layers: one float32 Panda reach seed had reached 98.4 % at 60M against the bfloat16 seeds' "
+         "97.5 ± 0.3 % (results/sac/fast). The `plus` rows observe joint sin/cos and self-collision distances, as "
+         "`ur5e-reach-sac-fast` does (it learned faster with them) and as PPO's `-plus` presets do (UR5e reach-avoid "
+         "88.5 % against 86.8 %: results/observations). `--max-seeds 1`: a 100M-step seed fits a 10 minute "
          "call (a 200M or 300M one takes two or three, each resume refilling the replay buffer), and vmapped fast-SAC seeds ran no faster in all than one (results/sac/fast). The `sampled` rows evaluate the same policies with "
          "sampled actions (why: results/sac/fast); they hold the seeds whose checkpoints were at hand when their part "
          "was done (the seeds x episodes column). The `-ppo` rows are our PPO presets (their runs shared with "

@@ -633,6 +633,31 @@ def comparable_parts(run: Run, runs_dir: str, record: str | None = None, registr
             for part in run_state(exp, other, runs_dir, record, registry).parts]
 
 
+def start_verdict(st: RunState, part: PartState, seconds: float | None, compiled: bool,
+                  startup_seen: float | None, whole_parts: bool, runs_dir: str, record: str | None = None,
+                  registry: dict | None = None) -> tuple[str, str]:
+    """Whether `part` of run state `st` starts with `seconds` left after the reserve (None: no limit): ("start",
+    ""), ("later", why) where `whole_parts` predicts it cannot finish (the next run is tried), or ("stop", why)
+    where `may_start` refuses it. Its speed is its own, else a part's of its run or of a comparable run
+    (`speed_guess`); its start-up the longest of that guess and `startup_seen` (this call's). Used by a training
+    process before each part and by the `--parallel` driver before it starts a worker (a worker that would stop
+    at once costs its process start and overruns the call)."""
+    rate_guess, startup_guess = speed_guess(st, part)
+    if part.rate is None and rate_guess is None:
+        rate_guess, startup_guess = speed_guess(st, part, comparable_parts(st.run, runs_dir, record, registry))
+    seen = [x for x in (startup_seen, startup_guess) if x is not None]
+    startup_guess = max(seen) if seen else None
+    if whole_parts and seconds is not None:
+        need = seconds_to_finish(part, compiled, startup_guess, rate_guess)
+        if need is None or need > seconds:
+            return "later", (f"left for a later call: it needs "
+                             f"{'an unknown time (no speed measured)' if need is None else f'~{need:.0f} s'} to "
+                             f"finish, {max(0.0, seconds):.0f} s are left")
+    if not may_start(part, seconds, compiled, startup_guess, rate_guess):
+        return "stop", f"time limit: stopped at {part.steps:,} of {part.budget:,} steps; run again to continue"
+    return "start", ""
+
+
 def train_pending(selection, runs_dir: str, deadline: float | None = None, reserve: float = 0.0,
                   log=print, learner_cls=None, max_seeds: int | None = None, record: str | None = None,
                   registry: dict | None = None, whole_parts: bool = False, record_each: bool = False,
@@ -696,22 +721,15 @@ def train_pending(selection, runs_dir: str, deadline: float | None = None, reser
                 part = pending[0]
                 where = f"[{st.key} {part.name}" + (f" in {st.shared}]" if st.shared else "]")
                 seconds = None if deadline is None else deadline - time.monotonic() - reserve
-                rate_guess, startup_guess = speed_guess(st, part)
-                if part.rate is None and rate_guess is None:
-                    rate_guess, startup_guess = speed_guess(st, part, comparable_parts(run, runs_dir, record, registry))
                 is_compiled = part.logdir in compiled
-                seen = [x for x in (startup_seen, startup_guess) if x is not None]
-                startup_guess = max(seen) if seen else None
-                if whole_parts and seconds is not None:
-                    need = seconds_to_finish(part, is_compiled, startup_guess, rate_guess)
-                    if need is None or need > seconds:
-                        log(f"{where} left for a later call: it needs "
-                            f"{'an unknown time (no speed measured)' if need is None else f'~{need:.0f} s'} to finish, "
-                            f"{max(0.0, seconds):.0f} s are left")
-                        finished = False
-                        break
-                if not may_start(part, seconds, is_compiled, startup_guess, rate_guess):
-                    log(f"{where} time limit: stopped at {part.steps:,} of {part.budget:,} steps; run again to continue")
+                verdict, why = start_verdict(st, part, seconds, is_compiled, startup_seen, whole_parts, runs_dir,
+                                             record, registry)
+                if verdict == "later":
+                    log(f"{where} {why}")
+                    finished = False
+                    break
+                if verdict == "stop":
+                    log(f"{where} {why}")
                     return False
                 resume = part.steps > 0
                 # A part stopped before its first checkpoint (a killed call) left config.json and logs: start it afresh.
@@ -816,9 +834,27 @@ def train_parallel(selection, runs_dir: str, gpus: list[str], deadline: float | 
 
     if worker_logs is not None:
         os.makedirs(worker_logs, exist_ok=True)
+    def refusal(key: str, part_name: str, seconds: float) -> str | None:
+        """Why the worker of a part to train would not start with `seconds` left (`start_verdict`, as the
+        worker decides it, without this call's start-ups), else None (also for a cross-evaluation item)."""
+        for _, st in planners(selection, runs_dir, out):
+            if st.key == key:
+                for part in pending_parts(st, max_seeds):
+                    if part.name == part_name:
+                        verdict, why = start_verdict(st, part, seconds - reserve, False, None, whole_parts,
+                                                     runs_dir, out)
+                        return None if verdict == "start" else why
+        return None
+
     while queue or running:
         for slot in [s for s in slots if s not in running]:
             seconds = None if deadline is None else deadline - time.monotonic()
+            while queue and seconds is not None:
+                why = refusal(*queue[0], seconds)
+                if why is None:
+                    break
+                key, part = queue.pop(0)
+                log(f"{name(slot)}: {key} {part} not started: {why}")
             if not queue or (seconds is not None and seconds <= reserve):
                 break
             key, part = queue.pop(0)
