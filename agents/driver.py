@@ -191,7 +191,11 @@ def _train(config: TrainConfig, learner_cls: type | None = None) -> TrainResult:
             t0 = time.perf_counter()
             eval_metrics = evaluate(programs, state, config)
             logger.say(f"[{logger.label}] evaluation done in {time.perf_counter() - t0:.0f} s")
-            text = json.dumps({"env_steps": step, "eval_envs": config.eval_envs, "per_seed": eval_metrics,
+            from agents.evaluation import device_description  # it imports this module
+
+            # The device of this (last) call: tables show it beside speeds, which compare only on one GPU model.
+            text = json.dumps({"env_steps": step, "eval_envs": config.eval_envs, "device": device_description(),
+                               "per_seed": eval_metrics,
                                "mean": {k: float(np.mean(v)) for k, v in eval_metrics.items()}}, indent=2)
             for path in (os.path.join(ckpt.step_dir(step), "eval.json"), os.path.join(logdir, "eval.json")):
                 write_atomic(path, text)

@@ -96,8 +96,10 @@ def _metrics_csv(path, steps, seeds, rate, wall):
     _write(path, "\n".join(rows) + "\n")
 
 
-def _part(run, runs_dir, exp, run_name, first, count, steps=(), evaluated=None, metrics=None, config=None):
-    """A hand-made part folder: config.json, checkpoint folders, eval.json and metrics.csv as given."""
+def _part(run, runs_dir, exp, run_name, first, count, steps=(), evaluated=None, metrics=None, config=None,
+          device=None):
+    """A hand-made part folder: config.json, checkpoint folders, eval.json (with `device` where given) and
+    metrics.csv as given."""
     logdir = os.path.join(runs_dir, exp, run_name, ex.part_name(first, count))
     config = config or run.config(logdir, first_seed=first, seeds=count)
     _write(os.path.join(logdir, "config.json"), json.dumps(config_json(config)))
@@ -105,7 +107,8 @@ def _part(run, runs_dir, exp, run_name, first, count, steps=(), evaluated=None, 
         os.makedirs(os.path.join(logdir, "checkpoints", str(step)))
     if evaluated is not None:
         per_seed = {"episode/target_reached": [0.1 * (first + i) for i in range(count)]}
-        _write(os.path.join(logdir, "eval.json"), json.dumps({"env_steps": evaluated, "eval_envs": 16, "per_seed": per_seed}))
+        _write(os.path.join(logdir, "eval.json"), json.dumps({"env_steps": evaluated, "eval_envs": 16, "per_seed": per_seed,
+                                                              **({"device": device} if device else {})}))
     if metrics is not None:
         _metrics_csv(os.path.join(logdir, "metrics.csv"), *metrics)
     return logdir
@@ -227,6 +230,20 @@ def test_a_partial_run_builds_a_row_of_its_done_seeds(tmp_path):
     with open(os.path.join(out, "toy", "table.md")) as f:
         table = f.read()
     assert table.count("| 1 x 16 (2 planned) |") == 2 and "| not done (missing) | 2 x - |" in table
+    assert "device" not in table  # no eval.json names one: no device column
+    # A device named by one part's eval.json: the row says which (and for how many of its seeds); a cross row,
+    # evaluated elsewhere, has no training device.
+    _part(b, runs_dir, "toy", "b", 1, 1, evaluated=10240, metrics=([5120, 10240], 1, 10.0, [30.0, 9.0]),
+          device="GPU (NVIDIA H100 80GB HBM3)")
+    _part(b, runs_dir, "toy", "b", 0, 1, steps=[10240], evaluated=10240, metrics=([5120, 10240], 1, 10.0, [30.0, 9.0]))
+    ex.build([(exp, list(exp.runs))], runs_dir, out, registry={"toy": exp}, log=lambda s: None)
+    with open(os.path.join(out, "toy", "table.md")) as f:
+        lines = f.read().splitlines()
+    head = next(line for line in lines if line.startswith("| run |")).split(" | ")
+    by_run = {line.split(" | ")[0]: line.split(" | ") for line in lines if line.startswith("| ")}
+    column = head.index("device (training's last call) |")
+    assert by_run["| b"][column] == "GPU (NVIDIA H100 80GB HBM3) (1 of 2) |"
+    assert by_run["| b on sampled"][column] == " |"
     assert not ex.build([(exp, list(exp.runs))], runs_dir, str(tmp_path / "other"), complete_only=True,
                         registry={"toy": exp}, log=lambda s: None)
 
@@ -688,7 +705,10 @@ def test_toy_experiment_trains_resumes_and_builds(tmp_path):
         st = ex.run_state(TOY, run, runs_dir)
         assert st.status == "done" and st.steps == 10_240
     with open(os.path.join(logdir, "eval.json")) as f:
-        assert json.load(f)["env_steps"] == 10_240
+        written = json.load(f)
+    from agents.evaluation import device_description
+
+    assert written["env_steps"] == 10_240 and written["device"] == device_description() == f"CPU, {os.cpu_count()} cores"
 
     # The cross-evaluation ran once run a was done: its policies on a 0.5 m goal, as eval.py computes it.
     a_part = ex.run_state(TOY, TOY.runs[0], runs_dir).done_parts[0]

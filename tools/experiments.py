@@ -38,6 +38,7 @@ index can read the registry cheaply; configs, training and plots import jax on u
 from __future__ import annotations
 
 import argparse
+import collections
 import contextlib
 import csv
 import dataclasses
@@ -899,7 +900,13 @@ def header(metric: str) -> str:
 
 
 def describe_overrides(run: Run) -> str:
-    return ", ".join(f"{k}={'x'.join(map(str, v)) if isinstance(v, (tuple, list)) else v}" for k, v in run.overrides.items())
+    """'algo.q_hidden_sizes=512x512, env.observation=joint_pos+ee_pos': sizes joined by x, names by +."""
+    def value(v) -> str:
+        if isinstance(v, (tuple, list)):
+            return ("+" if all(isinstance(x, str) for x in v) else "x").join(map(str, v))
+        return str(v)
+
+    return ", ".join(f"{k}={value(v)}" for k, v in run.overrides.items())
 
 
 def merged_evaluation(state: RunState, files: dict[str, str] | None = None) -> dict:
@@ -915,6 +922,8 @@ def merged_evaluation(state: RunState, files: dict[str, str] | None = None) -> d
         merged["env_steps"] = min(merged.get("env_steps", ev["env_steps"]), ev["env_steps"])
         merged["eval_envs"] = ev["eval_envs"]
         merged["seeds"] += keep
+        if ev.get("device"):  # recorded since 2026-11-26 (older files: not known)
+            merged.setdefault("devices", []).extend([ev["device"]] * keep)  # one per seed
         for name, values in ev["per_seed"].items():
             merged["per_seed"].setdefault(name, []).extend(values[:keep])
     return merged
@@ -971,6 +980,11 @@ def build_default(experiment: Experiment, states: list[RunState], out_dir: str, 
             cells[-1] = f"not done ({row['status']})"
         seeds = f"{ev['seeds']} x {ev['eval_envs']}" if ev is not None else f"{planned} x -"
         cells.append(seeds + (f" ({planned} planned)" if ev is not None and ev["seeds"] < planned else ""))
+        devices = ev.get("devices", []) if ev is not None and timing else []
+        cells.append(", ".join(f"{d} ({n} of {ev['seeds']})" if n < ev["seeds"] else d
+                               for d, n in collections.Counter(devices).items()))
+        if devices:
+            row["devices"] = devices
         rows.append(cells)
         table.append(row)
 
@@ -996,8 +1010,9 @@ def build_default(experiment: Experiment, states: list[RunState], out_dir: str, 
                "stochastic": cross.stochastic, "seeds": st.run.seeds, "status": status}
         cells = [label, f"`{cross.run}`'s policies, evaluated with {cross.setting}"]
         add(cells, row, cross.paper, merged_evaluation(st, files) if files else None, st, st.run.seeds, timing=False)
-    head = ["run", "preset and overrides"] + [h for m in metrics for h in (f"paper: {header(m)}", header(m))] + ["seeds x episodes"]
-    keep = [i for i in range(len(head)) if not head[i].startswith("paper: ") or any(r[i] for r in rows)]
+    head = (["run", "preset and overrides"] + [h for m in metrics for h in (f"paper: {header(m)}", header(m))]
+            + ["seeds x episodes", "device (training's last call)"])
+    keep = [i for i in range(len(head)) if not head[i].startswith(("paper: ", "device")) or any(r[i] for r in rows)]
     lines = [f"# {experiment.title}", "", f"Paper: {experiment.paper_ref}." + (f" {experiment.paper}" if experiment.paper else ""), ""]
     if experiment.note:
         lines += [experiment.note, ""]
