@@ -627,8 +627,8 @@ def test_parallel_spreads_the_parts_of_one_run_over_the_gpus(tmp_path, monkeypat
     with open(os.path.join(logs, "toy_b_seeds-1-1.log")) as f:
         assert f.read() == "worker of seeds-1-1\n"
     # 100 s to the deadline, 30 of them the reserve: the parts to train (no speed measured) would need twice the
-    # assumed 60 s start-up, so the driver starts no worker for them (one would stop at once, its process start
-    # overrunning the call); the cross-evaluations of the done parts still get theirs.
+    # assumed 60 s start-up, so the driver starts no worker for them (one would stop at once, after its process
+    # start); the cross-evaluations of the done parts still get theirs.
     started.clear()
     lines = []
     assert not ex.train_parallel(selection, runs_dir, ["0", "1"], time.monotonic() + 100.0, 30.0, log=lines.append,

@@ -642,7 +642,7 @@ def start_verdict(st: RunState, part: PartState, seconds: float | None, compiled
     where `may_start` refuses it. Its speed is its own, else a part's of its run or of a comparable run
     (`speed_guess`); its start-up the longest of that guess and `startup_seen` (this call's). Used by a training
     process before each part and by the `--parallel` driver before it starts a worker (a worker that would stop
-    at once costs its process start and overruns the call)."""
+    at once still costs its process start, 10-20 s past the parts' stop)."""
     rate_guess, startup_guess = speed_guess(st, part)
     if part.rate is None and rate_guess is None:
         rate_guess, startup_guess = speed_guess(st, part, comparable_parts(st.run, runs_dir, record, registry))
