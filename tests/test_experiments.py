@@ -586,6 +586,32 @@ def test_parallel_worker_commands(monkeypatch, jax_platforms_unset):
             ex.main(["run", "sac-fast/panda-reach", "--only-part", name, *nowhere])
 
 
+def test_run_shares_a_persistent_compilation_cache_with_its_workers(monkeypatch, tmp_path, jax_platforms_unset):
+    """`run` turns on JAX's compilation cache for itself and (through JAX_COMPILATION_CACHE_DIR) the workers it
+    starts: by default in .jax_cache/ of the repository, else the folder given or already in the environment."""
+    before = jax.config.jax_compilation_cache_dir
+    monkeypatch.delenv("JAX_COMPILATION_CACHE_DIR", raising=False)
+    monkeypatch.setattr(ex, "train_parallel", lambda *args, **kw: True)
+    monkeypatch.setattr(ex, "train_pending", lambda *args, **kw: True)
+    monkeypatch.setenv("CUDA_VISIBLE_DEVICES", "0")
+    try:
+        ex.main(["run", "sac-fast", "--no-build"])
+        assert os.environ["JAX_COMPILATION_CACHE_DIR"] == jax.config.jax_compilation_cache_dir == os.path.join(ex.ROOT, ".jax_cache")
+        env, _ = ex.worker_command("sac-fast/ur5e-reach", "0", 100.0, "runs/experiments", 30.0)
+        assert env["JAX_COMPILATION_CACHE_DIR"] == os.path.join(ex.ROOT, ".jax_cache")
+        mine = str(tmp_path / "cache")
+        monkeypatch.setenv("JAX_COMPILATION_CACHE_DIR", mine)  # a user's own cache is kept
+        ex.main(["run", "sac-fast", "--parallel", "--no-build"])
+        assert jax.config.jax_compilation_cache_dir == mine == ex.worker_command("a/b", "0", None, "r", 30.0)[0]["JAX_COMPILATION_CACHE_DIR"]
+        ex.main(["run", "sac-fast", "--no-build", "--compilation-cache", "off"])
+        assert "JAX_COMPILATION_CACHE_DIR" not in os.environ and jax.config.jax_compilation_cache_dir is None
+        assert "JAX_COMPILATION_CACHE_DIR" not in ex.worker_command("a/b", "0", None, "r", 30.0)[0]
+        with pytest.raises(ValueError, match=r"--compilation-cache with list is meaningless"):
+            ex.main(["list", "--compilation-cache", mine])
+    finally:
+        jax.config.update("jax_compilation_cache_dir", before)
+
+
 def test_parallel_spreads_the_parts_of_one_run_over_the_gpus(tmp_path, monkeypatch):
     """`run --parallel --max-seeds 1`: each seed of a run is its own worker (`--only-part`), the done parts'
     cross-evaluations left behind are workers too (first, while their checkpoints are here), and a worker

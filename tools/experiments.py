@@ -773,6 +773,25 @@ def local_gpus() -> list[str]:
     return [str(i) for i in range(sum(line.startswith("GPU ") for line in out.splitlines()))]
 
 
+def use_compilation_cache(path: str | None) -> str | None:
+    """Turns on JAX's persistent compilation cache in `path` for this process and the workers it starts (through
+    JAX_COMPILATION_CACHE_DIR, which jax reads at import): the parts of a run, its seeds and its resumes compile
+    one program, so every start after the first on a machine loads it instead of compiling it again. None: the
+    folder JAX_COMPILATION_CACHE_DIR names, else `.jax_cache/` in the repository; "off": no cache. Returns the
+    folder used (None when off)."""
+    import jax
+
+    if path is None:
+        path = os.environ.get("JAX_COMPILATION_CACHE_DIR") or os.path.join(ROOT, ".jax_cache")
+    if path == "off":
+        os.environ.pop("JAX_COMPILATION_CACHE_DIR", None)
+        jax.config.update("jax_compilation_cache_dir", None)
+        return None
+    os.environ["JAX_COMPILATION_CACHE_DIR"] = path
+    jax.config.update("jax_compilation_cache_dir", path)
+    return path
+
+
 def keep_off_the_gpus() -> None:
     """Puts this process's jax (the planning builds configs) on the CPU before it starts a backend: on a GPU it
     would take most of the first GPU's memory from the worker training there. Workers keep the environment's
@@ -1155,6 +1174,9 @@ def main(argv=None) -> int:
     p.add_argument("--only-part", help="run: train only this part (seeds-<first>-<last>, as --max-seeds plans them "
                    "and `commands` names them) of the one run named, and its cross-evaluations: what --parallel's "
                    "workers do")
+    p.add_argument("--compilation-cache", default=None, metavar="DIR",
+                   help="run: JAX's persistent compilation cache, shared by the parts and their resumes (default: "
+                   "$JAX_COMPILATION_CACHE_DIR, else .jax_cache/ in the repository; 'off' for none)")
     p.add_argument("--whole-parts", action="store_true", help="run --time-limit: train only the parts predicted to "
                    "finish in time (measured speeds), for a last call on a machine that will not keep its runs/")
     args = p.parse_args(argv)
@@ -1168,6 +1190,8 @@ def main(argv=None) -> int:
         raise ValueError(f"--workers-per-gpu={args.workers_per_gpu} is impossible: allowed is 1 or more.")
     if args.gpus is not None and args.gpus < 1:
         raise ValueError(f"--gpus={args.gpus} is impossible: allowed is 1 or more (or leave it out).")
+    if args.compilation_cache is not None and args.action != "run":
+        raise ValueError(f"--compilation-cache with {args.action} is meaningless: allowed is `run` with it.")
     if args.whole_parts and args.time_limit is None:
         raise ValueError("--whole-parts without --time-limit is meaningless: allowed is --whole-parts with "
                          "--time-limit S (every part fits no limit).")
@@ -1189,6 +1213,7 @@ def main(argv=None) -> int:
     elif args.action == "build":
         build(selection, args.runs_dir, args.out)
     else:
+        use_compilation_cache(args.compilation_cache)
         deadline = None if args.time_limit is None else start + args.time_limit
         reserve = args.reserve if args.reserve is not None else (max(30.0, 0.1 * args.time_limit) if args.time_limit else 0.0)
         if args.parallel:
