@@ -854,6 +854,7 @@ def train_parallel(selection, runs_dir: str, gpus: list[str], deadline: float | 
 
     if worker_logs is not None:
         os.makedirs(worker_logs, exist_ok=True)
+
     def refusal(key: str, part_name: str, seconds: float) -> str | None:
         """Why the worker of a part to train would not start with `seconds` left (`start_verdict`, as the
         worker decides it, without this call's start-ups), else None (also for a cross-evaluation item)."""
