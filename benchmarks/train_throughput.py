@@ -6,6 +6,7 @@ of the same environment in the same run, and on 1..N local GPUs at the same per-
     python -m benchmarks.train_throughput --devices 2 --multi-device gspmd shard_map --skip-env-only
     python -m benchmarks.train_throughput --trace traces/  # + profile: python -m benchmarks.trace_summary traces/1dev
     python -m benchmarks.train_throughput --preset ur5e-reach-sac-fast --variant compute_dtype=float32  # A/B, same rounds
+    python -m benchmarks.train_throughput --preset panda-reach-sac --seeds 1 2 5  # seeds vmapped in one program
 
 Training rate: the compiled chunk of `--updates` PPO updates (rollouts, GAE, the preset's epochs of
 minibatch gradient steps), timed after a one-update warm-up that compiles it; env steps per
@@ -18,7 +19,10 @@ process (results: throughput study) falls on both sides of each round's ratio. R
 figures, their medians, and the fraction of env-only = the median of the rounds' ratios, written
 after every round (a run cut off by a time limit keeps the rounds it finished). With
 several device counts, each run keeps the per-device `num_envs` and `batch_size` of the preset, so
-the global batch grows with the devices (weak scaling).
+the global batch grows with the devices (weak scaling). Several `--seeds` counts: each is a setting
+(seeds trained together in one vmapped program, as `train.py --seeds N`), its rate counted over all seeds
+and per seed, to choose how many seeds a process should train. Speed-up: against one device at the same
+seed count (a `--variant` row: against the preset itself).
 """
 
 from __future__ import annotations
@@ -113,7 +117,8 @@ def main():
     parser.add_argument("--preset", default="ur5e-reach-ppo")
     parser.add_argument("--updates", type=int, default=10, help="timed updates per measurement")
     parser.add_argument("--rounds", type=int, default=3, help="rounds of (env only, every setting) timings")
-    parser.add_argument("--seeds", type=int, default=1)
+    parser.add_argument("--seeds", type=int, nargs="+", default=[1],
+                        help="seeds trained together in one program; several counts: each measured (variants use the first)")
     parser.add_argument("--devices", type=int, nargs="+", default=[1], help="device counts to measure")
     parser.add_argument("--env-steps", type=int, default=100, help="env steps per timed call of the env-only rate")
     parser.add_argument("--multi-device", nargs="+", default=["gspmd"], choices=MULTI_DEVICE_MODES,
@@ -125,27 +130,31 @@ def main():
     parser.add_argument("--trace", metavar="DIR", help="also write a profiler trace of one update per setting to DIR/<setting>")
     parser.add_argument("--out", default="results/throughput/train_throughput")
     args = parser.parse_args()
-    if args.updates < 1 or args.rounds < 1 or args.env_steps < 1:
-        parser.error(f"--updates, --rounds and --env-steps must be >= 1, got {args.updates}, {args.rounds}, {args.env_steps}")
+    if args.updates < 1 or args.rounds < 1 or args.env_steps < 1 or min(args.seeds) < 1:
+        parser.error(f"--updates, --rounds, --env-steps and --seeds must be >= 1, got {args.updates}, {args.rounds}, "
+                     f"{args.env_steps}, {args.seeds}")
 
-    base = presets.make_config(args.preset, seeds=args.seeds, eval_envs=0, progress=False, tensorboard=False)
+    base = presets.make_config(args.preset, seeds=args.seeds[0], eval_envs=0, progress=False, tensorboard=False)
     # Several devices: each --multi-device mode; one device: no mode (None runs the default program).
     settings = {}
-    for devices in args.devices:
-        for mode in (args.multi_device if devices > 1 else [None]):
-            algo = base.algo
-            if devices > 1:  # keep the per-device batch: weak scaling
-                algo = dataclasses.replace(algo, num_envs=algo.num_envs * devices, batch_size=algo.batch_size * devices)
-            config = dataclasses.replace(base, algo=algo, devices=devices, multi_device=mode or base.multi_device,
-                                         num_timesteps=(args.rounds * args.updates + 2) * algo.env_steps_per_update)
-            config_lib.validate(config)  # every setting before the first compile
-            settings[f"{devices}dev" + (f"-{mode}" if mode else "")] = (devices, mode, config)
+    for seeds in dict.fromkeys(args.seeds):
+        for devices in args.devices:
+            for mode in (args.multi_device if devices > 1 else [None]):
+                algo = base.algo
+                if devices > 1:  # keep the per-device batch: weak scaling
+                    algo = dataclasses.replace(algo, num_envs=algo.num_envs * devices, batch_size=algo.batch_size * devices)
+                config = dataclasses.replace(base, algo=algo, seeds=seeds, devices=devices,
+                                             multi_device=mode or base.multi_device,
+                                             num_timesteps=(args.rounds * args.updates + 2) * algo.env_steps_per_update)
+                config_lib.validate(config)  # every setting before the first compile
+                label = f"{devices}dev" + (f"-{mode}" if mode else "") + (f" {seeds} seeds" if len(args.seeds) > 1 else "")
+                settings[label] = (devices, mode, config, None)
 
     for text in args.variant:
         algo = dataclasses.replace(base.algo, **parse_variant(text, base.algo))
         config = dataclasses.replace(base, algo=algo, num_timesteps=(args.rounds * args.updates + 2) * algo.env_steps_per_update)
         config_lib.validate(config)
-        settings[f"1dev {text}"] = (1, None, config)
+        settings[f"1dev {text}"] = (1, None, config, text)
 
     env_only = None
     if not args.skip_env_only:
@@ -154,7 +163,7 @@ def main():
         jax.block_until_ready(env_fn(*env_args))  # compiles
         env_only = []
     runs = {}
-    for label, (_, _, config) in settings.items():
+    for label, (_, _, config, _) in settings.items():
         runs[label] = Training(config)
         print(f"{label}: compile + first update {runs[label].compile_seconds:.0f} s", flush=True)
     rates = {label: [] for label in settings}
@@ -178,19 +187,22 @@ def main():
 def write_report(out: Path, args, base, settings: dict, runs: dict, rates: dict, env_only: list | None) -> str:
     """`out`.json and `out`.md from the rounds timed so far (medians over them); returns the markdown."""
     rows = []
-    for label, (devices, mode, config) in settings.items():
+    for label, (devices, mode, config, variant) in settings.items():
         algo = config.algo
-        row = {"setting": label, "devices": devices, "multi_device": mode, "num_envs": algo.num_envs,
-               "batch_size": algo.batch_size, "seeds": args.seeds, "env_steps_per_update": algo.env_steps_per_update,
+        row = {"setting": label, "devices": devices, "multi_device": mode, "variant": variant, "num_envs": algo.num_envs,
+               "batch_size": algo.batch_size, "seeds": config.seeds, "env_steps_per_update": algo.env_steps_per_update,
                "train_steps_per_s": statistics.median(rates[label]), "train_steps_per_s_rounds": rates[label],
+               "train_steps_per_s_per_seed": statistics.median(rates[label]) / config.seeds,
                "compile_and_first_update_s": runs[label].compile_seconds}
         if devices == 1 and env_only:
             ratios = [t / e for t, e in zip(rates[label], env_only)]
             row.update(env_only_steps_per_s=statistics.median(env_only), env_only_steps_per_s_rounds=env_only,
                        fraction_of_env_only=statistics.median(ratios), fraction_of_env_only_rounds=ratios)
         rows.append(row)
-    for row in rows:
-        row["speedup_vs_1_device"] = row["train_steps_per_s"] / rows[0]["train_steps_per_s"] if rows[0]["devices"] == 1 else None
+    one_device = {r["seeds"]: r["train_steps_per_s"] for r in rows if r["devices"] == 1 and r["variant"] is None}
+    for row in rows:  # against one device at the same seed count
+        base_rate = one_device.get(row["seeds"])
+        row["speedup_vs_1_device"] = row["train_steps_per_s"] / base_rate if base_rate else None
 
     rounds = len(next(iter(rates.values())))
     device = jax.devices()[0]
@@ -203,14 +215,14 @@ def write_report(out: Path, args, base, settings: dict, runs: dict, rates: dict,
     out.parent.mkdir(parents=True, exist_ok=True)
     out.with_suffix(".json").write_text(json.dumps({"meta": meta, "rows": rows}, indent=2))
     lines = [f"# Training throughput: {args.preset} ({meta['device']} x{meta['local_devices']}, {meta['date']})", "",
-             f"Command: `{meta['command']}`, jax {meta['jax']}, {args.seeds} seed(s), {rounds} rounds"
+             f"Command: `{meta['command']}`, jax {meta['jax']}, {'/'.join(map(str, args.seeds))} seed(s), {rounds} rounds"
              + (f" (of {args.rounds} asked)" if rounds < args.rounds else "")
              + f" of {args.updates} timed updates; medians over the rounds (fraction: median of the rounds' ratios).", "",
-             "| setting | devices | multi-device | envs | batch | env steps/update | training env steps/s | env-only env steps/s | fraction | speed-up |",
-             "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|"]
+             "| setting | devices | multi-device | envs | batch | seeds | env steps/update | training env steps/s (all seeds) | per seed | env-only env steps/s | fraction | speed-up |",
+             "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for r in rows:
-        lines.append(f"| {r['setting']} | {r['devices']} | {r['multi_device'] or ''} | {r['num_envs']:,} | {r['batch_size']} | {r['env_steps_per_update']:,} | "
-                     f"{r['train_steps_per_s']:,.0f} | {r.get('env_only_steps_per_s', float('nan')):,.0f} | "
+        lines.append(f"| {r['setting']} | {r['devices']} | {r['multi_device'] or ''} | {r['num_envs']:,} | {r['batch_size']} | {r['seeds']} | {r['env_steps_per_update']:,} | "
+                     f"{r['train_steps_per_s']:,.0f} | {r['train_steps_per_s_per_seed']:,.0f} | {r.get('env_only_steps_per_s', float('nan')):,.0f} | "
                      f"{r.get('fraction_of_env_only', float('nan')):.1%} | {r['speedup_vs_1_device'] or float('nan'):.2f} |")
     text = "\n".join(lines) + "\n"
     out.with_suffix(".md").write_text(text)
