@@ -7,8 +7,10 @@ import dataclasses
 import importlib.util
 import json
 import os
+import signal
 import shutil
 import time
+import types
 
 import jax
 import pytest
@@ -610,6 +612,52 @@ def test_run_shares_a_persistent_compilation_cache_with_its_workers(monkeypatch,
             ex.main(["list", "--compilation-cache", mine])
     finally:
         jax.config.update("jax_compilation_cache_dir", before)
+
+
+def test_workers_past_the_time_limit_are_interrupted_then_killed(tmp_path, monkeypatch):
+    """A worker still running WORKER_GRACE[0] s past the driver's deadline gets SIGINT (it checkpoints and exits),
+    one still running WORKER_GRACE[1] s past it is killed, so the call returns about a minute late at most.
+    Here two workers ignore SIGINT (as one stuck in a compilation would); a hand-made clock advances by the
+    driver's 2 s sleeps."""
+    runs_dir = str(tmp_path / "runs")
+    selection = ex.select(["toy/b"], {"toy": TOY})
+    now = [0.0]
+
+    def sleep(seconds):
+        now[0] += seconds
+        assert now[0] < 1000.0, "the driver still waits for its workers long after the time limit"
+
+    monkeypatch.setattr(ex, "time", types.SimpleNamespace(monotonic=lambda: now[0], sleep=sleep))
+    workers = []
+
+    class Stubborn:
+        def __init__(self, argv, env, cwd, stdout=None, stderr=None):
+            self.returncode, self.signals = None, []
+            workers.append(self)
+
+        def poll(self):
+            return self.returncode
+
+        def send_signal(self, sig):
+            self.signals.append((now[0], sig))
+
+        def kill(self):
+            self.signals.append((now[0], "kill"))
+            self.returncode = -9
+
+    monkeypatch.setattr(ex.subprocess, "Popen", Stubborn)
+    lines = []
+    deadline = 300.0  # 270 s after the 30 s reserve: both seeds of toy/b start (no speed known: 120 s needed)
+    assert not ex.train_parallel(selection, runs_dir, ["0", "1"], deadline, 30.0, log=lines.append, max_seeds=1)
+    assert len(workers) == 2
+    for w in workers:
+        (t_int, sig), (t_kill, kill) = w.signals
+        assert sig == signal.SIGINT and kill == "kill"
+        assert deadline + ex.WORKER_GRACE[0] < t_int <= deadline + ex.WORKER_GRACE[0] + 2
+        assert deadline + ex.WORKER_GRACE[1] < t_kill <= deadline + ex.WORKER_GRACE[1] + 2
+    assert now[0] <= deadline + ex.WORKER_GRACE[1] + 6  # the kill, then two of the driver's 2 s sleeps
+    assert sum("past the time limit: interrupted (SIGINT)" in line for line in lines) == 2
+    assert sum("exited with status -9" in line for line in lines) == 2
 
 
 def test_parallel_spreads_the_parts_of_one_run_over_the_gpus(tmp_path, monkeypatch):

@@ -48,6 +48,7 @@ import json
 import math
 import os
 import shlex
+import signal
 import statistics
 import subprocess
 import sys
@@ -835,6 +836,12 @@ def parallel_items(selection, runs_dir: str, max_seeds: int | None = None, out: 
     return list(dict.fromkeys(crosses + training))
 
 
+WORKER_GRACE = (10.0, 60.0)
+"""Seconds past the `--parallel` driver's deadline after which a worker still running is sent SIGINT (it saves a
+checkpoint and exits; an evaluation under way finishes first), then killed: a time-limited call returns at most
+about a minute late, so the command that started it still gets to copy its results."""
+
+
 def train_parallel(selection, runs_dir: str, gpus: list[str], deadline: float | None, reserve: float, log=print,
                    max_seeds: int | None = None, out: str = OUT_DIR, whole_parts: bool = False,
                    worker_logs: str | None = None, workers_per_gpu: int = 1) -> bool:
@@ -867,6 +874,7 @@ def train_parallel(selection, runs_dir: str, gpus: list[str], deadline: float | 
                         return None if verdict == "start" else why
         return None
 
+    interrupted, killed = set(), set()  # slots whose worker overran the deadline (no new worker starts by then)
     while queue or running:
         for slot in [s for s in slots if s not in running]:
             seconds = None if deadline is None else deadline - time.monotonic()
@@ -892,6 +900,17 @@ def train_parallel(selection, runs_dir: str, gpus: list[str], deadline: float | 
                 del running[slot]
         if deadline is not None and time.monotonic() > deadline - reserve:
             queue.clear()
+        if deadline is not None:
+            late = time.monotonic() - deadline
+            for slot, (proc, what) in running.items():
+                if late > WORKER_GRACE[1] and slot not in killed:
+                    log(f"{name(slot)}: {what} still running {late:.0f} s past the time limit: killed")
+                    proc.kill()
+                    killed.add(slot)
+                elif late > WORKER_GRACE[0] and slot not in interrupted:
+                    log(f"{name(slot)}: {what} still running {late:.0f} s past the time limit: interrupted (SIGINT)")
+                    proc.send_signal(signal.SIGINT)
+                    interrupted.add(slot)
         time.sleep(2)
     return all(run_state(exp, r, runs_dir, out).status == "done" for exp, runs in selection for r in runs)
 
