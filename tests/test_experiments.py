@@ -589,25 +589,28 @@ def test_parallel_worker_commands(monkeypatch, jax_platforms_unset):
 
 
 def test_run_shares_a_persistent_compilation_cache_with_its_workers(monkeypatch, tmp_path, jax_platforms_unset):
-    """`run` turns on JAX's compilation cache for itself and (through JAX_COMPILATION_CACHE_DIR) the workers it
-    starts: by default in .jax_cache/ of the repository, else the folder given or already in the environment."""
+    """`run` turns on JAX's compilation cache for itself and passes the same setting to the workers it starts
+    (`--compilation-cache`): by default in .jax_cache/ of the repository, else the folder given or named by
+    JAX_COMPILATION_CACHE_DIR; `off` reaches the workers too."""
     before = jax.config.jax_compilation_cache_dir
     monkeypatch.delenv("JAX_COMPILATION_CACHE_DIR", raising=False)
-    monkeypatch.setattr(ex, "train_parallel", lambda *args, **kw: True)
+    given = []
+    monkeypatch.setattr(ex, "train_parallel", lambda *args, **kw: given.append(kw["compilation_cache"]) or True)
     monkeypatch.setattr(ex, "train_pending", lambda *args, **kw: True)
     monkeypatch.setenv("CUDA_VISIBLE_DEVICES", "0")
+    default = os.path.join(ex.ROOT, ".jax_cache")
     try:
         ex.main(["run", "sac-fast", "--no-build"])
-        assert os.environ["JAX_COMPILATION_CACHE_DIR"] == jax.config.jax_compilation_cache_dir == os.path.join(ex.ROOT, ".jax_cache")
-        env, _ = ex.worker_command("sac-fast/ur5e-reach", "0", 100.0, "runs/experiments", 30.0)
-        assert env["JAX_COMPILATION_CACHE_DIR"] == os.path.join(ex.ROOT, ".jax_cache")
+        assert jax.config.jax_compilation_cache_dir == default
         mine = str(tmp_path / "cache")
         monkeypatch.setenv("JAX_COMPILATION_CACHE_DIR", mine)  # a user's own cache is kept
         ex.main(["run", "sac-fast", "--parallel", "--no-build"])
-        assert jax.config.jax_compilation_cache_dir == mine == ex.worker_command("a/b", "0", None, "r", 30.0)[0]["JAX_COMPILATION_CACHE_DIR"]
-        ex.main(["run", "sac-fast", "--no-build", "--compilation-cache", "off"])
-        assert "JAX_COMPILATION_CACHE_DIR" not in os.environ and jax.config.jax_compilation_cache_dir is None
-        assert "JAX_COMPILATION_CACHE_DIR" not in ex.worker_command("a/b", "0", None, "r", 30.0)[0]
+        assert jax.config.jax_compilation_cache_dir == mine and given == [mine]
+        ex.main(["run", "sac-fast", "--parallel", "--no-build", "--compilation-cache", "off"])
+        assert jax.config.jax_compilation_cache_dir is None and given == [mine, None]
+        _, argv = ex.worker_command("a/b", "0", None, "r", 30.0, compilation_cache=mine)
+        assert argv[-2:] == ["--compilation-cache", mine]
+        assert "--compilation-cache" not in ex.worker_command("a/b", "0", None, "r", 30.0)[1]  # the worker's default
         with pytest.raises(ValueError, match=r"--compilation-cache with list is meaningless"):
             ex.main(["list", "--compilation-cache", mine])
     finally:
@@ -632,7 +635,7 @@ def test_workers_past_the_time_limit_are_interrupted_then_killed(tmp_path, monke
 
     class Stubborn:
         def __init__(self, argv, env, cwd, stdout=None, stderr=None):
-            self.returncode, self.signals = None, []
+            self.returncode, self.signals, self.argv = None, [], argv
             workers.append(self)
 
         def poll(self):
@@ -650,6 +653,7 @@ def test_workers_past_the_time_limit_are_interrupted_then_killed(tmp_path, monke
     deadline = 300.0  # 270 s after the 30 s reserve: both seeds of toy/b start (no speed known: 120 s needed)
     assert not ex.train_parallel(selection, runs_dir, ["0", "1"], deadline, 30.0, log=lines.append, max_seeds=1)
     assert len(workers) == 2
+    assert all(w.argv[-2:] == ["--compilation-cache", "off"] for w in workers)  # the driver's setting: none
     for w in workers:
         (t_int, sig), (t_kill, kill) = w.signals
         assert sig == signal.SIGINT and kill == "kill"

@@ -775,22 +775,18 @@ def local_gpus() -> list[str]:
 
 
 def use_compilation_cache(path: str | None) -> str | None:
-    """Turns on JAX's persistent compilation cache in `path` for this process and the workers it starts (through
-    JAX_COMPILATION_CACHE_DIR, which jax reads at import): the parts of a run, its seeds and its resumes compile
-    one program, so every start after the first on a machine loads it instead of compiling it again. None: the
-    folder JAX_COMPILATION_CACHE_DIR names, else `.jax_cache/` in the repository; "off": no cache. Returns the
-    folder used (None when off)."""
+    """Turns on JAX's persistent compilation cache in `path` for this process (the `--parallel` driver passes the
+    same setting to its workers): the parts of a run, its seeds and its resumes compile one program, so every
+    start after the first on a machine loads it instead of compiling it again. None: the folder
+    JAX_COMPILATION_CACHE_DIR names, else `.jax_cache/` in the repository; "off": no cache. Returns the folder
+    used (None when off)."""
     import jax
 
     if path is None:
         path = os.environ.get("JAX_COMPILATION_CACHE_DIR") or os.path.join(ROOT, ".jax_cache")
-    if path == "off":
-        os.environ.pop("JAX_COMPILATION_CACHE_DIR", None)
-        jax.config.update("jax_compilation_cache_dir", None)
-        return None
-    os.environ["JAX_COMPILATION_CACHE_DIR"] = path
-    jax.config.update("jax_compilation_cache_dir", path)
-    return path
+    folder = None if path == "off" else path
+    jax.config.update("jax_compilation_cache_dir", folder)
+    return folder
 
 
 def keep_off_the_gpus() -> None:
@@ -804,10 +800,12 @@ def keep_off_the_gpus() -> None:
 
 def worker_command(key: str, gpu: str, seconds: float | None, runs_dir: str, reserve: float,
                    max_seeds: int | None = None, out: str = OUT_DIR, whole_parts: bool = False,
-                   only_part: str | None = None, workers_per_gpu: int = 1) -> tuple[dict, list[str]]:
+                   only_part: str | None = None, workers_per_gpu: int = 1,
+                   compilation_cache: str | None = None) -> tuple[dict, list[str]]:
     """(environment, argv) of the process that trains run `key` (its part `only_part`, or all it has left) on GPU
     `gpu` within `seconds`; with several workers per GPU, each may take 90 % of the GPU's memory divided among
-    them (XLA's preallocation would otherwise give the first one 75 %)."""
+    them (XLA's preallocation would otherwise give the first one 75 %). `compilation_cache`: the driver's
+    (a folder or "off"; None: the worker's default)."""
     argv = [sys.executable, "-m", "tools.experiments", "run", key, "--no-build", "--runs-dir", runs_dir,
             "--out", out, "--reserve", f"{reserve:g}"]
     if seconds is not None:
@@ -818,6 +816,8 @@ def worker_command(key: str, gpu: str, seconds: float | None, runs_dir: str, res
         argv += ["--whole-parts"]
     if only_part is not None:
         argv += ["--only-part", only_part]
+    if compilation_cache is not None:
+        argv += ["--compilation-cache", compilation_cache]
     env = {**os.environ, "CUDA_VISIBLE_DEVICES": gpu}
     if workers_per_gpu > 1:
         env["XLA_PYTHON_CLIENT_MEM_FRACTION"] = f"{0.9 / workers_per_gpu:.3f}"
@@ -844,14 +844,16 @@ about a minute late, so the command that started it still gets to copy its resul
 
 def train_parallel(selection, runs_dir: str, gpus: list[str], deadline: float | None, reserve: float, log=print,
                    max_seeds: int | None = None, out: str = OUT_DIR, whole_parts: bool = False,
-                   worker_logs: str | None = None, workers_per_gpu: int = 1) -> bool:
+                   worker_logs: str | None = None, workers_per_gpu: int = 1,
+                   compilation_cache: str | None = None) -> bool:
     """Trains the parts not done (and evaluates done parts with cross-evaluations left where their checkpoints
     are) one per GPU side by side (a subprocess each, CUDA_VISIBLE_DEVICES=gpu, `--only-part`); a GPU that
     finishes takes the next part. A run's parts (its seeds, at most `max_seeds` a part) spread over the GPUs, so
     `--max-seeds 1` trains up to one seed per GPU. `worker_logs`: a folder where each worker writes its output
     (`<experiment>_<run>_<part>.log`, appended) instead of this process's stdout, where they would interleave.
     `workers_per_gpu`: workers sharing each GPU, for programs too small to fill one (the paper's SAC: 128 envs,
-    batch 256), each GPU's first worker before any second one. Returns True when every run is done."""
+    batch 256), each GPU's first worker before any second one. `compilation_cache`: the folder the workers share
+    (None: none). Returns True when every run is done."""
     queue = parallel_items(selection, runs_dir, max_seeds, out)
     running: dict[tuple[int, str], tuple[subprocess.Popen, str]] = {}
     slots = [(k, gpu) for k in range(workers_per_gpu) for gpu in gpus]
@@ -888,7 +890,7 @@ def train_parallel(selection, runs_dir: str, gpus: list[str], deadline: float | 
                 break
             key, part = queue.pop(0)
             env, argv = worker_command(key, slot[1], seconds, runs_dir, reserve, max_seeds, out, whole_parts, part,
-                                       workers_per_gpu)
+                                       workers_per_gpu, compilation_cache or "off")
             path = None if worker_logs is None else os.path.join(worker_logs, f"{key.replace('/', '_')}_{part}.log")
             log(f"{name(slot)}: {key} {part}" + (f" (output: {path})" if path else ""))
             with contextlib.ExitStack() as stack:  # the worker keeps its own copy of the log file's handle
@@ -1233,7 +1235,7 @@ def main(argv=None) -> int:
     elif args.action == "build":
         build(selection, args.runs_dir, args.out)
     else:
-        use_compilation_cache(args.compilation_cache)
+        cache = use_compilation_cache(args.compilation_cache)
         deadline = None if args.time_limit is None else start + args.time_limit
         reserve = args.reserve if args.reserve is not None else (max(30.0, 0.1 * args.time_limit) if args.time_limit else 0.0)
         if args.parallel:
@@ -1244,7 +1246,8 @@ def main(argv=None) -> int:
                 raise ValueError("--parallel found no GPU: allowed is a host with GPUs (or --gpus N).")
             finished = train_parallel(selection, args.runs_dir, gpus, deadline, reserve,
                                       max_seeds=args.max_seeds, out=args.out, whole_parts=args.whole_parts,
-                                      worker_logs=args.worker_logs, workers_per_gpu=args.workers_per_gpu)
+                                      worker_logs=args.worker_logs, workers_per_gpu=args.workers_per_gpu,
+                                      compilation_cache=cache)
         else:
             finished = train_pending(selection, args.runs_dir, deadline, reserve, max_seeds=args.max_seeds,
                                      record=args.out, whole_parts=args.whole_parts, record_each=True,
