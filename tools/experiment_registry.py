@@ -12,6 +12,7 @@ _REACH_OBS = ("joint_pos", "ee_pos", "target_pos", "ee_to_target")
 _AVOID_OBS = _REACH_OBS + ("obstacle_pos", "link_obstacle_dist")
 # The `-plus` presets' observation (not in the paper): joint sin/cos and self-collision distances added.
 _PLUS_OBS = ("joint_pos", "joint_sin_cos", "ee_pos", "target_pos", "ee_to_target", "self_dist")
+_PLUS_AVOID_OBS = _PLUS_OBS + ("obstacle_pos", "link_obstacle_dist")
 _DEPARTS = ("Relative control is `ur5e-reach-ppo` (action scale 0.3, discount 0.99, joint-limit penalty 0.05: "
             "results/headline says why); absolute control is `ur5e-reach-absolute-ppo` (the paper's 4x256, 7 epochs, "
             "discount 0.97).")
@@ -192,12 +193,12 @@ register(Experiment(
        Run("panda-reach-avoid-f32", "panda-reach-avoid-sac-fast", {"algo.compute_dtype": "float32"},
            label="panda-reach-avoid, float32", paper=_PPO_ROWS["panda-reach-avoid"]),
        Run("ur5e-reach-avoid-plus", "ur5e-reach-avoid-sac-fast",
-           {"env.observation": _PLUS_OBS + ("obstacle_pos", "link_obstacle_dist")},
+           {"env.observation": _PLUS_AVOID_OBS},
            label="ur5e-reach-avoid, plus observation", paper=_PPO_ROWS["ur5e-reach-avoid"], num_timesteps=200_000_000),
        Run("panda-reach-plus", "panda-reach-sac-fast", {"env.observation": _PLUS_OBS},
            label="panda-reach, plus observation, 100M steps", paper=_PPO_ROWS["panda-reach"], num_timesteps=100_000_000),
        Run("panda-reach-avoid-plus", "panda-reach-avoid-sac-fast",
-           {"env.observation": _PLUS_OBS + ("obstacle_pos", "link_obstacle_dist")},
+           {"env.observation": _PLUS_AVOID_OBS},
            label="panda-reach-avoid, plus observation", paper=_PPO_ROWS["panda-reach-avoid"]))
     + tuple(Run(f"{env}-ppo", f"{env}-ppo", label=f"{env}, PPO", paper=paper) for env, paper in _PPO_ROWS.items()),
     metrics=_AVOID_METRICS + ("wall_clock", "steps_per_second"), curves=("episode/target_reached",),
