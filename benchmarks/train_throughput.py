@@ -45,6 +45,11 @@ from agents.loop import MULTI_DEVICE_MODES
 from benchmarks.env_throughput import env_rollout, time_calls
 
 
+def cell(value, spec: str) -> str:
+    """A table cell: the value formatted, or blank where it was not measured (--skip-env-only)."""
+    return "" if value is None else format(value, spec)
+
+
 class Training:
     """One setting's compiled chunk and its state; `time(updates)` runs `updates` updates and
     returns env steps/s."""
@@ -222,8 +227,8 @@ def write_report(out: Path, args, base, settings: dict, runs: dict, rates: dict,
              "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for r in rows:
         lines.append(f"| {r['setting']} | {r['devices']} | {r['multi_device'] or ''} | {r['num_envs']:,} | {r['batch_size']} | {r['seeds']} | {r['env_steps_per_update']:,} | "
-                     f"{r['train_steps_per_s']:,.0f} | {r['train_steps_per_s_per_seed']:,.0f} | {r.get('env_only_steps_per_s', float('nan')):,.0f} | "
-                     f"{r.get('fraction_of_env_only', float('nan')):.1%} | {r['speedup_vs_1_device'] or float('nan'):.2f} |")
+                     f"{r['train_steps_per_s']:,.0f} | {r['train_steps_per_s_per_seed']:,.0f} | {cell(r.get('env_only_steps_per_s'), ',.0f')} | "
+                     f"{cell(r.get('fraction_of_env_only'), '.1%')} | {cell(r['speedup_vs_1_device'], '.2f')} |")
     text = "\n".join(lines) + "\n"
     out.with_suffix(".md").write_text(text)
     return text

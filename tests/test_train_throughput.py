@@ -57,7 +57,8 @@ def test_several_seed_counts_are_each_a_setting(tmp_path, monkeypatch):
     assert rows["1dev 1 seeds"]["train_steps_per_s"] == pytest.approx(5120 / 0.5)
     assert rows["1dev 2 seeds"]["train_steps_per_s"] == pytest.approx(2 * 5120 / 0.5)
     assert rows["1dev 2 seeds"]["train_steps_per_s_per_seed"] == pytest.approx(5120 / 0.5)
-    assert "| 1dev 2 seeds | 1 |  | 64 | 64 | 2 | 5,120 | 20,480 | 10,240 |" in out.with_suffix(".md").read_text()
+    # --skip-env-only: the env-only rate and fraction cells are blank, not "nan"
+    assert "| 1dev 2 seeds | 1 |  | 64 | 64 | 2 | 5,120 | 20,480 | 10,240 |  |  | 1.00 |" in out.with_suffix(".md").read_text()
     monkeypatch.setattr(sys, "argv", ["train_throughput", "--preset", "point-mass-ppo", "--seeds", "0"])
     with pytest.raises(SystemExit):
         tt.main()
