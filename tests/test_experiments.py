@@ -366,6 +366,27 @@ def test_equal_runs_train_once_and_the_record_keeps_finished_parts(tmp_path):
     assert ex.run_state(first, base, runs_dir, out, registry).status == "done"  # seeds-0-2 (changed) is covered
 
 
+def test_record_copies_the_finished_parts_of_a_fetched_runs_folder(tmp_path, capsys):
+    """`record --runs-dir DIR`: the done parts' config.json, eval.json and metrics.csv of the selected runs into
+    the results (what a GPU machine's runs/ brings back), byte for byte; a partial part stays out."""
+    runs_dir, out = str(tmp_path / "fetched"), str(tmp_path / "results")
+    exp = ex.EXPERIMENTS["sac-fast"]
+    run = exp.run("panda-reach-plus")
+    done = _part(run, runs_dir, "sac-fast", "panda-reach-plus", 0, 1, steps=[run.budget()], evaluated=run.budget(),
+                 metrics=([2_000_000, run.budget()], 1, 280_000.0, [25.0, 380.0]))
+    _part(run, runs_dir, "sac-fast", "panda-reach-plus", 1, 1, steps=[30_000_000])  # stopped at its time limit
+    ex.main(["record", "sac-fast/panda-reach-plus", "--runs-dir", runs_dir, "--out", out])
+    printed = capsys.readouterr().out
+    assert "3 files recorded" in printed
+    folder = os.path.join(out, "sac-fast", "runs", "panda-reach-plus")
+    assert sorted(os.listdir(folder)) == ["seeds-0-0"]
+    for name in ("config.json", "eval.json", "metrics.csv"):
+        with open(os.path.join(done, name)) as a, open(os.path.join(folder, "seeds-0-0", name)) as b:
+            assert a.read() == b.read()
+    assert ex.run_state(exp, run, str(tmp_path / "elsewhere"), out).seeds_done == 1
+    assert not os.path.exists(os.path.join(out, "sac-fast", "table.md"))  # no table: build does that
+
+
 def test_time_limit_plan():
     st = ex.PartState("", 0, 1, "partial", steps=1000, budget=100_000, rate=100.0, startup=20.0)
     assert ex.may_start(st, None, compiled=False)  # no limit

@@ -7,6 +7,7 @@ table (markdown and JSON) and figure from the runs' `eval.json` and `metrics.csv
     python -m tools.experiments run sac-fast --parallel --max-seeds 1 --time-limit 540   # one part per local GPU
     python -m tools.experiments commands reward               # one train.py command per run (cluster schedulers)
     python -m tools.experiments build                         # tables and figures from what is trained
+    python -m tools.experiments record --runs-dir FETCHED/runs/experiments   # finished parts into the results, no table
 
 A name selects an experiment (`action-space`) or one of its runs (`action-space/relative`); none selects all.
 A run trains in parts, `<runs-dir>/<experiment>/<run>/seeds-<first>-<last>/` (a train.py logdir each, the seeds
@@ -1173,7 +1174,7 @@ def build(selection, runs_dir: str, out: str, complete_only: bool = False, log=p
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="python -m tools.experiments", description=__doc__.split("\n\n")[0])
-    p.add_argument("action", choices=("list", "run", "commands", "build"))
+    p.add_argument("action", choices=("list", "run", "commands", "build", "record"))
     p.add_argument("names", nargs="*", help="experiments or experiment/run (default: all)")
     p.add_argument("--runs-dir", default=RUNS_DIR, help=f"where runs are trained (default {RUNS_DIR})")
     p.add_argument("--out", default=OUT_DIR, help=f"where tables and figures go (default {OUT_DIR})")
@@ -1234,6 +1235,10 @@ def main(argv=None) -> int:
         print("\n".join(commands(selection, args.runs_dir, args.all, args.max_seeds, args.out)))
     elif args.action == "build":
         build(selection, args.runs_dir, args.out)
+    elif args.action == "record":
+        written = record(selection, args.runs_dir, args.out)
+        print("\n".join([f"recorded {path}" for path in written]
+                        + [f"{len(written)} files recorded from {args.runs_dir} into {args.out}"]))
     else:
         cache = use_compilation_cache(args.compilation_cache)
         deadline = None if args.time_limit is None else start + args.time_limit
