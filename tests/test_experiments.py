@@ -166,6 +166,26 @@ def test_listing_and_commands_on_a_hand_made_runs_folder(tmp_path):
     assert "1 done, 1 partial, 1 missing, 1 changed; table not built" in text
     assert "partial 1/2 seeds done, 0.00512M/0.01024M" in text and "total: 61,440 env steps" in text
     assert "35,840 trained" in text  # a: 2 x 10,240, b: 10,240 + 5,120, d: nothing (changed)
+    # b's 15 s timed; c's config and preset have no timed part in the real registry this listing reads
+    assert "; <1 GPU-min left at logged speeds + 1 part of presets never timed here" in text
+    # GPU time left: b's seed 1 from its checkpoint at its own speed, a 10 s start-up + 5,120 steps at 1,000/s;
+    # c (b's config but the seed) at b's speed, 10 + 10,240 / 1,000; e (another goal radius) only roughly, from
+    # its preset's runs, with --max-seeds 1 as two parts of 10 + 10.24 s; f's preset never ran here.
+    rough = ex.Run("e", "point-mass-ppo", {**TOY_RUN, "env.goal_radius": 0.2}, seeds=2, num_timesteps=10_240)
+    untimed = ex.Run("f", "point-mass-sac", {"eval_envs": 16}, seeds=1, num_timesteps=10_240)
+    registry = {"toy": dataclasses.replace(exp, runs=exp.runs + (rough, untimed))}
+    assert ex.time_left(states["b"], runs_dir, registry=registry) == (pytest.approx(15.12), 0)
+    assert ex.time_left(states["c"], runs_dir, registry=registry) == (pytest.approx(20.24), 0)
+    st_e = ex.run_state(registry["toy"], rough, runs_dir, registry=registry)
+    assert ex.guess_speed(st_e, ex.pending_parts(st_e, 1)[0], runs_dir, registry=registry) == (None, None)
+    assert ex.time_left(st_e, runs_dir, registry=registry, max_seeds=1) == (pytest.approx(40.48), 0)
+    # Two seeds in one part, only one-seed parts timed: b1's 1,000/s in all shared by the two, 10 + 10,240 / 500
+    assert ex.time_left(st_e, runs_dir, registry=registry) == (pytest.approx(30.48), 0)
+    assert ex.time_left(ex.run_state(registry["toy"], untimed, runs_dir, registry=registry), runs_dir,
+                        registry=registry) == (0.0, 1)
+    assert ex.time_note(0.0, 0) == "nothing left" and ex.time_note(0.0, 2) == "2 parts of presets never timed here"
+    assert ex.time_note(7_200.0, 1) == "~2.0 GPU-h left at logged speeds + 1 part of presets never timed here"
+    assert ex.time_note(600.0, 0) == "~10 GPU-min left at logged speeds"
 
     lines = ex.commands([(exp, list(exp.runs))], runs_dir)
     assert lines == [

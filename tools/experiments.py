@@ -3,6 +3,7 @@
 table (markdown and JSON) and figure from the runs' `eval.json` and `metrics.csv`.
 
     python -m tools.experiments list                          # every experiment: runs done, partly trained, missing
+    python -m tools.experiments list --max-seeds 1            # ... and the GPU time left at the logged speeds
     python -m tools.experiments run action-space --time-limit 540 --max-seeds 2   # train what is missing, then build
     python -m tools.experiments run sac-fast --parallel --max-seeds 1 --time-limit 540   # one part per local GPU
     python -m tools.experiments commands reward               # one train.py command per run (cluster schedulers)
@@ -490,16 +491,43 @@ def describe_state(st: RunState) -> str:
     return text + (f" [trains in {st.shared}]" if st.shared else "")
 
 
-def listing(selection, runs_dir: str, out: str, registry: dict | None = None) -> str:
-    """Every selected experiment with its runs' states, and the env steps they cost (a folder shared by
-    several runs counted once, with the most seeds any of them needs)."""
+def gpu_time(seconds: float) -> str:
+    """"~45 GPU-min", "~6.2 GPU-h", "<1 GPU-min"."""
+    minutes = seconds / 60
+    if minutes < 1:
+        return "<1 GPU-min"
+    return f"~{minutes:.0f} GPU-min" if minutes < 120 else f"~{minutes / 60:.1f} GPU-h"
+
+
+def time_note(seconds: float, unknown: int) -> str:
+    """What `time_left` predicts, for the listing: '~45 GPU-min left at logged speeds' (+ the parts it could not
+    time)."""
+    untimed = f"{unknown} part{'s' * (unknown != 1)} of presets never timed here"
+    if not seconds:
+        return untimed if unknown else "nothing left"
+    return f"{gpu_time(seconds)} left at logged speeds" + (f" + {untimed}" if unknown else "")
+
+
+def listing(selection, runs_dir: str, out: str, registry: dict | None = None, max_seeds: int | None = None) -> str:
+    """Every selected experiment with its runs' states, the env steps they cost (a folder shared by several runs
+    counted once, with the most seeds any of them needs) and the GPU time left to train them (`time_left`, the
+    parts planned as `run --max-seeds max_seeds` would, each folder by the run that plans it)."""
     lines, need, trained = [], {}, {}
+    planner = {st.folder: st.key for _, st in planners(selection, runs_dir, out, registry)}
+    total_seconds, total_unknown = 0.0, 0
     for exp, runs in selection:
         states = [run_state(exp, r, runs_dir, out, registry) for r in runs]
         counts = {s: sum(st.status == s for st in states) for s in ("done", "trained", "partial", "missing", "changed")}
         summary = ", ".join(f"{n} {s}" for s, n in counts.items() if n)
+        seconds, unknown = 0.0, 0
+        for st in states:
+            if st.status != "done" and planner.get(st.folder) == st.key:
+                more, none = time_left(st, runs_dir, out, registry, max_seeds)
+                seconds, unknown = seconds + more, unknown + none
+        total_seconds, total_unknown = total_seconds + seconds, total_unknown + unknown
         lines.append(f"{exp.name}: {exp.title} [{exp.paper_ref}]")
-        lines.append(f"  {summary}; table {'built' if table_built(exp, out) else 'not built'}")
+        lines.append(f"  {summary}; table {'built' if table_built(exp, out) else 'not built'}"
+                     + (f"; {time_note(seconds, unknown)}" if seconds or unknown else ""))
         for st in states:
             need[st.folder] = max(need.get(st.folder, 0), st.run.seeds * st.budget)
             reached: dict[int, int] = {}  # per seed, the furthest part holding it (parts may overlap)
@@ -522,7 +550,9 @@ def listing(selection, runs_dir: str, out: str, registry: dict | None = None) ->
             lines.append(f"  cross {cross.name}: {cross.run} with {cross.setting}: {status}")
     total = sum(need.values())
     done = sum(min(trained[f], need[f]) for f in need)
-    lines.append(f"total: {total:,} env steps ({total / 1e9:.2f}B), {done:,} trained")
+    lines.append(f"total: {total:,} env steps ({total / 1e9:.2f}B), {done:,} trained; "
+                 + time_note(total_seconds, total_unknown) + (f" (--max-seeds {max_seeds})" if max_seeds else
+                                                             " (all of a run's seeds in one part)"))
     return "\n".join(lines)
 
 
@@ -636,6 +666,57 @@ def comparable_parts(run: Run, runs_dir: str, record: str | None = None, registr
             for part in run_state(exp, other, runs_dir, record, registry).parts]
 
 
+def same_preset_parts(run: Run, runs_dir: str, record: str | None = None, registry: dict | None = None) -> list:
+    """The parts of the other registered runs of `run`'s preset, whatever their overrides: a rough stand-in speed
+    for estimates (`time_left`), never for a time limit's decisions."""
+    registry = EXPERIMENTS if registry is None else registry
+    return [part for exp in registry.values() for other in exp.runs if other is not run and other.preset == run.preset
+            for part in run_state(exp, other, runs_dir, record, registry).parts]
+
+
+def guess_speed(st: RunState, part: PartState, runs_dir: str, record: str | None = None,
+                registry: dict | None = None, rough: bool = False) -> tuple[float | None, float | None]:
+    """(env steps/s per seed, startup s) for `part` when it has none of its own: another part's of its run, else
+    of a run training the same config (`comparable_parts`), each with at least as many seeds (`speed_guess`);
+    with `rough`, then of a run of the same preset (`same_preset_parts`), and last a part of any of these with
+    fewer seeds, its throughput in all shared among `part`'s seeds (vmapping more seeds has never lowered the
+    throughput in all: results/sac/brax_reference, results/experiments; a time from it is an upper bound);
+    (None, None) where none was measured."""
+    rate, startup = speed_guess(st, part)
+    if part.rate is not None or rate is not None:
+        return rate, startup
+    comparable = comparable_parts(st.run, runs_dir, record, registry)
+    rate, startup = speed_guess(st, part, comparable)
+    if not rough or rate is not None:
+        return rate, startup
+    preset = same_preset_parts(st.run, runs_dir, record, registry)
+    rate, startup = speed_guess(st, part, preset)
+    if rate is not None:
+        return rate, startup
+    fewer = [p for p in [*st.parts, *comparable, *preset]
+             if p.rate is not None and p.status != "changed" and p.logdir != part.logdir]
+    if not fewer:
+        return None, None
+    slowest = min(fewer, key=lambda p: p.rate * p.count)
+    return slowest.rate * slowest.count / part.count, slowest.startup
+
+
+def time_left(st: RunState, runs_dir: str, record: str | None = None, registry: dict | None = None,
+              max_seeds: int | None = None) -> tuple[float, int]:
+    """(seconds, parts without a speed): one GPU's time to train the run's pending parts (`pending_parts` with
+    `max_seeds`), each from its checkpoint with one start-up, at its measured speed, else `guess_speed(rough=True)`
+    (speeds differ between GPU models and vary with the overrides: a planning figure, not a promise)."""
+    seconds, unknown = 0.0, 0
+    for part in pending_parts(st, max_seeds):
+        rate, startup = guess_speed(st, part, runs_dir, record, registry, rough=True)
+        need = seconds_to_finish(part, False, startup, rate)
+        if need is None:
+            unknown += 1
+        else:
+            seconds += need
+    return seconds, unknown
+
+
 def start_verdict(st: RunState, part: PartState, seconds: float | None, compiled: bool,
                   startup_seen: float | None, whole_parts: bool, runs_dir: str, record: str | None = None,
                   registry: dict | None = None) -> tuple[str, str]:
@@ -645,9 +726,7 @@ def start_verdict(st: RunState, part: PartState, seconds: float | None, compiled
     (`speed_guess`); its start-up the longest of that guess and `startup_seen` (this call's). Used by a training
     process before each part and by the `--parallel` driver before it starts a worker (a worker that would stop
     at once still costs its process start, 10-20 s past the parts' stop)."""
-    rate_guess, startup_guess = speed_guess(st, part)
-    if part.rate is None and rate_guess is None:
-        rate_guess, startup_guess = speed_guess(st, part, comparable_parts(st.run, runs_dir, record, registry))
+    rate_guess, startup_guess = guess_speed(st, part, runs_dir, record, registry)
     seen = [x for x in (startup_seen, startup_guess) if x is not None]
     startup_guess = max(seen) if seen else None
     if whole_parts and seconds is not None:
@@ -1192,8 +1271,9 @@ def main(argv=None) -> int:
     p.add_argument("--no-build", action="store_true", help="run: no tables (finished parts are still recorded, each "
                    "as it finishes)")
     p.add_argument("--all", action="store_true", help="commands: also the runs done (each as a fresh run)")
-    p.add_argument("--max-seeds", type=int, help="run, commands: seeds trained together in one train.py process "
-                                                 "(default: all of a run's; 1 trains each seed on its own)")
+    p.add_argument("--max-seeds", type=int, help="run, commands, list: seeds trained together in one train.py "
+                                                 "process (default: all of a run's; 1 trains each seed on its own); "
+                                                 "list plans its GPU time so")
     p.add_argument("--only-part", help="run: train only this part (seeds-<first>-<last>, as --max-seeds plans them "
                    "and `commands` names them) of the one run named, and its cross-evaluations: what --parallel's "
                    "workers do")
@@ -1230,7 +1310,7 @@ def main(argv=None) -> int:
             raise ValueError(f"--only-part={args.only_part!r} is not a part name: allowed is seeds-<first>-<last> "
                              "(first <= last, no leading zeros), as the logdirs of `commands` name them.")
     if args.action == "list":
-        print(listing(selection, args.runs_dir, args.out))
+        print(listing(selection, args.runs_dir, args.out, max_seeds=args.max_seeds))
     elif args.action == "commands":
         print("\n".join(commands(selection, args.runs_dir, args.all, args.max_seeds, args.out)))
     elif args.action == "build":
