@@ -74,6 +74,14 @@ def test_bad_overrides_and_names_raise():
         ex.select(["toy/zzz"], {"toy": TOY})
     with pytest.raises(ValueError, match="experiment 'zzz' is unknown"):
         ex.select(["zzz"], {"toy": TOY})
+    # Options another action would take are refused before anything is read.
+    for argv, message in ((["list", "--time-limit", "60"], "--time-limit with list is meaningless: allowed is `run`"),
+                          (["build", "--max-seeds", "2"], "--max-seeds with build is meaningless: allowed is `run` or "
+                                                          "`commands` or `list`"),
+                          (["record", "--all"], "--all with record is meaningless: allowed is `commands`"),
+                          (["commands", "--no-build"], "--no-build with commands is meaningless")):
+        with pytest.raises(ValueError, match=message):
+            ex.main(argv)
     ex.validate_experiment(TOY)
     for cross, message in ((ex.Cross("zzz", "x", {}), "run 'zzz' is not in experiment 'toy'"),
                            (ex.Cross("a", "x", {"no_field": 1}), "env field 'no_field' is unknown for point-mass"),

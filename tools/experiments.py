@@ -1251,6 +1251,12 @@ def build(selection, runs_dir: str, out: str, complete_only: bool = False, log=p
 # Command line.
 
 
+ACTION_FLAGS = {"time-limit": ("run",), "reserve": ("run",), "parallel": ("run",), "no-build": ("run",),
+                "whole-parts": ("run",), "compilation-cache": ("run",), "all": ("commands",),
+                "max-seeds": ("run", "commands", "list")}
+"""Options that mean something only to some actions (those --parallel needs are checked with it)."""
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="python -m tools.experiments", description=__doc__.split("\n\n")[0])
     p.add_argument("action", choices=("list", "run", "commands", "build", "record"))
@@ -1293,8 +1299,11 @@ def main(argv=None) -> int:
         raise ValueError(f"--workers-per-gpu={args.workers_per_gpu} is impossible: allowed is 1 or more.")
     if args.gpus is not None and args.gpus < 1:
         raise ValueError(f"--gpus={args.gpus} is impossible: allowed is 1 or more (or leave it out).")
-    if args.compilation_cache is not None and args.action != "run":
-        raise ValueError(f"--compilation-cache with {args.action} is meaningless: allowed is `run` with it.")
+    for flag, actions in ACTION_FLAGS.items():
+        given = getattr(args, flag.replace("-", "_"))
+        if given is not None and given is not False and args.action not in actions:
+            raise ValueError(f"--{flag} with {args.action} is meaningless: allowed is "
+                             f"{' or '.join(f'`{a}`' for a in actions)} with it.")
     if args.whole_parts and args.time_limit is None:
         raise ValueError("--whole-parts without --time-limit is meaningless: allowed is --whole-parts with "
                          "--time-limit S (every part fits no limit).")
