@@ -364,6 +364,9 @@ def test_equal_runs_train_once_and_the_record_keeps_finished_parts(tmp_path):
     # Building only the sharing experiment records the parts in the owner's record; a checkout without the
     # runs folder sees them done.
     _part(base, runs_dir, "first", "base", 2, 1, steps=[10240], evaluated=10240)
+    both = ex.record(ex.select(["first", "second"], registry), str(tmp_path / "runs"), str(tmp_path / "rec2"),
+                     registry=registry)
+    assert len(both) == len(set(both)) == 4  # base's seeds-0-1 and seeds-2-2, recorded once though same shares them
     files = ex.build(ex.select(["second"], registry), runs_dir, out, log=lambda s: None, registry=registry)
     record = os.path.join(out, "first", "runs", "base", "seeds-0-1")
     assert os.path.join(record, "eval.json") in files and os.path.join(record, "config.json") in files
@@ -405,7 +408,7 @@ def test_record_copies_the_finished_parts_of_a_fetched_runs_folder(tmp_path, cap
     _part(run, runs_dir, "sac-fast", "panda-reach-plus", 1, 1, steps=[30_000_000])  # stopped at its time limit
     ex.main(["record", "sac-fast/panda-reach-plus", "--runs-dir", runs_dir, "--out", out])
     printed = capsys.readouterr().out
-    assert "3 files recorded" in printed
+    assert printed.splitlines()[-1] == f"3 files recorded from {runs_dir} into {out}"
     folder = os.path.join(out, "sac-fast", "runs", "panda-reach-plus")
     assert sorted(os.listdir(folder)) == ["seeds-0-0"]
     for name in ("config.json", "eval.json", "metrics.csv"):

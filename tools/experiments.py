@@ -680,8 +680,8 @@ def guess_speed(st: RunState, part: PartState, runs_dir: str, record: str | None
     of a run training the same config (`comparable_parts`), each with at least as many seeds (`speed_guess`);
     with `rough`, then of a run of the same preset (`same_preset_parts`), and last a part of any of these with
     fewer seeds, its throughput in all shared among `part`'s seeds (vmapping more seeds has never lowered the
-    throughput in all: results/sac/brax_reference, results/experiments; a time from it is an upper bound);
-    (None, None) where none was measured."""
+    throughput in all: results/sac/brax_reference, results/experiments; for the same config a time from it is an
+    upper bound, for another config of the preset a rough one); (None, None) where none was measured."""
     rate, startup = speed_guess(st, part)
     if part.rate is not None or rate is not None:
         return rate, startup
@@ -1221,9 +1221,9 @@ def record_parts(state: RunState, record: str, only: str | None = None) -> list[
 
 def record(selection, runs_dir: str, out: str, registry: dict | None = None) -> list[str]:
     """Records the finished parts of every selected run (`record_parts`), built table or not: what a GPU call
-    brings back is `out`."""
-    return [path for exp, runs in selection for r in runs
-            for path in record_parts(run_state(exp, r, runs_dir, out, registry), out)]
+    brings back is `out`. Each file once, though runs sharing a folder both record it."""
+    return list(dict.fromkeys(path for exp, runs in selection for r in runs
+                              for path in record_parts(run_state(exp, r, runs_dir, out, registry), out)))
 
 
 def build(selection, runs_dir: str, out: str, complete_only: bool = False, log=print, registry: dict | None = None) -> list[str]:
