@@ -55,6 +55,14 @@ def test_registry_covers_the_issue_with_its_seeds():
     assert all(r.budget() > 0 for e in ex.EXPERIMENTS.values() for r in e.runs)
 
 
+def test_the_registry_spells_the_plus_observations_as_the_presets_do():
+    from agents.presets import make_config
+    from tools import experiment_registry as reg
+
+    assert make_config("ur5e-reach-ppo-plus").env.observation == reg._PLUS_OBS
+    assert make_config("ur5e-reach-avoid-ppo-plus").env.observation == reg._PLUS_AVOID_OBS
+
+
 def test_bad_overrides_and_names_raise():
     with pytest.raises(ValueError, match="env.no_such_field"):
         ex.Run("x", "point-mass-ppo", {"env.no_such_field": 1}).config()

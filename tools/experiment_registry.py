@@ -10,7 +10,8 @@ from tools.experiment_spec import Cross, Experiment, Run, register
 
 _REACH_OBS = ("joint_pos", "ee_pos", "target_pos", "ee_to_target")
 _AVOID_OBS = _REACH_OBS + ("obstacle_pos", "link_obstacle_dist")
-# The `-plus` presets' observation (not in the paper): joint sin/cos and self-collision distances added.
+# The `-plus` presets' observation (not in the paper): joint sin/cos and self-collision distances added. Spelled
+# here because this module stays free of jax (agents.presets is not); a test holds the two equal.
 _PLUS_OBS = ("joint_pos", "joint_sin_cos", "ee_pos", "target_pos", "ee_to_target", "self_dist")
 _PLUS_AVOID_OBS = _PLUS_OBS + ("obstacle_pos", "link_obstacle_dist")
 _DEPARTS = ("Relative control is `ur5e-reach-ppo` (action scale 0.3, discount 0.99, joint-limit penalty 0.05: "

@@ -657,21 +657,24 @@ def speed_key(run: Run) -> str:
     return json.dumps(fields, sort_keys=True)
 
 
+def parts_of_runs_like(run: Run, alike, runs_dir: str, record: str | None = None, registry: dict | None = None) -> list:
+    """The parts of the other registered runs for which `alike(other)` holds."""
+    registry = EXPERIMENTS if registry is None else registry
+    return [part for exp in registry.values() for other in exp.runs if other is not run and alike(other)
+            for part in run_state(exp, other, runs_dir, record, registry).parts]
+
+
 def comparable_parts(run: Run, runs_dir: str, record: str | None = None, registry: dict | None = None) -> list:
     """The parts of the other registered runs that train what `run` trains, budget apart (`speed_key`): their
     measured speeds stand in for a run that has none of its own yet (`speed_guess`)."""
-    registry = EXPERIMENTS if registry is None else registry
     key = speed_key(run)
-    return [part for exp in registry.values() for other in exp.runs if other is not run and speed_key(other) == key
-            for part in run_state(exp, other, runs_dir, record, registry).parts]
+    return parts_of_runs_like(run, lambda other: speed_key(other) == key, runs_dir, record, registry)
 
 
 def same_preset_parts(run: Run, runs_dir: str, record: str | None = None, registry: dict | None = None) -> list:
     """The parts of the other registered runs of `run`'s preset, whatever their overrides: a rough stand-in speed
     for estimates (`time_left`), never for a time limit's decisions."""
-    registry = EXPERIMENTS if registry is None else registry
-    return [part for exp in registry.values() for other in exp.runs if other is not run and other.preset == run.preset
-            for part in run_state(exp, other, runs_dir, record, registry).parts]
+    return parts_of_runs_like(run, lambda other: other.preset == run.preset, runs_dir, record, registry)
 
 
 def guess_speed(st: RunState, part: PartState, runs_dir: str, record: str | None = None,
@@ -1043,7 +1046,7 @@ def merged_evaluation(state: RunState, files: dict[str, str] | None = None) -> d
         merged["env_steps"] = min(merged.get("env_steps", ev["env_steps"]), ev["env_steps"])
         merged["eval_envs"] = ev["eval_envs"]
         merged["seeds"] += keep
-        if ev.get("device"):  # recorded since 2026-11-26 (older files: not known)
+        if ev.get("device"):  # eval.json files written before the device was recorded lack it
             merged.setdefault("devices", []).extend([ev["device"]] * keep)  # one per seed
         for name, values in ev["per_seed"].items():
             merged["per_seed"].setdefault(name, []).extend(values[:keep])
