@@ -1,12 +1,14 @@
 """train.py end to end: checkpoints that load back, exact resume, NaN stop, input validation, and
 the two-device data-parallel path."""
 
+import csv
 import dataclasses
 import json
 import os
 import subprocess
 import sys
 import textwrap
+import types
 
 import jax
 import jax.numpy as jnp
@@ -124,6 +126,68 @@ def test_time_limit_counts_from_the_start_at_the_last_chunk_speed(monkeypatch):
     for bad in (-1.0, float("nan")):
         with pytest.raises(ValueError, match="stop_after_seconds"):
             validate(dataclasses.replace(config, stop_after_seconds=bad))
+
+
+class _TimedPrograms:
+    """A run's programs on a simulated clock: the first chunk call compiles (50 s) unless compiled ahead, every
+    chunk then takes 1 s."""
+
+    def __init__(self, inner, clock):
+        self._inner, self._clock = inner, clock
+
+    def __getattr__(self, name):
+        return getattr(self._inner, name)
+
+    def chunk(self, state, n):
+        _simulated_compile(self._clock)
+        self._clock["now"] += 1.0
+        return self._inner.chunk(state, n)
+
+
+def _simulated_compile(clock):
+    if not clock["compiled"]:
+        clock["now"] += 50.0
+        clock["compiled"] = True
+
+
+def test_a_time_limit_judges_the_next_chunk_by_its_speed_not_the_compilation(tmp_path, monkeypatch):
+    """A 50 s compilation and 1 s chunks under a 60.5 s limit: compiled ahead, the run trains 10 chunks (the 11th
+    would end at 61 s); judged by a first chunk that included the compilation (51 s) it would stop after one.
+    The logged time of the first chunk keeps the compilation."""
+    clock = {"now": 0.0, "compiled": False}
+    real_programs_for = driver.programs_for
+
+    def compile_ahead(programs, state):
+        start = clock["now"]
+        _simulated_compile(clock)
+        return clock["now"] - start
+
+    monkeypatch.setattr(driver, "time", types.SimpleNamespace(perf_counter=lambda: clock["now"]))
+    monkeypatch.setattr(driver, "compile_ahead", compile_ahead)
+    monkeypatch.setattr(driver, "programs_for",
+                        lambda config, learner_cls=None: _TimedPrograms(real_programs_for(config, learner_cls), clock))
+    config = presets.make_config("point-mass-ppo", logdir=str(tmp_path / "t"), num_timesteps=25 * 5120, eval_envs=0,
+                                 log_every=5120, stop_after_seconds=60.5, **QUIET)
+    result = driver.train(config)
+    assert result.status == "stopped" and result.env_steps == 10 * 5120
+    with open(tmp_path / "t" / "metrics.csv") as f:
+        seconds = [float(row["wall_seconds"]) for row in csv.DictReader(f)]
+    assert seconds == [51.0] + [1.0] * 9
+
+
+def test_compile_ahead_leaves_the_jit_call_nothing_to_compile(caplog):
+    """The executable compiled ahead is the one the jit call runs (fresh programs: 3 seeds, no other test's)."""
+    config = presets.make_config("point-mass-ppo", seeds=3, num_timesteps=SHORT, eval_envs=0, **QUIET)
+    programs = driver.programs_for(config)
+    state = programs.init(driver.seed_keys(config))
+    with jax.log_compiles(True), caplog.at_level("WARNING"):
+        assert driver.compile_ahead(programs, state) > 0.0
+        compiled_ahead = [r.getMessage() for r in caplog.records if "XLA compilation of jit(chunk)" in r.getMessage()]
+        caplog.clear()
+        jax.block_until_ready(programs.chunk(state, jnp.int32(1)))
+        at_call = [r.getMessage() for r in caplog.records if "XLA compilation of jit(chunk)" in r.getMessage()]
+    # jax logs "Finished XLA compilation of jit(chunk)" where it compiles (or loads from the persistent cache).
+    assert compiled_ahead and not at_call, (compiled_ahead, at_call)
 
 
 def _stored_leaf_names(step_dir: str) -> list[str]:
