@@ -65,7 +65,8 @@ _UR5E_REACH_AVOID = dict(_UR5E_RELATIVE, w_joint_limit=1.0, joint_limit_margin=0
 # Not in the paper: sin/cos of the joint angles and self-collision distances observed (results: observation study).
 _PLUS_REACH = ("joint_pos", "joint_sin_cos", "ee_pos", "target_pos", "ee_to_target", "self_dist")
 _UR5E_PLUS = dict(_UR5E_RELATIVE, observation=_PLUS_REACH)
-_UR5E_PLUS_AVOID = dict(_UR5E_RELATIVE, observation=_PLUS_REACH + ("obstacle_pos", "link_obstacle_dist"))
+_PLUS_REACH_AVOID = _PLUS_REACH + ("obstacle_pos", "link_obstacle_dist")
+_UR5E_PLUS_AVOID = dict(_UR5E_RELATIVE, observation=_PLUS_REACH_AVOID)
 # Beyond the paper (issue 29, the future work of its Discussion): 3 obstacles of random radius moving in straight
 # lines that bounce off the sampling cube; their radii and velocities observed.
 MOVING_OBSTACLES_3 = dict(
@@ -111,13 +112,17 @@ PRESETS: dict[str, Preset] = {
                                   "env options + joint sin/cos and self-collision distances observed", "ur5e-reach",
                                   SAC_FAST, env=dict(_UR5E_REACH, observation=_PLUS_REACH),
                                   run=dict(num_timesteps=100_000_000, **_FAST_RUN)),
-    "panda-reach-sac-fast": Preset("Panda reach with fast SAC (4,096 envs, n-step, categorical critic)", "panda-reach",
-                                   SAC_FAST, run=dict(num_timesteps=60_000_000, **_FAST_RUN)),
-    "ur5e-reach-avoid-sac-fast": Preset("UR5e reach-avoid with fast SAC (4,096 envs, n-step, categorical critic)",
-                                        "ur5e-reach-avoid", SAC_FAST_REACH_AVOID, env=_UR5E_REACH_AVOID,
-                                        run=dict(num_timesteps=100_000_000, **_FAST_RUN)),
-    "panda-reach-avoid-sac-fast": Preset("Panda reach-avoid with fast SAC (4,096 envs, n-step, categorical critic)",
-                                         "panda-reach-avoid", SAC_FAST_REACH_AVOID,
+    "panda-reach-sac-fast": Preset("Panda reach with fast SAC (4,096 envs, n-step, categorical critic) + joint sin/cos and "
+                                   "self-collision distances observed", "panda-reach", SAC_FAST,
+                                   env=dict(observation=_PLUS_REACH), run=dict(num_timesteps=100_000_000, **_FAST_RUN)),
+    "ur5e-reach-avoid-sac-fast": Preset("UR5e reach-avoid with fast SAC (4,096 envs, n-step, categorical critic), "
+                                        "ur5e-reach-avoid-ppo's env options + joint sin/cos and self-collision "
+                                        "distances observed", "ur5e-reach-avoid", SAC_FAST_REACH_AVOID,
+                                        env=dict(_UR5E_REACH_AVOID, observation=_PLUS_REACH_AVOID),
+                                        run=dict(num_timesteps=200_000_000, **_FAST_RUN)),
+    "panda-reach-avoid-sac-fast": Preset("Panda reach-avoid with fast SAC (4,096 envs, n-step, categorical critic) + "
+                                         "joint sin/cos and self-collision distances observed", "panda-reach-avoid",
+                                         SAC_FAST_REACH_AVOID, env=dict(observation=_PLUS_REACH_AVOID),
                                          run=dict(num_timesteps=100_000_000, **_FAST_RUN)),
     "ur5e-reach-avoid-ppo": Preset("UR5e reach-avoid, 0.1 m obstacle, semi-sparse reward (paper) with a joint-limit "
                                    "penalty of 1.0, 4x256 (paper), action scale 0.3", "ur5e-reach-avoid",

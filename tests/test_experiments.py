@@ -61,6 +61,26 @@ def test_the_registry_spells_the_plus_observations_as_the_presets_do():
 
     assert make_config("ur5e-reach-ppo-plus").env.observation == reg._PLUS_OBS
     assert make_config("ur5e-reach-avoid-ppo-plus").env.observation == reg._PLUS_AVOID_OBS
+    for env in ("ur5e-reach", "panda-reach"):
+        assert make_config(f"{env}-sac-fast").env.observation == reg._PLUS_OBS
+    for env in ("ur5e-reach-avoid", "panda-reach-avoid"):
+        assert make_config(f"{env}-sac-fast").env.observation == reg._PLUS_AVOID_OBS
+
+
+def test_every_recorded_part_still_reads_as_its_registry_run():
+    """A preset edited after its runs trained must leave those rows an override that keeps their config: every
+    part recorded under results/experiments reads as its run's, not `changed` (a field a resume may not change)."""
+    checked = 0
+    for exp in ex.EXPERIMENTS.values():
+        for run in exp.runs:
+            folder = ex.record_folder(os.path.join(ex.ROOT, ex.OUT_DIR), exp.name, run.name)
+            for name in sorted(os.listdir(folder)) if os.path.isdir(folder) else ():
+                span = ex.parse_part(name)
+                if span is not None:
+                    part = ex.part_state(run, os.path.join(folder, name), *span)
+                    assert part.status != "changed", (exp.name, run.name, name, part.reason)
+                    checked += 1
+    assert checked >= 50  # the parts recorded so far (sac-fast, action-space, reward, ...)
 
 
 def test_bad_overrides_and_names_raise():
