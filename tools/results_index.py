@@ -590,6 +590,12 @@ FAILURES = (  # label, file
     ("UR5e reach-avoid, no joint-limit penalty", "failures/failures_ur5e_reach_avoid_ppo_no_joint_limit.json"),
     ("UR5e reach-avoid, joint-limit penalty 1.0, seed 0 at 150.7M", "failures/failures_ur5e_reach_avoid_ppo_151m.json"),
     ("UR5e reach-avoid (shipped)", "failures/failures_ur5e_reach_avoid_ppo.json"),
+    ("Panda reach, fast SAC, plus observation, seed 3", "failures/failures_panda_reach_sac_fast_plus_seed3.json"),
+    ("Panda reach, fast SAC, plus observation, seed 4", "failures/failures_panda_reach_sac_fast_plus_seed4.json"),
+    ("Panda reach-avoid, fast SAC, plus observation, seed 3",
+     "failures/failures_panda_reach_avoid_sac_fast_plus_seed3.json"),
+    ("UR5e reach-avoid, fast SAC, plus observation, seed 1",
+     "failures/failures_ur5e_reach_avoid_sac_fast_plus_seed1.json"),
 )
 
 
