@@ -160,7 +160,8 @@ def _train(config: TrainConfig, learner_cls: type | None = None) -> TrainResult:
     # left would stop after one chunk. The logged time of the first chunk still includes the compilation.
     status = "done"
     try:
-        compile_seconds = compile_ahead(programs, state) if config.stop_after_seconds else 0.0
+        timed = config.stop_after_seconds and updates_done < stop_updates  # a resume to evaluate runs no chunk
+        compile_seconds = compile_ahead(programs, state) if timed else 0.0
         while updates_done < stop_updates:
             targets = [stop_updates, (updates_done // every(log_every) + 1) * every(log_every)]
             if config.checkpoint_every:
