@@ -32,6 +32,7 @@ import ast
 import dataclasses
 import datetime
 import json
+import os
 import statistics
 import sys
 import time
@@ -216,13 +217,15 @@ def write_report(out: Path, args, base, settings: dict, runs: dict, rates: dict,
             "command": " ".join(["python", "-m", "benchmarks.train_throughput"] + sys.argv[1:]),
             "preset": args.preset, "updates": args.updates, "rounds": rounds, "rounds_asked": args.rounds,
             "env_steps": args.env_steps, "algo": dataclasses.asdict(base.algo), "env_name": base.env_name,
-            "env": dataclasses.asdict(base.env), "matmul_precision": base.matmul_precision}
+            "env": dataclasses.asdict(base.env), "matmul_precision": base.matmul_precision,
+            "xla_flags": os.environ.get("XLA_FLAGS", "")}  # as XLA read them (agents/xla_flags.py adds its own)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.with_suffix(".json").write_text(json.dumps({"meta": meta, "rows": rows}, indent=2))
     lines = [f"# Training throughput: {args.preset} ({meta['device']} x{meta['local_devices']}, {meta['date']})", "",
              f"Command: `{meta['command']}`, jax {meta['jax']}, {'/'.join(map(str, args.seeds))} seed(s), {rounds} rounds"
              + (f" (of {args.rounds} asked)" if rounds < args.rounds else "")
-             + f" of {args.updates} timed updates; medians over the rounds (fraction: median of the rounds' ratios).", "",
+             + f" of {args.updates} timed updates; medians over the rounds (fraction: median of the rounds' ratios)."
+             + (f" XLA_FLAGS: `{meta['xla_flags']}`." if meta["xla_flags"] else ""), "",
              "| setting | devices | multi-device | envs | batch | seeds | env steps/update | training env steps/s (all seeds) | per seed | env-only env steps/s | fraction | speed-up |",
              "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for r in rows:

@@ -15,6 +15,8 @@ def test_the_report_is_written_after_every_round(tmp_path, monkeypatch):
     out = tmp_path / "tp"
     monkeypatch.setattr(sys, "argv", ["train_throughput", "--preset", "point-mass-ppo", "--updates", "1", "--rounds", "3",
                                       "--skip-env-only", "--out", str(out)])
+    flags = "--xla_backend_optimization_level=3"  # XLA's default: the report names the flags a run had
+    monkeypatch.setenv("XLA_FLAGS", flags)
     timed, real = [], tt.Training.time
 
     def time_until_the_limit(self, updates):
@@ -28,6 +30,7 @@ def test_the_report_is_written_after_every_round(tmp_path, monkeypatch):
         tt.main()
     data = json.loads(out.with_suffix(".json").read_text())
     assert (data["meta"]["rounds"], data["meta"]["rounds_asked"]) == (2, 3)
+    assert data["meta"]["xla_flags"] == flags and f"XLA_FLAGS: `{flags}`." in out.with_suffix(".md").read_text()
     row = data["rows"][0]
     assert row["train_steps_per_s_rounds"] == timed and row["train_steps_per_s"] == pytest.approx(statistics.median(timed))
     assert "2 rounds (of 3 asked) of 1 timed updates" in out.with_suffix(".md").read_text()
