@@ -745,6 +745,26 @@ def test_workers_past_the_time_limit_are_interrupted_then_killed(tmp_path, monke
     assert sum("exited with status -9" in line for line in lines) == 2
 
 
+def test_round_robin_takes_a_seed_of_each_run_first_after_the_parts_with_checkpoints(tmp_path):
+    """`run --parallel --round-robin --max-seeds 1`: the part with a checkpoint (here c's seed 2) first, then the
+    first new seed of b, c and d, then the second of each; without it, run after run (each run's part with a
+    checkpoint before its new ones)."""
+    runs_dir, out = str(tmp_path / "runs"), str(tmp_path / "out")
+    runs = tuple(ex.Run(name, "point-mass-ppo", {**TOY_RUN, "seed": 10 * i}, seeds=3 if name == "c" else 2,
+                        num_timesteps=10_240) for i, name in enumerate("bcd", 1))
+    registry = {"toy": dataclasses.replace(TOY, runs=runs, cross=())}
+    _part(runs[1], runs_dir, "toy", "c", 2, 1, steps=[5120])  # half trained
+    selection = ex.select(["toy"], registry)
+    robin = ex.parallel_items(selection, runs_dir, max_seeds=1, out=out, registry=registry, round_robin=True)
+    assert robin == [("toy/c", "seeds-2-2"), ("toy/b", "seeds-0-0"), ("toy/c", "seeds-0-0"), ("toy/d", "seeds-0-0"),
+                     ("toy/b", "seeds-1-1"), ("toy/c", "seeds-1-1"), ("toy/d", "seeds-1-1")]
+    in_order = ex.parallel_items(selection, runs_dir, max_seeds=1, out=out, registry=registry)
+    assert in_order == [("toy/b", "seeds-0-0"), ("toy/b", "seeds-1-1"), ("toy/c", "seeds-2-2"), ("toy/c", "seeds-0-0"),
+                        ("toy/c", "seeds-1-1"), ("toy/d", "seeds-0-0"), ("toy/d", "seeds-1-1")]
+    with pytest.raises(ValueError, match="--round-robin without --parallel"):
+        ex.main(["run", "toy", "--round-robin"])
+
+
 def test_parallel_spreads_the_parts_of_one_run_over_the_gpus(tmp_path, monkeypatch):
     """`run --parallel --max-seeds 1`: each seed of a run is its own worker (`--only-part`), the done parts'
     cross-evaluations left behind are workers too (first, while their checkpoints are here), and a worker

@@ -6,6 +6,7 @@ table (markdown and JSON) and figure from the runs' `eval.json` and `metrics.csv
     python -m tools.experiments list --max-seeds 1            # ... and the GPU time left at the logged speeds
     python -m tools.experiments run action-space --time-limit 540 --max-seeds 2   # train what is missing, then build
     python -m tools.experiments run sac-fast --parallel --max-seeds 1 --time-limit 540   # one part per local GPU
+    python -m tools.experiments run sac-fast --parallel --round-robin --max-seeds 1   # a seed of every row first
     python -m tools.experiments commands reward               # one train.py command per run (cluster schedulers)
     python -m tools.experiments build                         # tables and figures from what is trained
     python -m tools.experiments record --runs-dir FETCHED/runs/experiments   # finished parts into the results, no table
@@ -46,6 +47,7 @@ import csv
 import dataclasses
 import datetime
 import functools
+import itertools
 import json
 import math
 import os
@@ -908,14 +910,23 @@ def worker_command(key: str, gpu: str, seconds: float | None, runs_dir: str, res
 
 
 def parallel_items(selection, runs_dir: str, max_seeds: int | None = None, out: str = OUT_DIR,
-                   registry: dict | None = None) -> list[tuple[str, str]]:
+                   registry: dict | None = None, round_robin: bool = False) -> list[tuple[str, str]]:
     """(run key, part name) for each part a worker can take on its own: the done parts with cross-evaluations
     left where their checkpoints are, then the parts still to train (`pending_parts`, at most `max_seeds` seeds
-    each). Runs that share a folder are planned once (`planners`), so no part is listed twice."""
+    each), run after run. `round_robin`: the parts with a checkpoint first (a machine that goes back loses
+    them), then the first new part of every run, then the second of every run, and so on, so that a time-limited
+    call screening several runs gets a seed of each before a second seed of any. Runs that share a folder are
+    planned once (`planners`), so no part is listed twice."""
     plans = planners(selection, runs_dir, out, registry)
     crosses = [(st.key, part.name) for exp, st in plans
                for _, _, part, _ in folder_crosses(exp, st, runs_dir, out, registry)]
-    training = [(st.key, part.name) for _, st in plans if st.status != "done" for part in pending_parts(st, max_seeds)]
+    pending = [(st.key, pending_parts(st, max_seeds)) for _, st in plans if st.status != "done"]
+    if round_robin:
+        started = [(key, part.name) for key, parts in pending for part in parts if part.steps]
+        fresh = [[(key, part.name) for part in parts if not part.steps] for key, parts in pending]
+        training = started + [item for rank in itertools.zip_longest(*fresh) for item in rank if item is not None]
+    else:
+        training = [(key, part.name) for key, parts in pending for part in parts]
     return list(dict.fromkeys(crosses + training))
 
 
@@ -928,7 +939,7 @@ about a minute late, so the command that started it still gets to copy its resul
 def train_parallel(selection, runs_dir: str, gpus: list[str], deadline: float | None, reserve: float, log=print,
                    max_seeds: int | None = None, out: str = OUT_DIR, whole_parts: bool = False,
                    worker_logs: str | None = None, workers_per_gpu: int = 1,
-                   compilation_cache: str | None = None) -> bool:
+                   compilation_cache: str | None = None, round_robin: bool = False) -> bool:
     """Trains the parts not done (and evaluates done parts with cross-evaluations left where their checkpoints
     are) one per GPU side by side (a subprocess each, CUDA_VISIBLE_DEVICES=gpu, `--only-part`); a GPU that
     finishes takes the next part. A run's parts (its seeds, at most `max_seeds` a part) spread over the GPUs, so
@@ -936,8 +947,8 @@ def train_parallel(selection, runs_dir: str, gpus: list[str], deadline: float | 
     (`<experiment>_<run>_<part>.log`, appended) instead of this process's stdout, where they would interleave.
     `workers_per_gpu`: workers sharing each GPU, for programs too small to fill one (the paper's SAC: 128 envs,
     batch 256), each GPU's first worker before any second one. `compilation_cache`: the folder the workers share
-    (None: none). Returns True when every run is done."""
-    queue = parallel_items(selection, runs_dir, max_seeds, out)
+    (None: none). `round_robin`: the parts' order of `parallel_items`. Returns True when every run is done."""
+    queue = parallel_items(selection, runs_dir, max_seeds, out, round_robin=round_robin)
     running: dict[tuple[int, str], tuple[subprocess.Popen, str]] = {}
     slots = [(k, gpu) for k in range(workers_per_gpu) for gpu in gpus]
 
@@ -1277,6 +1288,9 @@ def main(argv=None) -> int:
     p.add_argument("--workers-per-gpu", type=int, default=1, help="run --parallel: workers sharing each GPU "
                    "(default 1), for runs too small to fill a GPU (the paper's SAC); each may use 90 %% of its "
                    "memory divided among them")
+    p.add_argument("--round-robin", action="store_true", help="run --parallel (one GPU too): the parts with a "
+                   "checkpoint first, then one new part of each selected run before a second of any (a seed of "
+                   "each row first, with --max-seeds 1), instead of run after run")
     p.add_argument("--no-build", action="store_true", help="run: no tables (finished parts are still recorded, each "
                    "as it finishes)")
     p.add_argument("--all", action="store_true", help="commands: also the runs done (each as a fresh run)")
@@ -1295,7 +1309,8 @@ def main(argv=None) -> int:
     if args.max_seeds is not None and args.max_seeds < 1:
         raise ValueError(f"--max-seeds={args.max_seeds} is impossible: allowed is 1 or more (or leave it out).")
     lone = [flag for flag, given in (("worker-logs", args.worker_logs is not None), ("gpus", args.gpus is not None),
-                                     ("workers-per-gpu", args.workers_per_gpu != 1)) if given]
+                                     ("workers-per-gpu", args.workers_per_gpu != 1),
+                                     ("round-robin", args.round_robin)) if given]
     if lone and not args.parallel:
         raise ValueError(f"--{lone[0]} without --parallel is meaningless: allowed is `run --parallel` with it.")
     if args.workers_per_gpu < 1:
@@ -1344,7 +1359,7 @@ def main(argv=None) -> int:
             finished = train_parallel(selection, args.runs_dir, gpus, deadline, reserve,
                                       max_seeds=args.max_seeds, out=args.out, whole_parts=args.whole_parts,
                                       worker_logs=args.worker_logs, workers_per_gpu=args.workers_per_gpu,
-                                      compilation_cache=cache)
+                                      compilation_cache=cache, round_robin=args.round_robin)
         else:
             finished = train_pending(selection, args.runs_dir, deadline, reserve, max_seeds=args.max_seeds,
                                      record=args.out, whole_parts=args.whole_parts, record_each=True,
