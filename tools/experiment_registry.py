@@ -194,7 +194,6 @@ def _fast(name: str, env: str, label: str, overrides: dict | None = None, **fiel
 register(Experiment(
     "sac-fast", "Fast SAC (4,096 envs, n-step returns, categorical critic) on the four tasks, against the paper's PPO",
     "not in the paper (issue 25); the paper's columns are its PPO rows",
-    # Rows without an observation override observe the presets' (the plus one); the paper-observation rows set it.
     (_fast("ur5e-reach", "ur5e-reach", ""),
      _fast("panda-reach", "panda-reach", "paper's observation", _PAPER_OBS, num_timesteps=60_000_000),
      _fast("ur5e-reach-avoid", "ur5e-reach-avoid", "paper's observation", _PAPER_AVOID_OBS),
@@ -230,29 +229,17 @@ register(Experiment(
     curve_axes=("env_steps", "wall_clock"),
     paper="PPO (the paper's best): UR5e reach 96.1 %, Panda reach 98.8 %, UR5e reach-avoid 86.8 %, Panda "
           "reach-avoid 95.2 %; the paper's own SAC reached 61.6 % (UR5e reach) and 87.9 % (Panda reach).",
-    note="The fast presets observe joint sin/cos and self-collision distances (the `plus` observation, as PPO's "
-         "`-plus` presets do): the `plus` rows did better than the paper's observation on UR5e reach-avoid by a wide"
-         " margin, on the Panda tasks within the seed spread (results/sac/fast); the rows trained before keep the "
-         "paper's observation through an override. Budgets: UR5e reach-avoid 200M steps (a seed was still improving "
-         "at 100M), also at 300M (every seed was still improving at 200M); Panda reach 100M (at 60M every seed was "
-         "short of 98.8 % and still improving: results/experiments/README.md). The `f32` row trains in float32 "
-         "instead of bfloat16 hidden layers (no better at 100M: results/sac/fast). The `300m`, `f32` and `100m` rows"
-         " stop at the seeds they have (2, 2, 3): each asked whether a longer budget or float32 closes the gap with "
-         "the paper's observation, and the plus observation's rows answered the targets instead. Two levers for the "
-         "Panda rows were screened and stopped at the seeds they have: the `jl` rows add a joint-limit penalty "
-         "(about half of the plus rows' misses end at a joint limit: results/failures) with the UR5e presets' "
-         "weights (reach 0.05, reach-avoid 1.0; margin 0.5 rad); the `ent14` row lowers the entropy target from -7 "
-         "(one per joint) to -14 (most misses end 1-2 cm from the target). Each did worse than the plus row on the "
-         "same seeds (results/sac/fast), so the Panda reach-avoid `ent14` row was dropped untrained. The `200m` rows"
-         " ask whether a longer budget closes the Panda gap instead: the paper's observation gained 0.8 points from "
-         "60M to 100M, and the plus rows' training episodes were still improving at 100M. `--max-seeds 1`: a "
-         "100M-step seed fits a 10 minute call (a 200M or 300M one takes two or three, each resume refilling the "
-         "replay buffer), and vmapped fast-SAC seeds ran no faster in all than one (results/sac/fast). The `sampled`"
-         " rows evaluate the same policies with sampled actions (why: results/sac/fast); they hold the seeds whose "
-         "checkpoints were at hand when their part was done (the seeds x episodes column). The `-ppo` rows are our "
-         "PPO presets (their runs shared with other experiments), for the training curves on the same axes, env "
-         "steps and wall-clock (curves.png: training episodes, stochastic policies; wall-clock compares only runs of"
-         " one GPU model).",
+    note="Rows without an observation override observe the fast presets' `plus` observation (joint sin/cos and "
+         "self-collision distances added); the \"paper's observation\" rows override it. The rows named by a budget "
+         "(100M, 200M, 300M steps) or `f32` (float32 instead of bfloat16 hidden layers) ask whether more steps or "
+         "precision close a gap; the `jl` rows add the UR5e presets' joint-limit penalty and the `ent14` row lowers "
+         "the entropy target from -7 to -14, each against the Panda rows' misses (results/failures). Rows with fewer"
+         " than 5 seeds stopped once their question was answered; the findings and figures are in results/sac/fast. "
+         "One seed per process (`--max-seeds 1`): vmapped fast-SAC seeds train no faster in all than one. The "
+         "`sampled` rows evaluate the same policies with sampled actions; they hold the seeds whose checkpoints were"
+         " at hand (the seeds x episodes column). The `-ppo` rows are our PPO presets, for the training curves on "
+         "the same axes (curves.png: training episodes, stochastic policies; wall-clock compares only runs of one "
+         "GPU model).",
     cross=tuple(Cross(env, f"{env}-sampled", {}, label=f"{env}, sampled actions", paper=paper, stochastic=True)
                 for env, paper in _PPO_ROWS.items())))
 
