@@ -1,6 +1,8 @@
 """User tools around trained policies: the paper's tables (`paper_tables`), why a policy fails
-(`failure_report`), shipping a policy export (`ship_checkpoint`) and figures (`plots`), the results tables (`results_index`). Each runs
-as `python -m tools.<name> --help` from the repository root and imports as `from tools import <name>`."""
+(`failure_report`), shipping a policy export (`ship_checkpoint`) and figures (`plots`), the results tables
+(`results_index`), the experiments (`experiments`) and their unfinished parts moved between machines
+(`carry_parts`). Each runs as `python -m tools.<name> --help` from the repository root and imports as
+`from tools import <name>`."""
 
 import sys
 
