@@ -132,7 +132,7 @@ def _replacements():
 @contextlib.contextmanager
 def fast_mjx(enabled: bool | None = None):
     """Applies this module's replacements while open (re-entrant). `enabled=None`: on when JAX's
-    default backend is a GPU (on a CPU, measured 15 % slower on the arm than the library calls)."""
+    default backend is a GPU (on a CPU the library calls are faster)."""
     if enabled is None:
         enabled = jax.default_backend() in ("gpu", "cuda", "rocm")
     if not enabled:

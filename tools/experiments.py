@@ -596,7 +596,8 @@ def commands(selection, runs_dir: str, everything: bool = False, max_seeds: int 
 
 ASSUMED_STARTUP = 60.0
 """Seconds of start-up assumed for a part whose start-up was never measured (nor a comparable part's):
-compilation and, for an off-policy learner, the replay buffer's first fill (fast SAC: 55-67 s on an H200)."""
+compilation and, for an off-policy learner, the replay buffer's first fill (about a minute for fast SAC:
+results/experiments/README.md)."""
 
 
 def may_start(part: PartState, seconds: float | None, compiled: bool, startup_guess: float | None = None,
