@@ -385,22 +385,35 @@ def restore_state(ckpt: Checkpointer, step: int, programs: Programs, config: Tra
 def learner_only_checkpoint(logdir: str, dest_logdir: str) -> int:
     """Saves the newest intact checkpoint of run `logdir` learner-only (`TrainConfig.checkpoint_envs` False: no
     env states, no replay buffer) into `dest_logdir/checkpoints/`, with its policy export; returns its env step.
-    A few MB instead of tens (PPO's 8,192 env states) or a GB (fast SAC's buffer), so an unfinished run can move
-    to another machine; its resume starts fresh episodes and, off-policy, refills the buffer."""
-    ckpt = Checkpointer(os.path.join(logdir, "checkpoints"))
+    PPO's 8,192 env states make most of its checkpoint, so the copy is a small fraction of it; a checkpoint
+    saved learner-only already (the fast SAC presets') is saved again unchanged. The resume from the copy starts
+    fresh episodes and, off-policy, refills the buffer. Restored on one device, whatever the run used."""
+    folder = os.path.join(logdir, "checkpoints")
+    if not os.path.isdir(folder):
+        raise ValueError(f"logdir={logdir!r} holds no checkpoints folder: allowed is the directory of a run with "
+                         "at least one readable checkpoint.")
+    ckpt = Checkpointer(folder)
     try:
-        errors = []
+        damaged = []
         for step in sorted(ckpt.manager.all_steps(), reverse=True):
             try:
                 config = config_from_json(ckpt.restore_config(step))
-                programs = programs_for(config)
-                abstract = programs.abstract_state
-                state, _ = ckpt.restore(step, abstract if config.checkpoint_envs else _learner_only(abstract, programs.learner))
-                break
-            except Exception as error:  # orbax / tensorstore raise many types on a damaged checkpoint
-                errors.append(f"{ckpt.step_dir(step)}: {_first_line(error)}")
+            except Exception as error:  # orbax / tensorstore / json raise many types on a damaged file
+                damaged.append(f"{ckpt.step_dir(step)}: {_first_line(error)}")
+                continue
+            config = dataclasses.replace(config, devices=1)  # a run field: restoring needs no other device
+            programs = programs_for(config)  # an error here is not damage: it propagates
+            abstract = programs.abstract_state
+            if not config.checkpoint_envs:
+                abstract = _learner_only(abstract, programs.learner)
+            try:
+                state, _ = ckpt.restore(step, abstract)
+            except Exception as error:
+                damaged.append(f"{ckpt.step_dir(step)}: {_first_line(error)}")
+                continue
+            break
         else:
-            raise ValueError(f"logdir={logdir!r} holds no intact checkpoint ({'; '.join(errors) or 'none found'}): "
+            raise ValueError(f"logdir={logdir!r} holds no intact checkpoint ({'; '.join(damaged) or 'none found'}): "
                              "allowed is the directory of a run with at least one readable checkpoint.")
     finally:
         ckpt.close()

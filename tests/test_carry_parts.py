@@ -1,19 +1,27 @@
-"""tools.carry_parts: an unfinished part moves to another runs folder learner-only and resumes there."""
+"""tools.carry_parts: unfinished parts move to another runs folder learner-only and resume there; a damaged part
+or a lost piece costs only its own part; a done part, a newer one or another config here is kept."""
 
-import csv
 import json
 import os
+import shutil
 
 import jax
 import numpy as np
 import pytest
 
-from agents import driver, presets
+from agents import driver
 from agents.checkpoint import Checkpointer
 from tools import carry_parts
+from tools import experiments as ex
 
-SHORT = 30_720  # 6 updates of the PPO probe preset (the program tests/test_loop_train.py compiles)
-BASE = dict(num_timesteps=SHORT, eval_envs=0, log_every=5120, tensorboard=False, progress=False)
+QUIET = dict(tensorboard=False, progress=False)
+# The configs of tests/test_loop_train.py's exact-resume and learner-only SAC tests: the same compiled programs.
+PPO_RUN = ex.Run("ppo", "point-mass-ppo", dict(eval_envs=0, log_every=5120, checkpoint_every=5120, **QUIET), seeds=1,
+                 num_timesteps=30_720)
+SAC_RUN = ex.Run("sac", "point-mass-sac", dict(eval_envs=0, log_every=1_600, checkpoint_envs=False, **QUIET), seeds=1,
+                 num_timesteps=3_200)
+EXP = ex.Experiment("toy", "carried parts", "not in the paper", (PPO_RUN, SAC_RUN), metrics=("target_reached",))
+REGISTRY = {"toy": EXP}
 
 
 def _stored_leaf_names(step_dir: str) -> list[str]:
@@ -21,41 +29,108 @@ def _stored_leaf_names(step_dir: str) -> list[str]:
         return list(json.load(f)["tree_metadata"])
 
 
-def test_an_unfinished_part_is_packed_learner_only_in_pieces_and_resumes_after_unpacking(tmp_path):
-    runs, carry, there = tmp_path / "runs", str(tmp_path / "carry"), str(tmp_path / "there")
-    part = str(runs / "toy" / "b" / "seeds-0-0")
-    first = driver.train(presets.make_config("point-mass-ppo", logdir=part, stop_after_steps=15_360, **BASE))
-    assert first.status == "stopped"
-    assert any("env_state" in n for n in _stored_leaf_names(os.path.join(part, "checkpoints", "15360")))
-    done = runs / "toy" / "b" / "seeds-1-1"  # evaluated: done, not packed
-    os.makedirs(done / "checkpoints" / "30720")
-    (done / "eval.json").write_text("{}")
-    os.makedirs(runs / "toy" / "b" / "seeds-2-2")  # nothing trained yet: not packed
-    assert carry_parts.unfinished_parts(str(runs)) == ["toy/b/seeds-0-0"]
+def _learner_of(part_dir: str, step: int, config):
+    ckpt = Checkpointer(os.path.join(part_dir, "checkpoints"))
+    try:
+        return driver.restore_state(ckpt, step, driver.programs_for(config), config, with_envs=False).learner
+    finally:
+        ckpt.close()
 
-    pieces = carry_parts.pack(str(runs), carry, max_mb=0.05, log=lambda s: None)
-    assert len(pieces) > 1 and all(os.path.getsize(p) <= 0.05 * 2**20 for p in pieces)
-    assert [os.path.basename(p) for p in pieces][:2] == ["parts.tgz.000", "parts.tgz.001"]
 
-    assert carry_parts.unpack(carry, there, log=lambda s: None) == ["toy/b/seeds-0-0"]
-    moved = os.path.join(there, "toy", "b", "seeds-0-0")
-    assert sorted(os.listdir(os.path.join(moved, "checkpoints"))) == ["15360"]
-    stored = _stored_leaf_names(os.path.join(moved, "checkpoints", "15360"))
+def _assert_same_tree(a, b):
+    for x, y in zip(jax.tree.leaves(jax.device_get(a)), jax.tree.leaves(jax.device_get(b)), strict=True):
+        np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    """A runs folder with a PPO part stopped half way (full checkpoints), a SAC part stopped half way
+    (learner-only checkpoints), a PPO part whose newest checkpoint is damaged, one whose every checkpoint is,
+    a done part and a part never trained; and the stopped runs' results."""
+    root = tmp_path_factory.mktemp("carry")
+    runs = str(root / "runs")
+    part = lambda run, first=0: os.path.join(runs, "toy", run.name, ex.part_name(first, 1))
+    ppo = driver.train(PPO_RUN.config(part(PPO_RUN), stop_after_steps=15_360))
+    sac = driver.train(SAC_RUN.config(part(SAC_RUN), stop_after_steps=1_600))
+    assert ppo.status == sac.status == "stopped"
+    for first, damage in ((1, ["15360"]), (2, ["5120", "10240", "15360"])):
+        shutil.copytree(part(PPO_RUN), part(PPO_RUN, first))
+        for step in damage:  # the config's metadata truncated, as tests/test_run_safety.py damages one
+            meta = os.path.join(part(PPO_RUN, first), "checkpoints", step, "config", "metadata")
+            with open(meta) as f:
+                text = f.read()
+            with open(meta, "w") as f:
+                f.write(text[:10])
+    os.makedirs(os.path.join(part(SAC_RUN, 1), "checkpoints", "3200"))
+    with open(os.path.join(part(SAC_RUN, 1), "eval.json"), "w") as f:
+        f.write("{}")
+    os.makedirs(part(SAC_RUN, 2))
+    return root, runs, ppo, sac
+
+
+def test_unfinished_parts_are_packed_learner_only_and_resume_after_unpacking(runs):
+    root, runs_dir, ppo, sac = runs
+    assert carry_parts.unfinished_parts(runs_dir) == ["toy/ppo/seeds-0-0", "toy/ppo/seeds-1-1", "toy/ppo/seeds-2-2",
+                                                      "toy/sac/seeds-0-0"]
+    source = os.path.join(runs_dir, "toy/ppo/seeds-0-0/checkpoints/15360")
+    assert any("env_state" in n for n in _stored_leaf_names(source))
+    lines, carry, there = [], str(root / "carry"), str(root / "there")
+    pieces = carry_parts.pack(runs_dir, carry, max_mb=0.05, log=lines.append)
+    assert any(line.startswith("left out toy/ppo/seeds-2-2: ValueError") for line in lines), lines
+    names = [os.path.basename(p) for p in pieces]
+    assert {n.rsplit(".", 1)[0] for n in names} == {"toy__ppo__seeds-0-0.tgz", "toy__ppo__seeds-1-1.tgz",
+                                                    "toy__sac__seeds-0-0.tgz"}
+    assert "toy__ppo__seeds-0-0.tgz.001" in names  # split into pieces of at most 0.05 MiB
+    assert all(os.path.getsize(p) <= 0.05 * 2**20 for p in pieces)
+
+    assert carry_parts.unpack(carry, there, log=lambda s: None) == ["toy/ppo/seeds-0-0", "toy/ppo/seeds-1-1",
+                                                                    "toy/sac/seeds-0-0"]
+    moved = {rel: os.path.join(there, rel) for rel in ("toy/ppo/seeds-0-0", "toy/ppo/seeds-1-1", "toy/sac/seeds-0-0")}
+    assert os.listdir(os.path.join(moved["toy/ppo/seeds-0-0"], "checkpoints")) == ["15360"]
+    assert os.listdir(os.path.join(moved["toy/ppo/seeds-1-1"], "checkpoints")) == ["10240"]  # the newest intact one
+    stored = _stored_leaf_names(os.path.join(moved["toy/ppo/seeds-0-0"], "checkpoints", "15360"))
     assert any("learner" in n for n in stored) and not any("env_state" in n for n in stored)
-    with open(os.path.join(moved, "metrics.csv")) as f:
-        assert [int(float(r["env_steps"])) for r in csv.DictReader(f)] == [5120, 10240, 15360]
-    ckpt = Checkpointer(os.path.join(moved, "checkpoints"))
-    programs = driver.programs_for(first.config)
-    saved = driver.restore_state(ckpt, 15_360, programs, first.config, with_envs=False)
-    ckpt.close()
-    for a, b in zip(jax.tree.leaves(jax.device_get(first.state.learner)), jax.tree.leaves(jax.device_get(saved.learner))):
-        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))  # the learner arrives exactly
+    _assert_same_tree(ppo.state.learner, _learner_of(moved["toy/ppo/seeds-0-0"], 15_360, ppo.config))
+    sac_learner = _learner_of(moved["toy/sac/seeds-0-0"], 1_600, sac.config)
+    for name in ("policy_params", "q_params", "target_q_params", "log_alpha", "q_opt", "obs_stats"):
+        _assert_same_tree(getattr(sac.state.learner, name), getattr(sac_learner, name))
+    # The experiments runner reads the carried parts as partly trained, under the registry's config.
+    states = {run.name: ex.run_state(EXP, run, there, registry=REGISTRY) for run in EXP.runs}
+    assert [(p.name, p.status, p.steps) for p in states["ppo"].parts][:1] == [("seeds-0-0", "partial", 15_360)]
+    assert [(p.name, p.status, p.steps) for p in states["sac"].parts] == [("seeds-0-0", "partial", 1_600)]
+    resumed = driver.train(PPO_RUN.config(moved["toy/ppo/seeds-0-0"], resume=True))
+    assert resumed.status == "done" and resumed.env_steps == 30_720
+    # Unpacked again: the resumed part keeps its newer checkpoint here.
+    lines.clear()
+    assert "toy/ppo/seeds-0-0" not in carry_parts.unpack(carry, there, log=lines.append)
+    assert "kept toy/ppo/seeds-0-0: it has a checkpoint at 30,720 env steps here (packed: 15,360)" in lines
 
-    resumed = driver.train(presets.make_config("point-mass-ppo", logdir=moved, resume=True, **BASE))
-    assert resumed.status == "done" and resumed.env_steps == SHORT
-    # Unpacked again, the part keeps its newer checkpoint here.
-    assert carry_parts.unpack(carry, there, log=lambda s: None) == []
-    assert str(SHORT) in os.listdir(os.path.join(moved, "checkpoints"))
+
+def test_unpack_skips_a_part_with_a_lost_piece_and_keeps_done_or_other_parts_here(runs):
+    root, runs_dir, _, _ = runs
+    carry, there = str(root / "carry2"), str(root / "there2")
+    carry_parts.pack(runs_dir, carry, max_mb=0.05, log=lambda s: None)
+    os.remove(os.path.join(carry, "toy__ppo__seeds-0-0.tgz.001"))
+    done = os.path.join(there, "toy", "sac", "seeds-0-0")  # done here, with no checkpoint left
+    os.makedirs(done)
+    with open(os.path.join(done, "eval.json"), "w") as f:
+        f.write("{}")
+    other = os.path.join(there, "toy", "ppo", "seeds-1-1")  # an older checkpoint of another config
+    os.makedirs(os.path.join(other, "checkpoints", "5120"))
+    stored = json.load(open(os.path.join(runs_dir, "toy", "ppo", "seeds-1-1", "config.json")))
+    with open(os.path.join(other, "config.json"), "w") as f:
+        json.dump({**stored, "seed": 99}, f)
+    lines = []
+    assert carry_parts.unpack(carry, there, log=lines.append) == []
+    assert "skipped toy__ppo__seeds-0-0.tgz: ValueError: piece 001 is missing" in lines
+    assert "kept toy/sac/seeds-0-0: it is done here (eval.json)" in lines
+    assert "kept toy/ppo/seeds-1-1: its config.json here differs from the packed one" in lines
+    assert os.listdir(done) == ["eval.json"] and json.load(open(os.path.join(other, "config.json")))["seed"] == 99
+    # Within the total: the part with the most steps first, the rest left out and named.
+    lines.clear()
+    pieces = carry_parts.pack(runs_dir, carry, max_total_mb=0.2, log=lines.append)  # each part ~0.13-0.23 MiB
+    assert {os.path.basename(p).rsplit(".", 1)[0] for p in pieces} == {"toy__ppo__seeds-0-0.tgz"}
+    assert any(line.startswith("left out toy/sac/seeds-0-0 at 1,600 env steps:") for line in lines), lines
 
 
 def test_bad_arguments_are_refused_naming_the_option(tmp_path):
@@ -63,14 +138,13 @@ def test_bad_arguments_are_refused_naming_the_option(tmp_path):
         carry_parts.main(["pack", "--runs-dir", str(tmp_path)])
     with pytest.raises(ValueError, match="unpack needs --from"):
         carry_parts.main(["unpack"])
-    with pytest.raises(ValueError, match="--from=.* holds no parts.tgz"):
+    with pytest.raises(ValueError, match="--from=.* holds no <part>.tgz.NNN pieces"):
         carry_parts.main(["unpack", "--from", str(tmp_path)])
     with pytest.raises(ValueError, match="max_mb=0.0 is invalid"):
         carry_parts.pack(str(tmp_path), str(tmp_path / "out"), max_mb=0.0)
+    with pytest.raises(ValueError, match="max_total_mb=-1.0 is invalid"):
+        carry_parts.pack(str(tmp_path), str(tmp_path / "out"), max_total_mb=-1.0)
     assert carry_parts.pack(str(tmp_path), str(tmp_path / "out"), log=lambda s: None) == []
-
-
-def test_a_part_without_an_intact_checkpoint_is_refused_naming_the_logdir(tmp_path):
-    os.makedirs(tmp_path / "part" / "checkpoints")
-    with pytest.raises(ValueError, match=r"logdir=.*part' holds no intact checkpoint \(none found\)"):
-        driver.learner_only_checkpoint(str(tmp_path / "part"), str(tmp_path / "dest"))
+    with pytest.raises(ValueError, match=r"logdir=.*nothing' holds no checkpoints folder"):
+        driver.learner_only_checkpoint(str(tmp_path / "nothing"), str(tmp_path / "dest"))
+    assert not os.path.exists(tmp_path / "nothing")  # nothing created in the source

@@ -1,36 +1,43 @@
 """Carries the unfinished parts of `tools.experiments` runs from one machine to the next. A GPU machine lent
 for half an hour goes back with its `runs/`, and a part trained half way (by a `run --time-limit` call that ended
-first) is lost with it; these few MB let the next machine resume it.
+first) is lost with it; its learner-only checkpoint lets the next machine resume it.
 
     python -m tools.carry_parts pack --runs-dir runs/experiments --to $OUT/carry     # the last call on a machine
     python -m tools.carry_parts unpack --from DIR --runs-dir runs/experiments        # the first call on the next
 
 `pack` takes every part folder (`<experiment>/<run>/seeds-<first>-<last>/`) that has a checkpoint and no
-`eval.json` (not done), saves its newest checkpoint learner-only (`agents.driver.learner_only_checkpoint`: no
-env states, no replay buffer) beside its `config.json` and `metrics.csv`, and writes them as one gzipped tar
-split into pieces of at most `--max-mb` (`parts.tgz.000`, ...: a device call brings back files of at most 16 MiB).
-A resume from it starts fresh episodes and, for SAC, refills the replay buffer: not bit-for-bit the run that
-would have gone on, the same as any learner-only resume. `unpack` joins the pieces and extracts each part
-whose folder here has no checkpoint at that step or later.
+`eval.json` (not done), the one with the most env steps first, saves its newest intact checkpoint learner-only
+(`agents.driver.learner_only_checkpoint`: no env states, no replay buffer; per seed about 3-5 MB for the PPO
+presets, 16 MB for the fast SAC ones) beside its `config.json` and `metrics.csv`, and writes each part as its own
+gzipped tar, `<experiment>__<run>__<part>.tgz.NNN`, split into pieces of at most `--max-mb`, until `--max-total-mb`
+is used (a device call brings back at most 8 files of 16 MiB, 64 MiB in all, and the next call's working tree,
+which must carry them in a git-ignored folder, is limited to 64 MiB too). A part that cannot be saved or does not
+fit is left out and named. A resume from the copy starts fresh episodes and, for SAC, refills the replay buffer:
+not bit-for-bit the run that would have gone on, the same as any learner-only resume.
+
+`unpack` puts each complete archive's part into the runs folder, except where the folder there is done
+(`eval.json`), has a checkpoint at that step or later, or holds another config; an archive with a piece missing or
+damaged is named and skipped.
 """
 
 from __future__ import annotations
 
 import argparse
 import io
+import json
 import os
 import re
 import shutil
 import tarfile
 import tempfile
 
-PIECE = "parts.tgz"
 PART_DIR = re.compile(r"seeds-\d+-\d+")
+PIECE = re.compile(r"(?P<archive>.+\.tgz)\.(?P<index>\d{3})")
 
 
 def unfinished_parts(runs_dir: str) -> list[str]:
     """The part folders under `runs_dir` (relative, `<experiment>/<run>/seeds-F-L`) with a checkpoint and no
-    eval.json, sorted."""
+    eval.json, sorted by name."""
     found = []
     for root, dirs, files in os.walk(runs_dir):
         if PART_DIR.fullmatch(os.path.basename(root)):
@@ -47,62 +54,124 @@ def newest_step(part_dir: str) -> int | None:
     return max(steps) if steps else None
 
 
-def pack(runs_dir: str, to: str, max_mb: float = 15.0, log=print) -> list[str]:
-    """Writes the unfinished parts of `runs_dir` learner-only into `to/parts.tgz.NNN`; returns the pieces'
-    paths (none if no part is unfinished)."""
+def archive_name(rel: str) -> str:
+    """'sac-fast/panda-reach/seeds-0-0' -> 'sac-fast__panda-reach__seeds-0-0.tgz' (a file name a device call
+    brings back: letters, digits, '.', '_' and '-')."""
+    return "__".join(rel.split(os.sep)) + ".tgz"
+
+
+def _part_archive(runs_dir: str, rel: str, staging: str) -> tuple[bytes, int]:
+    """(the gzipped tar of part `rel` saved learner-only with its config.json and metrics.csv, its env step)."""
     from agents import driver
 
-    if not max_mb > 0:
-        raise ValueError(f"max_mb={max_mb!r} is invalid: allowed is a number > 0.")
-    parts = unfinished_parts(runs_dir)
-    if not parts:
-        log(f"no unfinished part under {runs_dir}")
-        return []
+    dest = os.path.join(staging, rel)
+    step = driver.learner_only_checkpoint(os.path.join(runs_dir, rel), dest)
+    for name in ("config.json", "metrics.csv"):
+        if os.path.isfile(os.path.join(runs_dir, rel, name)):
+            shutil.copy2(os.path.join(runs_dir, rel, name), dest)
+    data = io.BytesIO()
+    with tarfile.open(fileobj=data, mode="w:gz") as tar:
+        tar.add(dest, arcname=rel)
+    return data.getvalue(), step
+
+
+def pack(runs_dir: str, to: str, max_mb: float = 15.0, max_total_mb: float = 45.0, log=print) -> list[str]:
+    """Writes the unfinished parts of `runs_dir`, learner-only, into `to/<archive>.NNN` pieces (the old pieces
+    there removed first); returns the pieces' paths."""
+    for name, value in (("max_mb", max_mb), ("max_total_mb", max_total_mb)):
+        if not value > 0:
+            raise ValueError(f"{name}={value!r} is invalid: allowed is a number > 0.")
+    os.makedirs(to, exist_ok=True)
+    for name in os.listdir(to):
+        if PIECE.fullmatch(name):
+            os.remove(os.path.join(to, name))
+    parts = sorted(unfinished_parts(runs_dir), key=lambda rel: -newest_step(os.path.join(runs_dir, rel)))
+    size, budget, paths = int(max_mb * 2**20), int(max_total_mb * 2**20), []
     with tempfile.TemporaryDirectory() as staging:
         for rel in parts:
-            dest = os.path.join(staging, rel)
-            step = driver.learner_only_checkpoint(os.path.join(runs_dir, rel), dest)
-            for name in ("config.json", "metrics.csv"):
-                if os.path.isfile(os.path.join(runs_dir, rel, name)):
-                    shutil.copy2(os.path.join(runs_dir, rel, name), dest)
-            log(f"packed {rel} at {step:,} env steps")
-        data = io.BytesIO()
-        with tarfile.open(fileobj=data, mode="w:gz") as tar:
-            for rel in parts:
-                tar.add(os.path.join(staging, rel), arcname=rel)
-    os.makedirs(to, exist_ok=True)
-    blob, size = data.getvalue(), int(max_mb * 2**20)
-    paths = []
-    for i in range(0, len(blob), size):
-        paths.append(os.path.join(to, f"{PIECE}.{i // size:03d}"))
-        with open(paths[-1], "wb") as f:
-            f.write(blob[i:i + size])
-    log(f"{len(parts)} parts, {len(blob) / 2**20:.1f} MiB in {len(paths)} pieces under {to}")
+            try:
+                blob, step = _part_archive(runs_dir, rel, staging)
+            except Exception as error:  # a damaged part must not cost the others their carry
+                log(f"left out {rel}: {type(error).__name__}: {str(error).splitlines()[0] if str(error) else ''}")
+                continue
+            written = sum(os.path.getsize(p) for p in paths)
+            if written + len(blob) > budget:
+                log(f"left out {rel} at {step:,} env steps: {len(blob) / 2**20:.1f} MiB would pass "
+                    f"--max-total-mb {max_total_mb:g} ({written / 2**20:.1f} MiB written)")
+                continue
+            for i in range(0, len(blob), size):
+                paths.append(os.path.join(to, f"{archive_name(rel)}.{i // size:03d}"))
+                with open(paths[-1], "wb") as f:
+                    f.write(blob[i:i + size])
+            log(f"packed {rel} at {step:,} env steps: {len(blob) / 2**20:.1f} MiB")
+    if not parts:
+        log(f"no unfinished part under {runs_dir}")
     return paths
 
 
+def _read_archive(source: str, pieces: list[str]) -> bytes:
+    """The joined pieces; ValueError if their numbers do not run 000, 001, ... without a gap."""
+    indices = [int(PIECE.fullmatch(p)["index"]) for p in pieces]
+    if indices != list(range(len(pieces))):
+        missing = sorted(set(range(max(indices) + 1)) - set(indices))
+        raise ValueError(f"piece {missing[0]:03d} is missing")
+    blob = b""
+    for name in pieces:
+        with open(os.path.join(source, name), "rb") as f:
+            blob += f.read()
+    return blob
+
+
+def _keep_reason(packed_dir: str, target: str) -> str:
+    """Why the part folder `target` here is kept rather than replaced by `packed_dir`, or ""."""
+    if not os.path.isdir(target):
+        return ""
+    if os.path.isfile(os.path.join(target, "eval.json")):
+        return "it is done here (eval.json)"
+    here, packed = newest_step(target), newest_step(packed_dir)
+    if here is not None and here >= packed:
+        return f"it has a checkpoint at {here:,} env steps here (packed: {packed:,})"
+    configs = [os.path.join(d, "config.json") for d in (target, packed_dir)]
+    if all(os.path.isfile(c) for c in configs):
+        loaded = []
+        for c in configs:
+            with open(c) as f:
+                loaded.append(json.load(f))
+        if loaded[0] != loaded[1]:
+            return "its config.json here differs from the packed one"
+    return ""
+
+
 def unpack(source: str, runs_dir: str, log=print) -> list[str]:
-    """Extracts the parts packed in `source/parts.tgz.*` into `runs_dir`, except those whose folder there has a
-    checkpoint at the packed step or later; returns the parts extracted (relative paths)."""
-    pieces = sorted(name for name in os.listdir(source) if re.fullmatch(re.escape(PIECE) + r"\.\d{3}", name))
-    if not pieces:
-        raise ValueError(f"--from={source!r} holds no {PIECE}.NNN pieces: allowed is the folder `pack --to` wrote.")
-    blob = b"".join(open(os.path.join(source, name), "rb").read() for name in pieces)
+    """Puts the parts packed in `source` into `runs_dir` (see the module docstring); returns those put there
+    (relative paths)."""
+    archives: dict[str, list[str]] = {}
+    for name in sorted(os.listdir(source)):
+        match = PIECE.fullmatch(name)
+        if match:
+            archives.setdefault(match["archive"], []).append(name)
+    if not archives:
+        raise ValueError(f"--from={source!r} holds no <part>.tgz.NNN pieces: allowed is a folder `pack --to` wrote.")
     extracted = []
-    with tempfile.TemporaryDirectory() as staging:
-        with tarfile.open(fileobj=io.BytesIO(blob), mode="r:gz") as tar:
-            tar.extractall(staging, filter="data")
-        for rel in unfinished_parts(staging):
-            packed, here = newest_step(os.path.join(staging, rel)), newest_step(os.path.join(runs_dir, rel))
-            if here is not None and here >= packed:
-                log(f"kept {rel}: it has a checkpoint at {here:,} env steps here (packed: {packed:,})")
+    for archive, pieces in archives.items():
+        with tempfile.TemporaryDirectory() as staging:
+            try:
+                with tarfile.open(fileobj=io.BytesIO(_read_archive(source, pieces)), mode="r:gz") as tar:
+                    tar.extractall(staging, filter="data")
+            except Exception as error:  # a missing or damaged piece: gzip, zlib and tarfile raise many types
+                log(f"skipped {archive}: {type(error).__name__}: {error}")
                 continue
-            target = os.path.join(runs_dir, rel)
-            if os.path.isdir(target):
-                shutil.rmtree(target)
-            shutil.copytree(os.path.join(staging, rel), target)
-            extracted.append(rel)
-            log(f"unpacked {rel} at {packed:,} env steps")
+            for rel in unfinished_parts(staging):
+                target = os.path.join(runs_dir, rel)
+                why = _keep_reason(os.path.join(staging, rel), target)
+                if why:
+                    log(f"kept {rel}: {why}")
+                    continue
+                if os.path.isdir(target):
+                    shutil.rmtree(target)
+                shutil.copytree(os.path.join(staging, rel), target)
+                extracted.append(rel)
+                log(f"unpacked {rel} at {newest_step(target):,} env steps")
     return extracted
 
 
@@ -111,17 +180,21 @@ def main(argv=None) -> int:
     p.add_argument("action", choices=("pack", "unpack"))
     p.add_argument("--runs-dir", default=os.path.join("runs", "experiments"),
                    help="the experiments' runs folder (default runs/experiments)")
-    p.add_argument("--to", help="pack: the folder for the pieces")
+    p.add_argument("--to", help="pack: the folder for the pieces (carry it to the next machine in a git-ignored "
+                                "folder of the repository)")
     p.add_argument("--from", dest="source", help="unpack: the folder holding the pieces")
     p.add_argument("--max-mb", type=float, default=15.0, help="pack: the largest piece in MiB (default 15)")
+    p.add_argument("--max-total-mb", type=float, default=45.0,
+                   help="pack: the pieces' total in MiB (default 45); the parts with the most steps go first")
     args = p.parse_args(argv)
     if args.action == "pack":
         if args.to is None or args.source is not None:
             raise ValueError("pack needs --to DIR (and no --from): allowed is `pack --to DIR`.")
-        pack(args.runs_dir, args.to, args.max_mb)
+        pack(args.runs_dir, args.to, args.max_mb, args.max_total_mb)
     else:
-        if args.source is None or args.to is not None:
-            raise ValueError("unpack needs --from DIR (and no --to): allowed is `unpack --from DIR`.")
+        if args.source is None or args.to is not None or args.max_total_mb != 45.0 or args.max_mb != 15.0:
+            raise ValueError("unpack needs --from DIR (and no --to, --max-mb or --max-total-mb): allowed is "
+                             "`unpack --from DIR`.")
         unpack(args.source, args.runs_dir)
     return 0
 
