@@ -670,6 +670,39 @@ def test_parallel_worker_commands(monkeypatch, jax_platforms_unset):
             ex.main(["run", "sac-fast/panda-reach", "--only-part", name, *nowhere])
 
 
+def test_run_carries_unfinished_parts_in_and_out_within_its_time_limit(monkeypatch, tmp_path, jax_platforms_unset):
+    """`run --carry-in A --carry-out B`: the parts packed in A are put into the runs folder before any training,
+    the unfinished ones packed into B after it, and a time limit keeps CARRY_RESERVE's seconds for the packing
+    (30 s + 15 s per worker slot: 60 s on two GPUs)."""
+    from tools import carry_parts
+
+    events = []
+    monkeypatch.setattr(carry_parts, "unpack", lambda source, runs_dir: events.append(("unpack", source, runs_dir)))
+    monkeypatch.setattr(carry_parts, "pack", lambda runs_dir, to: events.append(("pack", runs_dir, to)))
+    monkeypatch.setattr(ex, "train_parallel", lambda selection, runs_dir, gpus, deadline, *a, **kw:
+                        events.append(("train", gpus, deadline - time.monotonic())) or True)
+    monkeypatch.setattr(ex, "train_pending", lambda selection, runs_dir, deadline, *a, **kw:
+                        events.append(("train", None, deadline)) or True)
+    monkeypatch.setenv("CUDA_VISIBLE_DEVICES", "0,1")
+    carry_in, carry_out, runs_dir = str(tmp_path / "in"), str(tmp_path / "out"), str(tmp_path / "runs")
+    os.makedirs(carry_in)
+    with open(os.path.join(carry_in, "toy__a__seeds-0-0.tgz.000"), "wb") as f:
+        f.write(b"")
+    common = ["--runs-dir", runs_dir, "--no-build", "--carry-in", carry_in, "--carry-out", carry_out]
+    ex.main(["run", "sac-fast", "--parallel", "--time-limit", "500", *common])
+    assert [e[0] for e in events] == ["unpack", "train", "pack"]
+    assert events[0][1:] == (carry_in, runs_dir) and events[2][1:] == (runs_dir, carry_out)
+    assert events[1][1] == ["0", "1"] and 438.0 < events[1][2] <= 440.0  # 500 s less 30 + 2 x 15
+    events.clear()
+    os.remove(os.path.join(carry_in, "toy__a__seeds-0-0.tgz.000"))  # nothing to unpack; no limit, no reserve
+    ex.main(["run", "sac-fast", *common])
+    assert events == [("train", None, None), ("pack", runs_dir, carry_out)]
+    with pytest.raises(ValueError, match=r"--carry-in='.*nowhere' is not a folder"):
+        ex.main(["run", "sac-fast", "--carry-in", str(tmp_path / "nowhere"), "--no-build"])
+    with pytest.raises(ValueError, match=r"--carry-out with list is meaningless"):
+        ex.main(["list", "--carry-out", carry_out])
+
+
 def test_run_shares_a_persistent_compilation_cache_with_its_workers(monkeypatch, tmp_path, jax_platforms_unset):
     """`run` turns on JAX's compilation cache for itself and passes the same setting to the workers it starts
     (`--compilation-cache`): by default in .jax_cache/ of the repository, else the folder given or named by

@@ -142,6 +142,11 @@ def _keep_reason(packed_dir: str, target: str) -> str:
     return ""
 
 
+def has_pieces(source: str) -> bool:
+    """Whether folder `source` holds pieces `pack` writes."""
+    return any(PIECE.fullmatch(name) for name in os.listdir(source))
+
+
 def unpack(source: str, runs_dir: str, log=print) -> list[str]:
     """Puts the parts packed in `source` into `runs_dir` (see the module docstring); returns those put there
     (relative paths)."""

@@ -31,7 +31,8 @@ its `stop_after_seconds` (the driver starts a chunk of updates only if it ends i
 started when its measured speed (its `metrics.csv`, or another part's of at least as many seeds) leaves no time
 for one log interval. The next call resumes where this one stopped. A part stopped half way resumes only where
 its checkpoints are: for the last call on a machine that will not keep `runs/`, `--whole-parts` trains only the
-parts predicted to finish in the time left and leaves the others untouched.
+parts predicted to finish in the time left and leaves the others untouched, or `--carry-out DIR` packs the
+unfinished parts learner-only into DIR for the next machine's `--carry-in DIR` (`tools/carry_parts.py`).
 
 The experiments are registered in `tools/experiment_registry.py` (types: `tools/experiment_spec.py`); this
 module trains, lists and tabulates them. It imports only the standard library at the top, so the results
@@ -931,6 +932,10 @@ def parallel_items(selection, runs_dir: str, max_seeds: int | None = None, out: 
     return list(dict.fromkeys(crosses + training))
 
 
+CARRY_RESERVE = (30.0, 15.0)
+"""Seconds `run --carry-out` keeps from its time limit for packing the unfinished parts: a start, plus one
+learner-only save per part that may be unfinished (one per worker slot)."""
+
 WORKER_GRACE = (10.0, 60.0)
 """Seconds past the `--parallel` driver's deadline after which a worker still running is sent SIGINT (it saves a
 checkpoint and exits; an evaluation under way finishes first), then killed: a time-limited call returns at most
@@ -1267,6 +1272,7 @@ def build(selection, runs_dir: str, out: str, complete_only: bool = False, log=p
 
 
 ACTION_FLAGS = {"time-limit": ("run",), "reserve": ("run",), "parallel": ("run",), "no-build": ("run",),
+                "carry-in": ("run",), "carry-out": ("run",),
                 "whole-parts": ("run",), "compilation-cache": ("run",), "all": ("commands",),
                 "max-seeds": ("run", "commands", "list")}
 """Options that mean something only to some actions (those --parallel needs are checked with it)."""
@@ -1304,6 +1310,11 @@ def main(argv=None) -> int:
     p.add_argument("--compilation-cache", default=None, metavar="DIR",
                    help="run: JAX's persistent compilation cache, shared by the parts and their resumes (default: "
                    "$JAX_COMPILATION_CACHE_DIR, else .jax_cache/ in the repository; 'off' for none)")
+    p.add_argument("--carry-in", metavar="DIR", help="run: first put the parts packed in DIR (by --carry-out on "
+                   "another machine) into --runs-dir (`tools.carry_parts unpack`)")
+    p.add_argument("--carry-out", metavar="DIR", help="run: last, pack the unfinished parts learner-only into DIR "
+                   "(`tools.carry_parts pack`), for a machine that will not keep its runs/; with --time-limit, "
+                   "training stops early enough for it")
     p.add_argument("--whole-parts", action="store_true", help="run --time-limit: train only the parts predicted to "
                    "finish in time (measured speeds), for a last call on a machine that will not keep its runs/")
     args = p.parse_args(argv)
@@ -1348,15 +1359,28 @@ def main(argv=None) -> int:
         print("\n".join([f"recorded {path}" for path in written]
                         + [f"{len(written)} files recorded from {args.runs_dir} into {args.out}"]))
     else:
+        from tools import carry_parts
+
+        if args.carry_in is not None and not os.path.isdir(args.carry_in):
+            raise ValueError(f"--carry-in={args.carry_in!r} is not a folder: allowed is a folder that --carry-out "
+                             "(or `tools.carry_parts pack --to`) wrote.")
         cache = use_compilation_cache(args.compilation_cache)
-        deadline = None if args.time_limit is None else start + args.time_limit
         reserve = args.reserve if args.reserve is not None else (max(30.0, 0.1 * args.time_limit) if args.time_limit else 0.0)
+        gpus = []
         if args.parallel:
             keep_off_the_gpus()
             visible = local_gpus()
             gpus = visible if args.gpus is None else (visible or [str(i) for i in range(args.gpus)])[:args.gpus]
             if not gpus:
                 raise ValueError("--parallel found no GPU: allowed is a host with GPUs (or --gpus N).")
+        packing = CARRY_RESERVE[0] + CARRY_RESERVE[1] * max(1, len(gpus) * args.workers_per_gpu) if args.carry_out else 0.0
+        deadline = None if args.time_limit is None else start + args.time_limit - packing
+        if args.carry_in is not None:
+            if carry_parts.has_pieces(args.carry_in):
+                carry_parts.unpack(args.carry_in, args.runs_dir)
+            else:
+                print(f"--carry-in: no pieces in {args.carry_in}")
+        if args.parallel:
             finished = train_parallel(selection, args.runs_dir, gpus, deadline, reserve,
                                       max_seeds=args.max_seeds, out=args.out, whole_parts=args.whole_parts,
                                       worker_logs=args.worker_logs, workers_per_gpu=args.workers_per_gpu,
@@ -1365,6 +1389,8 @@ def main(argv=None) -> int:
             finished = train_pending(selection, args.runs_dir, deadline, reserve, max_seeds=args.max_seeds,
                                      record=args.out, whole_parts=args.whole_parts, record_each=True,
                                      only_part=args.only_part)
+        if args.carry_out is not None:
+            carry_parts.pack(args.runs_dir, args.carry_out)
         if not args.no_build:
             for path in record(selection, args.runs_dir, args.out):
                 print(f"recorded {path}")
