@@ -678,7 +678,7 @@ def test_run_carries_unfinished_parts_in_and_out_within_its_time_limit(monkeypat
 
     events = []
     monkeypatch.setattr(carry_parts, "unpack", lambda source, runs_dir: events.append(("unpack", source, runs_dir)))
-    monkeypatch.setattr(carry_parts, "pack", lambda runs_dir, to: events.append(("pack", runs_dir, to)))
+    monkeypatch.setattr(carry_parts, "pack", lambda runs_dir, to, **kw: events.append(("pack", runs_dir, to, kw)))
     monkeypatch.setattr(ex, "train_parallel", lambda selection, runs_dir, gpus, deadline, *a, **kw:
                         events.append(("train", gpus, deadline - time.monotonic())) or True)
     monkeypatch.setattr(ex, "train_pending", lambda selection, runs_dir, deadline, *a, **kw:
@@ -691,12 +691,16 @@ def test_run_carries_unfinished_parts_in_and_out_within_its_time_limit(monkeypat
     common = ["--runs-dir", runs_dir, "--no-build", "--carry-in", carry_in, "--carry-out", carry_out]
     ex.main(["run", "sac-fast", "--parallel", "--time-limit", "500", *common])
     assert [e[0] for e in events] == ["unpack", "train", "pack"]
-    assert events[0][1:] == (carry_in, runs_dir) and events[2][1:] == (runs_dir, carry_out)
+    assert events[0][1:] == (carry_in, runs_dir) and events[2][1:] == (runs_dir, carry_out, {})
     assert events[1][1] == ["0", "1"] and 438.0 < events[1][2] <= 440.0  # 500 s less 30 + 2 x 15
     events.clear()
     os.remove(os.path.join(carry_in, "toy__a__seeds-0-0.tgz.000"))  # nothing to unpack; no limit, no reserve
-    ex.main(["run", "sac-fast", *common])
-    assert events == [("train", None, None), ("pack", runs_dir, carry_out)]
+    ex.main(["run", "sac-fast", *common, "--carry-max-mb", "40"])
+    assert events == [("train", None, None), ("pack", runs_dir, carry_out, {"max_total_mb": 40.0})]
+    with pytest.raises(ValueError, match=r"--carry-max-mb=0.0 is invalid"):
+        ex.main(["run", "sac-fast", *common, "--carry-max-mb", "0"])
+    with pytest.raises(ValueError, match=r"--carry-max-mb without --carry-out is meaningless"):
+        ex.main(["run", "sac-fast", "--no-build", "--carry-max-mb", "40"])
     with pytest.raises(ValueError, match=r"--carry-in='.*nowhere' is not a folder"):
         ex.main(["run", "sac-fast", "--carry-in", str(tmp_path / "nowhere"), "--no-build"])
     with pytest.raises(ValueError, match=r"--carry-out with list is meaningless"):

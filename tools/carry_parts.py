@@ -10,9 +10,9 @@ first) is lost with it; its learner-only checkpoint lets the next machine resume
 (`agents.driver.learner_only_checkpoint`: no env states, no replay buffer; per seed about 3-5 MB for the PPO
 presets, 16 MB for the fast SAC ones) beside its `config.json` and `metrics.csv`, and writes each part as its own
 gzipped tar, `<experiment>__<run>__<part>.tgz.NNN`, split into pieces of at most `--max-mb`, until `--max-total-mb`
-is used (a device call brings back at most 8 files of 16 MiB, 64 MiB in all, and the next call's working tree,
-which must carry them in a git-ignored folder, is limited to 64 MiB too). A part that cannot be saved or does not
-fit is left out and named. A resume from the copy starts fresh episodes and, for SAC, refills the replay buffer:
+is used (default 15: a device call brings back files of at most 16 MiB, and the next call's working tree, which
+carries the pieces in a git-ignored folder beside the repository's ~22 MiB and its wheels' ~26 MiB, is limited to
+64 MiB). A part that cannot be saved or does not fit is left out and named. A resume from the copy starts fresh episodes and, for SAC, refills the replay buffer:
 not bit-for-bit the run that would have gone on, the same as any learner-only resume.
 
 `unpack` puts each complete archive's part into the runs folder, except where the folder there is done
@@ -75,7 +75,7 @@ def _part_archive(runs_dir: str, rel: str, staging: str) -> tuple[bytes, int]:
     return data.getvalue(), step
 
 
-def pack(runs_dir: str, to: str, max_mb: float = 15.0, max_total_mb: float = 45.0, log=print) -> list[str]:
+def pack(runs_dir: str, to: str, max_mb: float = 15.0, max_total_mb: float = 15.0, log=print) -> list[str]:
     """Writes the unfinished parts of `runs_dir`, learner-only, into `to/<archive>.NNN` pieces (the old pieces
     there removed first); returns the pieces' paths."""
     for name, value in (("max_mb", max_mb), ("max_total_mb", max_total_mb)):
@@ -189,15 +189,15 @@ def main(argv=None) -> int:
                                 "folder of the repository)")
     p.add_argument("--from", dest="source", help="unpack: the folder holding the pieces")
     p.add_argument("--max-mb", type=float, default=15.0, help="pack: the largest piece in MiB (default 15)")
-    p.add_argument("--max-total-mb", type=float, default=45.0,
-                   help="pack: the pieces' total in MiB (default 45); the parts with the most steps go first")
+    p.add_argument("--max-total-mb", type=float, default=15.0,
+                   help="pack: the pieces' total in MiB (default 15); the parts with the most steps go first")
     args = p.parse_args(argv)
     if args.action == "pack":
         if args.to is None or args.source is not None:
             raise ValueError("pack needs --to DIR (and no --from): allowed is `pack --to DIR`.")
         pack(args.runs_dir, args.to, args.max_mb, args.max_total_mb)
     else:
-        if args.source is None or args.to is not None or args.max_total_mb != 45.0 or args.max_mb != 15.0:
+        if args.source is None or args.to is not None or args.max_total_mb != 15.0 or args.max_mb != 15.0:
             raise ValueError("unpack needs --from DIR (and no --to, --max-mb or --max-total-mb): allowed is "
                              "`unpack --from DIR`.")
         unpack(args.source, args.runs_dir)

@@ -1272,7 +1272,7 @@ def build(selection, runs_dir: str, out: str, complete_only: bool = False, log=p
 
 
 ACTION_FLAGS = {"time-limit": ("run",), "reserve": ("run",), "parallel": ("run",), "no-build": ("run",),
-                "carry-in": ("run",), "carry-out": ("run",),
+                "carry-in": ("run",), "carry-out": ("run",), "carry-max-mb": ("run",),
                 "whole-parts": ("run",), "compilation-cache": ("run",), "all": ("commands",),
                 "max-seeds": ("run", "commands", "list")}
 """Options that mean something only to some actions (those --parallel needs are checked with it)."""
@@ -1315,6 +1315,8 @@ def main(argv=None) -> int:
     p.add_argument("--carry-out", metavar="DIR", help="run: last, pack the unfinished parts learner-only into DIR "
                    "(`tools.carry_parts pack`), for a machine that will not keep its runs/; with --time-limit, "
                    "training stops early enough for it")
+    p.add_argument("--carry-max-mb", type=float, help="run --carry-out: the packed parts' total in MiB (default 15; "
+                   "the parts with the most steps first)")
     p.add_argument("--whole-parts", action="store_true", help="run --time-limit: train only the parts predicted to "
                    "finish in time (measured speeds), for a last call on a machine that will not keep its runs/")
     args = p.parse_args(argv)
@@ -1361,6 +1363,11 @@ def main(argv=None) -> int:
     else:
         from tools import carry_parts
 
+        if args.carry_max_mb is not None and args.carry_out is None:
+            raise ValueError("--carry-max-mb without --carry-out is meaningless: allowed is --carry-max-mb with "
+                             "--carry-out DIR.")
+        if args.carry_max_mb is not None and not args.carry_max_mb > 0:
+            raise ValueError(f"--carry-max-mb={args.carry_max_mb} is invalid: allowed is a number > 0.")
         if args.carry_in is not None and not os.path.isdir(args.carry_in):
             raise ValueError(f"--carry-in={args.carry_in!r} is not a folder: allowed is a folder that --carry-out "
                              "(or `tools.carry_parts pack --to`) wrote.")
@@ -1390,7 +1397,8 @@ def main(argv=None) -> int:
                                      record=args.out, whole_parts=args.whole_parts, record_each=True,
                                      only_part=args.only_part)
         if args.carry_out is not None:
-            carry_parts.pack(args.runs_dir, args.carry_out)
+            carry_parts.pack(args.runs_dir, args.carry_out, **({} if args.carry_max_mb is None else
+                                                               {"max_total_mb": args.carry_max_mb}))
         if not args.no_build:
             for path in record(selection, args.runs_dir, args.out):
                 print(f"recorded {path}")
