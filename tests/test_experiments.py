@@ -691,7 +691,7 @@ def test_run_carries_unfinished_parts_in_and_out_within_its_time_limit(monkeypat
     common = ["--runs-dir", runs_dir, "--no-build", "--carry-in", carry_in, "--carry-out", carry_out]
     ex.main(["run", "sac-fast", "--parallel", "--time-limit", "500", *common])
     assert [e[0] for e in events] == ["unpack", "train", "pack"]
-    assert events[0][1:] == (carry_in, runs_dir) and events[2][1:] == (runs_dir, carry_out, {})
+    assert events[0][1:] == (carry_in, runs_dir) and events[2][1:] == (runs_dir, carry_out, {"max_total_mb": 15.0})
     assert events[1][1] == ["0", "1"] and 438.0 < events[1][2] <= 440.0  # 500 s less 30 + 2 x 15
     events.clear()
     os.remove(os.path.join(carry_in, "toy__a__seeds-0-0.tgz.000"))  # nothing to unpack; no limit, no reserve

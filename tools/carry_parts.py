@@ -31,8 +31,14 @@ import shutil
 import tarfile
 import tempfile
 
-PART_DIR = re.compile(r"seeds-\d+-\d+")
+from tools.experiments import checkpoint_steps, parse_part
+
 PIECE = re.compile(r"(?P<archive>.+\.tgz)\.(?P<index>\d{3})")
+PIECE_MB = 15.0
+"""The largest piece `pack` writes, in MiB: a device call brings back files of at most 16 MiB."""
+TOTAL_MB = 15.0
+"""What `pack` writes in all, in MiB: the next device call's working tree carries the pieces beside the
+repository (~22 MiB) and its wheels (~26 MiB), within 64 MiB."""
 
 
 def unfinished_parts(runs_dir: str) -> list[str]:
@@ -40,7 +46,7 @@ def unfinished_parts(runs_dir: str) -> list[str]:
     eval.json, sorted by name."""
     found = []
     for root, dirs, files in os.walk(runs_dir):
-        if PART_DIR.fullmatch(os.path.basename(root)):
+        if parse_part(os.path.basename(root)) is not None:
             dirs[:] = []
             if "eval.json" not in files and newest_step(root) is not None:
                 found.append(os.path.relpath(root, runs_dir))
@@ -48,10 +54,9 @@ def unfinished_parts(runs_dir: str) -> list[str]:
 
 
 def newest_step(part_dir: str) -> int | None:
-    """The largest env step among `part_dir/checkpoints/<step>/` folders, None if there is none."""
-    folder = os.path.join(part_dir, "checkpoints")
-    steps = [int(name) for name in os.listdir(folder) if name.isdigit()] if os.path.isdir(folder) else []
-    return max(steps) if steps else None
+    """The env step of the newest checkpoint of `part_dir` (`checkpoint_steps`), None if there is none."""
+    steps = checkpoint_steps(part_dir)
+    return steps[-1] if steps else None
 
 
 def archive_name(rel: str) -> str:
@@ -75,7 +80,7 @@ def _part_archive(runs_dir: str, rel: str, staging: str) -> tuple[bytes, int]:
     return data.getvalue(), step
 
 
-def pack(runs_dir: str, to: str, max_mb: float = 15.0, max_total_mb: float = 15.0, log=print) -> list[str]:
+def pack(runs_dir: str, to: str, max_mb: float = PIECE_MB, max_total_mb: float = TOTAL_MB, log=print) -> list[str]:
     """Writes the unfinished parts of `runs_dir`, learner-only, into `to/<archive>.NNN` pieces (the old pieces
     there removed first); returns the pieces' paths."""
     for name, value in (("max_mb", max_mb), ("max_total_mb", max_total_mb)):
@@ -115,11 +120,11 @@ def _read_archive(source: str, pieces: list[str]) -> bytes:
     if indices != list(range(len(pieces))):
         missing = sorted(set(range(max(indices) + 1)) - set(indices))
         raise ValueError(f"piece {missing[0]:03d} is missing")
-    blob = b""
+    chunks = []
     for name in pieces:
         with open(os.path.join(source, name), "rb") as f:
-            blob += f.read()
-    return blob
+            chunks.append(f.read())
+    return b"".join(chunks)
 
 
 def _keep_reason(packed_dir: str, target: str) -> str:
@@ -188,16 +193,17 @@ def main(argv=None) -> int:
     p.add_argument("--to", help="pack: the folder for the pieces (carry it to the next machine in a git-ignored "
                                 "folder of the repository)")
     p.add_argument("--from", dest="source", help="unpack: the folder holding the pieces")
-    p.add_argument("--max-mb", type=float, default=15.0, help="pack: the largest piece in MiB (default 15)")
-    p.add_argument("--max-total-mb", type=float, default=15.0,
-                   help="pack: the pieces' total in MiB (default 15); the parts with the most steps go first")
+    p.add_argument("--max-mb", type=float, help=f"pack: the largest piece in MiB (default {PIECE_MB:g})")
+    p.add_argument("--max-total-mb", type=float,
+                   help=f"pack: the pieces' total in MiB (default {TOTAL_MB:g}); the parts with the most steps go first")
     args = p.parse_args(argv)
     if args.action == "pack":
         if args.to is None or args.source is not None:
             raise ValueError("pack needs --to DIR (and no --from): allowed is `pack --to DIR`.")
-        pack(args.runs_dir, args.to, args.max_mb, args.max_total_mb)
+        pack(args.runs_dir, args.to, PIECE_MB if args.max_mb is None else args.max_mb,
+             TOTAL_MB if args.max_total_mb is None else args.max_total_mb)
     else:
-        if args.source is None or args.to is not None or args.max_total_mb != 15.0 or args.max_mb != 15.0:
+        if args.source is None or args.to is not None or args.max_total_mb is not None or args.max_mb is not None:
             raise ValueError("unpack needs --from DIR (and no --to, --max-mb or --max-total-mb): allowed is "
                              "`unpack --from DIR`.")
         unpack(args.source, args.runs_dir)

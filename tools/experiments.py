@@ -1315,8 +1315,8 @@ def main(argv=None) -> int:
     p.add_argument("--carry-out", metavar="DIR", help="run: last, pack the unfinished parts learner-only into DIR "
                    "(`tools.carry_parts pack`), for a machine that will not keep its runs/; with --time-limit, "
                    "training stops early enough for it")
-    p.add_argument("--carry-max-mb", type=float, help="run --carry-out: the packed parts' total in MiB (default 15; "
-                   "the parts with the most steps first)")
+    p.add_argument("--carry-max-mb", type=float, help="run --carry-out: the packed parts' total in MiB (default: "
+                   "`tools.carry_parts.TOTAL_MB`; the parts with the most steps first)")
     p.add_argument("--whole-parts", action="store_true", help="run --time-limit: train only the parts predicted to "
                    "finish in time (measured speeds), for a last call on a machine that will not keep its runs/")
     args = p.parse_args(argv)
@@ -1397,8 +1397,8 @@ def main(argv=None) -> int:
                                      record=args.out, whole_parts=args.whole_parts, record_each=True,
                                      only_part=args.only_part)
         if args.carry_out is not None:
-            carry_parts.pack(args.runs_dir, args.carry_out, **({} if args.carry_max_mb is None else
-                                                               {"max_total_mb": args.carry_max_mb}))
+            carry_parts.pack(args.runs_dir, args.carry_out,
+                             max_total_mb=carry_parts.TOTAL_MB if args.carry_max_mb is None else args.carry_max_mb)
         if not args.no_build:
             for path in record(selection, args.runs_dir, args.out):
                 print(f"recorded {path}")
