@@ -785,8 +785,8 @@ def test_workers_past_the_time_limit_are_interrupted_then_killed(tmp_path, monke
 
 def test_round_robin_takes_a_seed_of_each_run_first_after_the_parts_with_checkpoints(tmp_path):
     """`run --parallel --round-robin --max-seeds 1`: the part with a checkpoint (here c's seed 2) first, then the
-    first new seed of b, c and d, then the second of each; without it, run after run (each run's part with a
-    checkpoint before its new ones)."""
+    first new seed of b and d, then their second and c's first new one (a run's new parts rank after the parts it
+    has done or started), and so on; without it, run after run (each run's part with a checkpoint before its new ones)."""
     runs_dir, out = str(tmp_path / "runs"), str(tmp_path / "out")
     runs = tuple(ex.Run(name, "point-mass-ppo", {**TOY_RUN, "seed": 10 * i}, seeds=3 if name == "c" else 2,
                         num_timesteps=10_240) for i, name in enumerate("bcd", 1))
@@ -794,11 +794,18 @@ def test_round_robin_takes_a_seed_of_each_run_first_after_the_parts_with_checkpo
     _part(runs[1], runs_dir, "toy", "c", 2, 1, steps=[5120])  # half trained
     selection = ex.select(["toy"], registry)
     robin = ex.parallel_items(selection, runs_dir, max_seeds=1, out=out, registry=registry, round_robin=True)
-    assert robin == [("toy/c", "seeds-2-2"), ("toy/b", "seeds-0-0"), ("toy/c", "seeds-0-0"), ("toy/d", "seeds-0-0"),
-                     ("toy/b", "seeds-1-1"), ("toy/c", "seeds-1-1"), ("toy/d", "seeds-1-1")]
+    assert robin == [("toy/c", "seeds-2-2"), ("toy/b", "seeds-0-0"), ("toy/d", "seeds-0-0"), ("toy/b", "seeds-1-1"),
+                     ("toy/c", "seeds-0-0"), ("toy/d", "seeds-1-1"), ("toy/c", "seeds-1-1")]
     in_order = ex.parallel_items(selection, runs_dir, max_seeds=1, out=out, registry=registry)
     assert in_order == [("toy/b", "seeds-0-0"), ("toy/b", "seeds-1-1"), ("toy/c", "seeds-2-2"), ("toy/c", "seeds-0-0"),
                         ("toy/c", "seeds-1-1"), ("toy/d", "seeds-0-0"), ("toy/d", "seeds-1-1")]
+    # c's first seed half trained and b's done: d's first seed comes before a second seed of b or c
+    runs_dir2 = str(tmp_path / "runs2")
+    _part(runs[1], runs_dir2, "toy", "c", 0, 1, steps=[5120])
+    _part(runs[0], runs_dir2, "toy", "b", 0, 1, steps=[10240], evaluated=10240)
+    robin = ex.parallel_items(selection, runs_dir2, max_seeds=1, out=out, registry=registry, round_robin=True)
+    assert robin == [("toy/c", "seeds-0-0"), ("toy/d", "seeds-0-0"), ("toy/b", "seeds-1-1"), ("toy/c", "seeds-1-1"),
+                     ("toy/d", "seeds-1-1"), ("toy/c", "seeds-2-2")]
     with pytest.raises(ValueError, match="--round-robin without --parallel"):
         ex.main(["run", "toy", "--round-robin"])
 

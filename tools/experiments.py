@@ -48,7 +48,6 @@ import csv
 import dataclasses
 import datetime
 import functools
-import itertools
 import json
 import math
 import os
@@ -916,19 +915,23 @@ def parallel_items(selection, runs_dir: str, max_seeds: int | None = None, out: 
     """(run key, part name) for each part a worker can take on its own: the done parts with cross-evaluations
     left where their checkpoints are, then the parts still to train (`pending_parts`, at most `max_seeds` seeds
     each), run after run. `round_robin`: the parts with a checkpoint first (a machine that goes back loses
-    them), then the first new part of every run, then the second of every run, and so on, so that a time-limited
+    them), then the new parts by how many parts their run already has (done or started), so that a time-limited
     call screening several runs gets a seed of each before a second seed of any. Runs that share a folder are
     planned once (`planners`), so no part is listed twice."""
     plans = planners(selection, runs_dir, out, registry)
     crosses = [(st.key, part.name) for exp, st in plans
                for _, _, part, _ in folder_crosses(exp, st, runs_dir, out, registry)]
-    pending = [(st.key, pending_parts(st, max_seeds)) for _, st in plans if st.status != "done"]
+    pending = [(st, pending_parts(st, max_seeds)) for _, st in plans if st.status != "done"]
     if round_robin:
-        started = [(key, part.name) for key, parts in pending for part in parts if part.steps]
-        fresh = [[(key, part.name) for part in parts if not part.steps] for key, parts in pending]
-        training = started + [item for rank in itertools.zip_longest(*fresh) for item in rank if item is not None]
+        started = [(st.key, part.name) for st, parts in pending for part in parts if part.steps]
+        fresh = []  # (rank, run order, item): a run's new parts rank after the parts it has done or started
+        for order, (st, parts) in enumerate(pending):
+            held = len(st.done_parts) + sum(1 for part in parts if part.steps)
+            new = [part for part in parts if not part.steps]
+            fresh += [(held + rank, order, (st.key, part.name)) for rank, part in enumerate(new)]
+        training = started + [item for *_, item in sorted(fresh)]
     else:
-        training = [(key, part.name) for key, parts in pending for part in parts]
+        training = [(st.key, part.name) for st, parts in pending for part in parts]
     return list(dict.fromkeys(crosses + training))
 
 
@@ -1296,8 +1299,8 @@ def main(argv=None) -> int:
                    "(default 1), for runs too small to fill a GPU (the paper's SAC); each may use 90 %% of its "
                    "memory divided among them")
     p.add_argument("--round-robin", action="store_true", help="run --parallel (one GPU too): the parts with a "
-                   "checkpoint first, then one new part of each selected run before a second of any (a seed of "
-                   "each row first, with --max-seeds 1), instead of run after run")
+                   "checkpoint first, then the new parts ranked by how many parts their run already has, done or "
+                   "started (a seed of each row first, with --max-seeds 1), instead of run after run")
     p.add_argument("--no-build", action="store_true", help="run: no tables (finished parts are still recorded, each "
                    "as it finishes)")
     p.add_argument("--all", action="store_true", help="commands: also the runs done (each as a fresh run)")
