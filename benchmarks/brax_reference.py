@@ -161,6 +161,10 @@ def main(argv=None):
     spu = config.algo.env_steps_per_update
     updates_per_eval = args.updates_per_eval or DEFAULT_UPDATES_PER_EVAL[algo_name]
     total = args.evals * updates_per_eval * spu
+    if algo_name == "sac" and args.skip != "brax" and total <= config.algo.min_replay_size:
+        raise ValueError(f"--evals={args.evals} x --updates-per-eval={updates_per_eval} x {spu} env steps = {total:,} "
+                         f"env steps is invalid for SAC: allowed is more than algo.min_replay_size="
+                         f"{config.algo.min_replay_size:,} (Brax's SAC trains only after its buffer holds that many).")
     config = config.__class__(**{**config.__dict__, "num_timesteps": total})
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)

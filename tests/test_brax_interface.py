@@ -60,3 +60,16 @@ def test_brax_reference_trace_needs_a_second_brax_epoch(tmp_path):
     with pytest.raises(ValueError, match=r"--evals=1 with --trace: allowed is 2 or more"):
         brax_reference.main(["--preset", "point-mass-sac", "--evals", "1", "--trace", str(tmp_path)])
     assert not any(tmp_path.iterdir())
+
+
+def test_brax_reference_refuses_a_sac_run_too_short_to_leave_the_replay_warmup(tmp_path):
+    """Brax's SAC raises deep inside its train() when its steps do not pass min_replay_size: point-mass-sac
+    (16 env steps a vector step, min_replay_size 1,024) with 2 x 32 updates is 1,024 env steps, refused before
+    anything is built or written."""
+    from benchmarks import brax_reference
+
+    with pytest.raises(ValueError, match=r"--evals=2 x --updates-per-eval=32 x 16 env steps = 1,024 env steps is "
+                                         r"invalid for SAC: allowed is more than algo.min_replay_size=1,024"):
+        brax_reference.main(["--preset", "point-mass-sac", "--evals", "2", "--updates-per-eval", "32",
+                             "--out", str(tmp_path / "out")])
+    assert not any(tmp_path.iterdir())
