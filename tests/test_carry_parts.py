@@ -3,6 +3,7 @@ or a lost piece costs only its own part; a done part, a newer one or another con
 
 import json
 import os
+import re
 import shutil
 
 import jax
@@ -106,7 +107,7 @@ def test_unfinished_parts_are_packed_learner_only_and_resume_after_unpacking(run
     assert "kept toy/ppo/seeds-0-0: it has a checkpoint at 30,720 env steps here (packed: 15,360)" in lines
 
 
-def test_unpack_skips_a_part_with_a_lost_piece_and_keeps_done_or_other_parts_here(runs):
+def test_unpack_skips_a_part_with_a_lost_piece_and_keeps_done_or_other_parts_here_and_pack_bundles(runs):
     root, runs_dir, _, _ = runs
     carry, there = str(root / "carry2"), str(root / "there2")
     carry_parts.pack(runs_dir, carry, max_mb=0.05, log=lambda s: None)
@@ -126,11 +127,29 @@ def test_unpack_skips_a_part_with_a_lost_piece_and_keeps_done_or_other_parts_her
     assert "kept toy/sac/seeds-0-0: it is done here (eval.json)" in lines
     assert "kept toy/ppo/seeds-1-1: its config.json here differs from the packed one" in lines
     assert os.listdir(done) == ["eval.json"] and json.load(open(os.path.join(other, "config.json")))["seed"] == 99
-    # Within the total: the part with the most steps first, the rest left out and named.
+    # Bundles of at most the total: the part with the most steps first in `carry`, the others where they fit
+    # (first fit), each bundle within the total; a part larger than the total left out and named.
+    # Packed sizes: PPO seeds 0 and 1 ~0.13 MiB each, SAC 0.21-0.25 MiB.
+    def bundles():
+        found = {}
+        for folder in sorted(os.listdir(carry)) + [""]:
+            path = os.path.join(carry, folder)
+            if os.path.isdir(path):
+                found[folder or "."] = sorted(n.rsplit(".", 2)[0] for n in os.listdir(path) if n.endswith(".000"))
+        return found
+
     lines.clear()
-    pieces = carry_parts.pack(runs_dir, carry, max_total_mb=0.2, log=lines.append)  # each part ~0.13-0.23 MiB
-    assert {os.path.basename(p).rsplit(".", 1)[0] for p in pieces} == {"toy__ppo__seeds-0-0.tgz"}
-    assert any(line.startswith("left out toy/sac/seeds-0-0 at 1,600 env steps:") for line in lines), lines
+    carry_parts.pack(runs_dir, carry, max_total_mb=0.2, log=lines.append)
+    assert bundles() == {".": ["toy__ppo__seeds-0-0"], "more-1": ["toy__ppo__seeds-1-1"]}
+    assert any(re.fullmatch(r"left out toy/sac/seeds-0-0 at 1,600 env steps: 0\.2\d MiB is more than "
+                            r"--max-total-mb 0\.2", line) for line in lines), lines
+    pieces = carry_parts.pack(runs_dir, carry, max_total_mb=0.3, log=lambda s: None)  # the old bundles replaced
+    assert bundles() == {".": ["toy__ppo__seeds-0-0", "toy__ppo__seeds-1-1"], "more-1": ["toy__sac__seeds-0-0"]}
+    for folder in (carry, os.path.join(carry, "more-1")):
+        assert sum(os.path.getsize(p) for p in pieces if os.path.dirname(p) == folder) <= 0.3 * 2**20
+    # A bundle is unpacked on its own: the first holds the PPO parts only.
+    assert carry_parts.unpack(carry, str(root / "there3"), log=lambda s: None) == ["toy/ppo/seeds-0-0",
+                                                                                 "toy/ppo/seeds-1-1"]
 
 
 def test_bad_arguments_are_refused_naming_the_option(tmp_path):

@@ -9,10 +9,11 @@ first) is lost with it; its learner-only checkpoint lets the next machine resume
 `eval.json` (not done), the one with the most env steps first, saves its newest intact checkpoint learner-only
 (`agents.driver.learner_only_checkpoint`: no env states, no replay buffer; per seed about 3-5 MB for the PPO
 presets, 16 MB for the fast SAC ones) beside its `config.json` and `metrics.csv`, and writes each part as its own
-gzipped tar, `<experiment>__<run>__<part>.tgz.NNN`, split into pieces of at most `--max-mb`, until `--max-total-mb`
-is used (default 15: a device call brings back files of at most 16 MiB, and the next call's working tree, which
-carries the pieces in a git-ignored folder beside the repository's ~22 MiB and its wheels' ~26 MiB, is limited to
-64 MiB). A part that cannot be saved or does not fit is left out and named. A resume from the copy starts fresh episodes and, for SAC, refills the replay buffer:
+gzipped tar, `<experiment>__<run>__<part>.tgz.NNN`, split into pieces of at most `--max-mb`, in bundles of at
+most `--max-total-mb` (default 15: a device call brings back files of at most 16 MiB, and the next call's working
+tree, which carries one bundle in a git-ignored folder beside the repository and its wheels, is limited to 64 MiB):
+the first bundle in `--to`, the parts that do not fit beside it in `--to`/more-1, more-2, ..., each for another
+call of the next machine. A part that cannot be saved, or is larger than a bundle, is left out and named. A resume from the copy starts fresh episodes and, for SAC, refills the replay buffer:
 not bit-for-bit the run that would have gone on, the same as any learner-only resume.
 
 `unpack` puts each complete archive's part into the runs folder, except where the folder there is done
@@ -80,18 +81,29 @@ def _part_archive(runs_dir: str, rel: str, staging: str) -> tuple[bytes, int]:
     return data.getvalue(), step
 
 
+def bundle_dir(to: str, index: int) -> str:
+    """Where `pack` writes bundle `index`: `to` itself for the first, `to/more-<index>` for the others."""
+    return to if index == 0 else os.path.join(to, f"more-{index}")
+
+
 def pack(runs_dir: str, to: str, max_mb: float = PIECE_MB, max_total_mb: float = TOTAL_MB, log=print) -> list[str]:
-    """Writes the unfinished parts of `runs_dir`, learner-only, into `to/<archive>.NNN` pieces (the old pieces
-    there removed first); returns the pieces' paths."""
+    """Writes the unfinished parts of `runs_dir`, learner-only, as `<archive>.NNN` pieces in bundles of at most
+    `max_total_mb` each (what one device call's tree carries): the first in `to`, the parts that do not fit
+    beside it in `to/more-1`, then `to/more-2`, ... (first fit, the parts with the most steps first), so that the
+    next machine's calls carry one bundle each. The old pieces there are removed first; returns the pieces' paths."""
     for name, value in (("max_mb", max_mb), ("max_total_mb", max_total_mb)):
         if not value > 0:
             raise ValueError(f"{name}={value!r} is invalid: allowed is a number > 0.")
     os.makedirs(to, exist_ok=True)
-    for name in os.listdir(to):
-        if PIECE.fullmatch(name):
-            os.remove(os.path.join(to, name))
+    for folder in [to] + [os.path.join(to, d) for d in os.listdir(to) if re.fullmatch(r"more-\d+", d)]:
+        for name in os.listdir(folder):
+            if PIECE.fullmatch(name):
+                os.remove(os.path.join(folder, name))
+        if folder != to and not os.listdir(folder):
+            os.rmdir(folder)
     parts = sorted(unfinished_parts(runs_dir), key=lambda rel: -newest_step(os.path.join(runs_dir, rel)))
     size, budget, paths = int(max_mb * 2**20), int(max_total_mb * 2**20), []
+    written: list[int] = []  # bytes in each bundle
     with tempfile.TemporaryDirectory() as staging:
         for rel in parts:
             try:
@@ -99,16 +111,22 @@ def pack(runs_dir: str, to: str, max_mb: float = PIECE_MB, max_total_mb: float =
             except Exception as error:  # a damaged part must not cost the others their carry
                 log(f"left out {rel}: {type(error).__name__}: {str(error).splitlines()[0] if str(error) else ''}")
                 continue
-            written = sum(os.path.getsize(p) for p in paths)
-            if written + len(blob) > budget:
-                log(f"left out {rel} at {step:,} env steps: {len(blob) / 2**20:.1f} MiB would pass "
-                    f"--max-total-mb {max_total_mb:g} ({written / 2**20:.1f} MiB written)")
+            if len(blob) > budget:
+                log(f"left out {rel} at {step:,} env steps: {len(blob) / 2**20:.2f} MiB is more than "
+                    f"--max-total-mb {max_total_mb:g}")
                 continue
+            index = next((i for i, used in enumerate(written) if used + len(blob) <= budget), len(written))
+            if index == len(written):
+                written.append(0)
+            folder = bundle_dir(to, index)
+            os.makedirs(folder, exist_ok=True)
             for i in range(0, len(blob), size):
-                paths.append(os.path.join(to, f"{archive_name(rel)}.{i // size:03d}"))
+                paths.append(os.path.join(folder, f"{archive_name(rel)}.{i // size:03d}"))
                 with open(paths[-1], "wb") as f:
                     f.write(blob[i:i + size])
-            log(f"packed {rel} at {step:,} env steps: {len(blob) / 2**20:.1f} MiB")
+            written[index] += len(blob)
+            log(f"packed {rel} at {step:,} env steps: {len(blob) / 2**20:.1f} MiB"
+                + (f", in {folder} (beyond the first {max_total_mb:g} MiB: carry it in another call)" if index else ""))
     if not parts:
         log(f"no unfinished part under {runs_dir}")
     return paths

@@ -1318,8 +1318,9 @@ def main(argv=None) -> int:
     p.add_argument("--carry-out", metavar="DIR", help="run: last, pack the unfinished parts learner-only into DIR "
                    "(`tools.carry_parts pack`), for a machine that will not keep its runs/; with --time-limit, "
                    "training stops early enough for it")
-    p.add_argument("--carry-max-mb", type=float, help="run --carry-out: the packed parts' total in MiB (default: "
-                   "`tools.carry_parts.TOTAL_MB`; the parts with the most steps first)")
+    p.add_argument("--carry-max-mb", type=float, help="run --carry-out: each bundle's total in MiB, what one call "
+                   "carries (default: `tools.carry_parts.TOTAL_MB`; the parts with the most steps in DIR, those that "
+                   "do not fit beside them in DIR/more-1, ...)")
     p.add_argument("--whole-parts", action="store_true", help="run --time-limit: train only the parts predicted to "
                    "finish in time (measured speeds), for a last call on a machine that will not keep its runs/")
     args = p.parse_args(argv)
