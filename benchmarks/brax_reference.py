@@ -254,7 +254,9 @@ def main(argv=None):
                 if algo_name == "sac" else "")
              + "; both evaluated by "
              f"`agents.loop.make_evaluate` on the same {args.eval_envs} fresh episodes (deterministic policy).", "",
-             f"Training env steps/s: ours {ours or float('nan'):,.0f}, Brax {brax or float('nan'):,.0f}"
+             "Training env steps/s: " + ", ".join(
+                 f"{who} " + (f"{speed:,.0f}" if speed else "not run (--skip)" if args.skip == who.lower() else "not measured")
+                 for who, speed in (("ours", ours), ("Brax", brax)))
              + (f", ratio {report['speedup']:.2f}x" if "speedup" in report else "") + ".", "",
              "| env steps | ours: reached | ours: self coll. | ours: steps in target | Brax: reached | Brax: self coll. | Brax: steps in target |",
              "|---:|---:|---:|---:|---:|---:|---:|"]
