@@ -785,7 +785,7 @@ def test_workers_past_the_time_limit_are_interrupted_then_killed(tmp_path, monke
 
 def test_round_robin_takes_a_seed_of_each_run_first_after_the_parts_with_checkpoints(tmp_path):
     """`run --parallel --round-robin --max-seeds 1`: the part with a checkpoint (here c's seed 2) first, then the
-    first new seed of b and d, then their second and c's first new one (a run's new parts rank after the parts it
+    first new seed of b and d, then their second and c's first new one (a run's new parts rank after the seeds it
     has done or started), and so on; without it, run after run (each run's part with a checkpoint before its new ones)."""
     runs_dir, out = str(tmp_path / "runs"), str(tmp_path / "out")
     runs = tuple(ex.Run(name, "point-mass-ppo", {**TOY_RUN, "seed": 10 * i}, seeds=3 if name == "c" else 2,
@@ -808,6 +808,22 @@ def test_round_robin_takes_a_seed_of_each_run_first_after_the_parts_with_checkpo
                      ("toy/d", "seeds-1-1"), ("toy/c", "seeds-2-2")]
     with pytest.raises(ValueError, match="--round-robin without --parallel"):
         ex.main(["run", "toy", "--round-robin"])
+
+
+def test_round_robin_ranks_new_parts_by_the_seeds_their_run_has_before_them(tmp_path):
+    """Parts of two seeds (`--max-seeds 2`): b has two done one-seed parts, c one done two-seed part, d nothing.
+    Both b and c hold two seeds, so their new parts rank together, after d's first and beside d's second
+    (counting parts instead would put c's before b's and d's second before b's)."""
+    runs_dir, out = str(tmp_path / "runs"), str(tmp_path / "out")
+    runs = tuple(ex.Run(name, "point-mass-ppo", {**TOY_RUN, "seed": 10 * i}, seeds=4, num_timesteps=10_240)
+                 for i, name in enumerate("bcd", 1))
+    registry = {"toy": dataclasses.replace(TOY, runs=runs, cross=())}
+    for first in (0, 1):
+        _part(runs[0], runs_dir, "toy", "b", first, 1, steps=[10240], evaluated=10240)
+    _part(runs[1], runs_dir, "toy", "c", 0, 2, steps=[10240], evaluated=10240)
+    selection = ex.select(["toy"], registry)
+    robin = ex.parallel_items(selection, runs_dir, max_seeds=2, out=out, registry=registry, round_robin=True)
+    assert robin == [("toy/d", "seeds-0-1"), ("toy/b", "seeds-2-3"), ("toy/c", "seeds-2-3"), ("toy/d", "seeds-2-3")]
 
 
 def test_parallel_spreads_the_parts_of_one_run_over_the_gpus(tmp_path, monkeypatch):

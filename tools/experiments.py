@@ -915,8 +915,8 @@ def parallel_items(selection, runs_dir: str, max_seeds: int | None = None, out: 
     """(run key, part name) for each part a worker can take on its own: the done parts with cross-evaluations
     left where their checkpoints are, then the parts still to train (`pending_parts`, at most `max_seeds` seeds
     each), run after run. `round_robin`: the parts with a checkpoint first (a machine that goes back loses
-    them), then the new parts by how many parts their run already has (done or started), so that a time-limited
-    call screening several runs gets a seed of each before a second seed of any. Runs that share a folder are
+    them), then the new parts by how many seeds their run has before them (done, started, or in its earlier new
+    parts), so that a time-limited call screening several runs gets a seed of each before a second seed of any. Runs that share a folder are
     planned once (`planners`), so no part is listed twice."""
     plans = planners(selection, runs_dir, out, registry)
     crosses = [(st.key, part.name) for exp, st in plans
@@ -924,11 +924,12 @@ def parallel_items(selection, runs_dir: str, max_seeds: int | None = None, out: 
     pending = [(st, pending_parts(st, max_seeds)) for _, st in plans if st.status != "done"]
     if round_robin:
         started = [(st.key, part.name) for st, parts in pending for part in parts if part.steps]
-        fresh = []  # (rank, run order, item): a run's new parts rank after the parts it has done or started
+        fresh = []  # (rank, run order, item): a new part ranks by the seeds its run has before it
         for order, (st, parts) in enumerate(pending):
-            held = len(st.done_parts) + sum(1 for part in parts if part.steps)
-            new = [part for part in parts if not part.steps]
-            fresh += [(held + rank, order, (st.key, part.name)) for rank, part in enumerate(new)]
+            held = sum(p.count for p in st.done_parts) + sum(p.count for p in parts if p.steps)
+            for part in (p for p in parts if not p.steps):
+                fresh.append((held, order, (st.key, part.name)))
+                held += part.count
         training = started + [item for *_, item in sorted(fresh)]
     else:
         training = [(st.key, part.name) for st, parts in pending for part in parts]
@@ -1299,8 +1300,8 @@ def main(argv=None) -> int:
                    "(default 1), for runs too small to fill a GPU (the paper's SAC); each may use 90 %% of its "
                    "memory divided among them")
     p.add_argument("--round-robin", action="store_true", help="run --parallel (one GPU too): the parts with a "
-                   "checkpoint first, then the new parts ranked by how many parts their run already has, done or "
-                   "started (a seed of each row first, with --max-seeds 1), instead of run after run")
+                   "checkpoint first, then the new parts ranked by how many seeds their run has before them, done, "
+                   "started or new (a seed of each row first, with --max-seeds 1), instead of run after run")
     p.add_argument("--no-build", action="store_true", help="run: no tables (finished parts are still recorded, each "
                    "as it finishes)")
     p.add_argument("--all", action="store_true", help="commands: also the runs done (each as a fresh run)")
@@ -1319,8 +1320,8 @@ def main(argv=None) -> int:
                    "(`tools.carry_parts pack`), for a machine that will not keep its runs/; with --time-limit, "
                    "training stops early enough for it")
     p.add_argument("--carry-max-mb", type=float, help="run --carry-out: each bundle's total in MiB, what one call "
-                   "carries (default: `tools.carry_parts.TOTAL_MB`; the parts with the most steps in DIR, those that "
-                   "do not fit beside them in DIR/more-1, ...)")
+                   "carries (default: `tools.carry_parts.TOTAL_MB`; first fit, the parts with the most steps first, "
+                   "into DIR, DIR/more-1, ...)")
     p.add_argument("--whole-parts", action="store_true", help="run --time-limit: train only the parts predicted to "
                    "finish in time (measured speeds), for a last call on a machine that will not keep its runs/")
     args = p.parse_args(argv)
