@@ -76,7 +76,7 @@ def test_unfinished_parts_are_packed_learner_only_and_resume_after_unpacking(run
     source = os.path.join(runs_dir, "toy/ppo/seeds-0-0/checkpoints/15360")
     assert any("env_state" in n for n in _stored_leaf_names(source))
     lines, carry, there = [], str(root / "carry"), str(root / "there")
-    pieces = carry_parts.pack(runs_dir, carry, max_mb=0.05, log=lines.append)
+    pieces = carry_parts.pack(runs_dir, carry, max_mb=0.05, max_files=100, log=lines.append)
     assert any(line.startswith("left out toy/ppo/seeds-2-2: ValueError") for line in lines), lines
     names = [os.path.basename(p) for p in pieces]
     assert {n.rsplit(".", 1)[0] for n in names} == {"toy__ppo__seeds-0-0.tgz", "toy__ppo__seeds-1-1.tgz",
@@ -110,7 +110,7 @@ def test_unfinished_parts_are_packed_learner_only_and_resume_after_unpacking(run
 def test_unpack_skips_a_part_with_a_lost_piece_and_keeps_done_or_other_parts_here_and_pack_bundles(runs):
     root, runs_dir, _, _ = runs
     carry, there = str(root / "carry2"), str(root / "there2")
-    carry_parts.pack(runs_dir, carry, max_mb=0.05, log=lambda s: None)
+    carry_parts.pack(runs_dir, carry, max_mb=0.05, max_files=100, log=lambda s: None)
     os.remove(os.path.join(carry, "toy__ppo__seeds-0-0.tgz.001"))
     done = os.path.join(there, "toy", "sac", "seeds-0-0")  # done here, with no checkpoint left
     os.makedirs(done)
@@ -127,29 +127,52 @@ def test_unpack_skips_a_part_with_a_lost_piece_and_keeps_done_or_other_parts_her
     assert "kept toy/sac/seeds-0-0: it is done here (eval.json)" in lines
     assert "kept toy/ppo/seeds-1-1: its config.json here differs from the packed one" in lines
     assert os.listdir(done) == ["eval.json"] and json.load(open(os.path.join(other, "config.json")))["seed"] == 99
-    # Bundles of at most the total: the part with the most steps first in `carry`, the others where they fit
-    # (first fit), each bundle within the total; a part larger than the total left out and named.
-    # Packed sizes: PPO seeds 0 and 1 ~0.13 MiB each, SAC 0.21-0.25 MiB.
-    def bundles():
-        found = {}
-        for folder in sorted(os.listdir(carry)) + [""]:
-            path = os.path.join(carry, folder)
-            if os.path.isdir(path):
-                found[folder or "."] = sorted(n.rsplit(".", 2)[0] for n in os.listdir(path) if n.endswith(".000"))
-        return found
+    # One bundle holds all three when they fit, and only the first bundle is read by an unpack.
+    pieces = carry_parts.pack(runs_dir, carry, max_total_mb=1.0, log=lambda s: None)
+    assert {os.path.dirname(p) for p in pieces} == {carry}
+    os.makedirs(os.path.join(carry, "more-1"))
+    shutil.copy(pieces[0], os.path.join(carry, "more-1", "toy__other__seeds-0-0.tgz.000"))
+    assert carry_parts.unpack(carry, str(root / "there3"), log=lambda s: None) == [
+        "toy/ppo/seeds-0-0", "toy/ppo/seeds-1-1", "toy/sac/seeds-0-0"]
 
-    lines.clear()
-    carry_parts.pack(runs_dir, carry, max_total_mb=0.2, log=lines.append)
-    assert bundles() == {".": ["toy__ppo__seeds-0-0"], "more-1": ["toy__ppo__seeds-1-1"]}
-    assert any(re.fullmatch(r"left out toy/sac/seeds-0-0 at 1,600 env steps: 0\.2\d MiB is more than "
-                            r"--max-total-mb 0\.2", line) for line in lines), lines
-    pieces = carry_parts.pack(runs_dir, carry, max_total_mb=0.3, log=lambda s: None)  # the old bundles replaced
-    assert bundles() == {".": ["toy__ppo__seeds-0-0", "toy__ppo__seeds-1-1"], "more-1": ["toy__sac__seeds-0-0"]}
-    for folder in (carry, os.path.join(carry, "more-1")):
-        assert sum(os.path.getsize(p) for p in pieces if os.path.dirname(p) == folder) <= 0.3 * 2**20
-    # A bundle is unpacked on its own: the first holds the PPO parts only.
-    assert carry_parts.unpack(carry, str(root / "there3"), log=lambda s: None) == ["toy/ppo/seeds-0-0",
-                                                                                 "toy/ppo/seeds-1-1"]
+
+def test_pack_fills_bundles_first_fit_within_what_a_call_brings_back(tmp_path, monkeypatch):
+    """Archives of fixed sizes (MiB) in place of the learner-only saves: the parts with the most steps first,
+    each into the first bundle with room (a small late part back-fills the first bundle), a part larger than a
+    bundle left out, and the pieces kept within the files and MiB a device call brings back; a second pack
+    replaces the first one's bundles and removes a bundle folder left empty."""
+    mib = {"big": 0.9, "mid": 0.6, "small": 0.3, "huge": 1.5, "tail": 0.5}
+    steps = {"big": 500, "mid": 400, "huge": 300, "small": 200, "tail": 100}
+    runs_dir = tmp_path / "runs"
+    for name, step in steps.items():
+        os.makedirs(runs_dir / "toy" / name / "seeds-0-0" / "checkpoints" / str(step))
+    monkeypatch.setattr(carry_parts, "_part_archive", lambda runs, rel, staging: (
+        b"x" * int(mib[rel.split(os.sep)[1]] * 2**20), steps[rel.split(os.sep)[1]]))
+    to, lines = str(tmp_path / "carry"), []
+
+    def bundles():
+        return {os.path.relpath(root, to): sorted(f.split("__")[1] for f in files if f.endswith(".000"))
+                for root, _, files in os.walk(to) if files}
+
+    pieces = carry_parts.pack(str(runs_dir), to, max_mb=0.5, max_total_mb=1.2, max_files=5, max_all_mb=10,
+                              log=lines.append)
+    # big (2 pieces) opens "."; mid does not fit beside it: more-1; huge is larger than a bundle; small back-fills
+    # "."; tail would fit in more-1 but its piece would be the 6th file
+    assert bundles() == {".": ["big", "small"], "more-1": ["mid"]}
+    assert len(pieces) == 5 and all(os.path.getsize(p) <= 0.5 * 2**20 for p in pieces)
+    assert any(line.startswith("left out toy/huge/seeds-0-0 at 300 env steps: 1.50 MiB is more than --max-total-mb")
+               for line in lines), lines
+    assert any(line.startswith("left out toy/tail/seeds-0-0 at 100 env steps: with its 1 piece(s), 0.5 MiB, the "
+                               "bundles would pass what a device call brings back (5 files, 10 MiB)") for line in lines)
+    assert lines[-1].startswith("5 piece(s), 1.8 MiB, in 2 bundle(s):"), lines[-1]
+    # Within 1.4 MiB in all: mid (to 1.5) and tail are left out
+    carry_parts.pack(str(runs_dir), to, max_mb=0.5, max_total_mb=1.2, max_all_mb=1.4, log=lambda s: None)
+    assert bundles() == {".": ["big", "small"]}
+    assert not os.path.exists(os.path.join(to, "more-1"))  # emptied by the new pack and removed
+    with open(os.path.join(to, "more-5"), "w") as f:  # a file of a bundle's name is left alone
+        f.write("not a bundle")
+    carry_parts.pack(str(runs_dir), to, max_mb=0.5, max_total_mb=1.2, log=lambda s: None)
+    assert bundles()["."] == ["big", "small"] and bundles()["more-1"] == ["mid", "tail"]
 
 
 def test_bad_arguments_are_refused_naming_the_option(tmp_path):

@@ -12,8 +12,11 @@ presets, 16 MB for the fast SAC ones) beside its `config.json` and `metrics.csv`
 gzipped tar, `<experiment>__<run>__<part>.tgz.NNN`, split into pieces of at most `--max-mb`, in bundles of at
 most `--max-total-mb` (default 15: a device call brings back files of at most 16 MiB, and the next call's working
 tree, which carries one bundle in a git-ignored folder beside the repository and its wheels, is limited to 64 MiB):
-the first bundle in `--to`, the parts that do not fit beside it in `--to`/more-1, more-2, ..., each for another
-call of the next machine. A part that cannot be saved, or is larger than a bundle, is left out and named. A resume from the copy starts fresh episodes and, for SAC, refills the replay buffer:
+the first bundle in `--to`, the parts that do not fit beside it in `--to`/more-1, more-2, ... (first fit), each
+for another call of the next machine (`--to` at most one folder below the call's $OUT: a call brings back files at
+most two folders down, 8 of them, 64 MiB in all, which `pack` keeps to). A part that cannot be saved, is larger
+than a bundle or passes those limits is left out and named. Until its bundle is unpacked there, a part in a later
+bundle looks new to the next machine: leave its run out of the calls before that one, or it starts afresh. A resume from the copy starts fresh episodes and, for SAC, refills the replay buffer:
 not bit-for-bit the run that would have gone on, the same as any learner-only resume.
 
 `unpack` puts each complete archive's part into the runs folder, except where the folder there is done
@@ -38,8 +41,13 @@ PIECE = re.compile(r"(?P<archive>.+\.tgz)\.(?P<index>\d{3})")
 PIECE_MB = 15.0
 """The largest piece `pack` writes, in MiB: a device call brings back files of at most 16 MiB."""
 TOTAL_MB = 15.0
-"""What `pack` writes in all, in MiB: the next device call's working tree carries the pieces beside the
-repository (~22 MiB) and its wheels (~26 MiB), within 64 MiB."""
+"""A bundle's size in MiB, what one device call carries: its working tree holds the bundle beside the repository
+(~22 MiB) and its wheels (~20 MiB), within 64 MiB."""
+RETURN_FILES = 7
+"""The most pieces `pack` writes in all its bundles: a device call brings back at most 8 files, one kept for the
+call's logs."""
+RETURN_MB = 60.0
+"""The most MiB `pack` writes in all its bundles: a device call brings back at most 64 MiB."""
 
 
 def unfinished_parts(runs_dir: str) -> list[str]:
@@ -86,16 +94,22 @@ def bundle_dir(to: str, index: int) -> str:
     return to if index == 0 else os.path.join(to, f"more-{index}")
 
 
-def pack(runs_dir: str, to: str, max_mb: float = PIECE_MB, max_total_mb: float = TOTAL_MB, log=print) -> list[str]:
+def pack(runs_dir: str, to: str, max_mb: float = PIECE_MB, max_total_mb: float = TOTAL_MB,
+         max_files: int = RETURN_FILES, max_all_mb: float = RETURN_MB, log=print) -> list[str]:
     """Writes the unfinished parts of `runs_dir`, learner-only, as `<archive>.NNN` pieces in bundles of at most
     `max_total_mb` each (what one device call's tree carries): the first in `to`, the parts that do not fit
     beside it in `to/more-1`, then `to/more-2`, ... (first fit, the parts with the most steps first), so that the
-    next machine's calls carry one bundle each. The old pieces there are removed first; returns the pieces' paths."""
-    for name, value in (("max_mb", max_mb), ("max_total_mb", max_total_mb)):
+    next machine's calls carry one bundle each; at most `max_files` pieces and `max_all_mb` MiB in all (what a
+    device call brings back), the parts beyond named and left out. The old pieces there are removed first; returns
+    the pieces' paths."""
+    for name, value in (("max_mb", max_mb), ("max_total_mb", max_total_mb), ("max_all_mb", max_all_mb)):
         if not value > 0:
             raise ValueError(f"{name}={value!r} is invalid: allowed is a number > 0.")
+    if not (isinstance(max_files, int) and max_files >= 1):
+        raise ValueError(f"max_files={max_files!r} is invalid: allowed is an integer >= 1.")
     os.makedirs(to, exist_ok=True)
-    for folder in [to] + [os.path.join(to, d) for d in os.listdir(to) if re.fullmatch(r"more-\d+", d)]:
+    for folder in [to] + [os.path.join(to, d) for d in os.listdir(to)
+                          if re.fullmatch(r"more-\d+", d) and os.path.isdir(os.path.join(to, d))]:
         for name in os.listdir(folder):
             if PIECE.fullmatch(name):
                 os.remove(os.path.join(folder, name))
@@ -115,6 +129,11 @@ def pack(runs_dir: str, to: str, max_mb: float = PIECE_MB, max_total_mb: float =
                 log(f"left out {rel} at {step:,} env steps: {len(blob) / 2**20:.2f} MiB is more than "
                     f"--max-total-mb {max_total_mb:g}")
                 continue
+            count, total = -(-len(blob) // size), sum(written) + len(blob)
+            if len(paths) + count > max_files or total > max_all_mb * 2**20:
+                log(f"left out {rel} at {step:,} env steps: with its {count} piece(s), {len(blob) / 2**20:.1f} MiB, "
+                    f"the bundles would pass what a device call brings back ({max_files} files, {max_all_mb:g} MiB)")
+                continue
             index = next((i for i, used in enumerate(written) if used + len(blob) <= budget), len(written))
             if index == len(written):
                 written.append(0)
@@ -126,9 +145,12 @@ def pack(runs_dir: str, to: str, max_mb: float = PIECE_MB, max_total_mb: float =
                     f.write(blob[i:i + size])
             written[index] += len(blob)
             log(f"packed {rel} at {step:,} env steps: {len(blob) / 2**20:.1f} MiB"
-                + (f", in {folder} (beyond the first {max_total_mb:g} MiB: carry it in another call)" if index else ""))
+                + (f", in {folder} (bundle {index + 1}: carry it in a call of its own)" if index else ""))
     if not parts:
         log(f"no unfinished part under {runs_dir}")
+    elif paths:
+        log(f"{len(paths)} piece(s), {sum(written) / 2**20:.1f} MiB, in {len(written)} bundle(s): "
+            + ", ".join(f"{bundle_dir(to, i)} {used / 2**20:.1f} MiB" for i, used in enumerate(written)))
     return paths
 
 
@@ -213,7 +235,8 @@ def main(argv=None) -> int:
     p.add_argument("--from", dest="source", help="unpack: the folder holding the pieces")
     p.add_argument("--max-mb", type=float, help=f"pack: the largest piece in MiB (default {PIECE_MB:g})")
     p.add_argument("--max-total-mb", type=float,
-                   help=f"pack: the pieces' total in MiB (default {TOTAL_MB:g}); the parts with the most steps go first")
+                   help=f"pack: each bundle's total in MiB, what one call carries (default {TOTAL_MB:g}); first fit, "
+                        "the parts with the most steps first")
     args = p.parse_args(argv)
     if args.action == "pack":
         if args.to is None or args.source is not None:
