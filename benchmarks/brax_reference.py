@@ -148,6 +148,10 @@ def main(argv=None):
                         "PPO ours of its parameters, so keep --eval-envs small): "
                         "`python -m benchmarks.trace_summary DIR/ours`")
     args = parser.parse_args(argv)
+    for flag, value in (("--evals", args.evals), ("--updates-per-eval", args.updates_per_eval),
+                        ("--eval-envs", args.eval_envs)):
+        if value is not None and value < 1:
+            raise ValueError(f"{flag}={value} is invalid: allowed is an integer >= 1.")
     if args.trace and args.skip != "brax" and args.evals < 2:
         raise ValueError(f"--evals={args.evals} with --trace: allowed is 2 or more (Brax's second training epoch is "
                          "traced; its first compiles).")
@@ -156,8 +160,6 @@ def main(argv=None):
     algo_name = registry.of_config(config.algo).name
     if algo_name not in BRAX_TRAINERS:
         raise ValueError(f"--preset {args.preset} trains {algo_name}: allowed are presets of {', '.join(BRAX_TRAINERS)}.")
-    env = envs.from_config(config.env_name, config.env)
-    config = brax_comparable(config, algo_name, env.action_size)
     spu = config.algo.env_steps_per_update
     updates_per_eval = args.updates_per_eval or DEFAULT_UPDATES_PER_EVAL[algo_name]
     total = args.evals * updates_per_eval * spu
@@ -165,6 +167,8 @@ def main(argv=None):
         raise ValueError(f"--evals={args.evals} x --updates-per-eval={updates_per_eval} x {spu} env steps = {total:,} "
                          f"env steps is invalid for SAC: allowed is more than algo.min_replay_size="
                          f"{config.algo.min_replay_size:,} (Brax's SAC trains only after its buffer holds that many).")
+    env = envs.from_config(config.env_name, config.env)
+    config = brax_comparable(config, algo_name, env.action_size)
     config = config.__class__(**{**config.__dict__, "num_timesteps": total})
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)

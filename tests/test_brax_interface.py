@@ -71,5 +71,8 @@ def test_brax_reference_refuses_a_sac_run_too_short_to_leave_the_replay_warmup(t
     with pytest.raises(ValueError, match=r"--evals=2 x --updates-per-eval=32 x 16 env steps = 1,024 env steps is "
                                          r"invalid for SAC: allowed is more than algo.min_replay_size=1,024"):
         brax_reference.main(["--preset", "point-mass-sac", "--evals", "2", "--updates-per-eval", "32",
-                             "--out", str(tmp_path / "out")])
+                             "--out", str(tmp_path / "sub" / "out")])
+    for flag in ("--evals", "--updates-per-eval", "--eval-envs"):
+        with pytest.raises(ValueError, match=f"{flag}=0 is invalid: allowed is an integer >= 1"):
+            brax_reference.main(["--preset", "point-mass-sac", flag, "0", "--out", str(tmp_path / "sub" / "out")])
     assert not any(tmp_path.iterdir())
