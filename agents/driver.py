@@ -287,10 +287,11 @@ def remove_run_files(logdir: str, remove_dir: bool = False) -> None:
         os.rmdir(logdir)
 
 
-def _resume(ckpt: Checkpointer, config: TrainConfig, learner_cls):
-    """(checkpointer, step, merged config, programs, state) of the newest intact checkpoint. A
-    checkpoint that cannot be read is moved to `<logdir>/corrupt_checkpoints/` with a warning naming
-    it (so the resumed run can save that step again); ValueError if none is intact."""
+def _newest_intact(ckpt: Checkpointer, prepare, load):
+    """The newest checkpoint of `ckpt` whose config and state both read, newest first: `prepare(step, saved_config)`
+    builds what loading needs (its errors propagate: they are not damage), `load(step, prepared)` restores the
+    state. Returns (step, prepared, state, [(step, error) of each damaged newer checkpoint]); step None if none
+    reads."""
     bad = []
     for step in sorted(ckpt.manager.all_steps(), reverse=True):
         try:
@@ -298,19 +299,40 @@ def _resume(ckpt: Checkpointer, config: TrainConfig, learner_cls):
         except Exception as error:  # orbax / tensorstore / json raise many types on a damaged file
             bad.append((step, error))
             continue
-        merged = merge_resume_config(config, saved, done_steps=step)  # a refused option is not damage
-        validate(merged)
-        programs = programs_for(merged, learner_cls)
+        prepared = prepare(step, saved)
         try:
-            state = restore_state(ckpt, step, programs, merged, with_envs=saved.checkpoint_envs)
+            state = load(step, prepared)
         except Exception as error:
             bad.append((step, error))
             continue
-        break
-    else:
-        what = "; ".join(f"{ckpt.step_dir(s)}: {_first_line(e)}" for s, e in bad) or "none found"
-        raise ValueError(f"resume=True but logdir={config.logdir!r} holds no intact checkpoint ({what}): allowed is "
-                         "the directory of an earlier run with at least one readable checkpoint.")
+        return step, prepared, state, bad
+    return None, None, None, bad
+
+
+def _damage_report(ckpt: Checkpointer, bad) -> str:
+    """The damaged checkpoints of `_newest_intact`, one "dir: error" each, for an error message."""
+    return "; ".join(f"{ckpt.step_dir(s)}: {_first_line(e)}" for s, e in bad) or "none found"
+
+
+def _resume(ckpt: Checkpointer, config: TrainConfig, learner_cls):
+    """(checkpointer, step, merged config, programs, state) of the newest intact checkpoint. A
+    checkpoint that cannot be read is moved to `<logdir>/corrupt_checkpoints/` with a warning naming
+    it (so the resumed run can save that step again); ValueError if none is intact."""
+    def prepare(step, saved):
+        merged = merge_resume_config(config, saved, done_steps=step)  # a refused option is not damage
+        validate(merged)
+        return merged, saved, programs_for(merged, learner_cls)
+
+    def load(step, prepared):
+        merged, saved, programs = prepared
+        return restore_state(ckpt, step, programs, merged, with_envs=saved.checkpoint_envs)
+
+    step, prepared, state, bad = _newest_intact(ckpt, prepare, load)
+    if step is None:
+        raise ValueError(f"resume=True but logdir={config.logdir!r} holds no intact checkpoint "
+                         f"({_damage_report(ckpt, bad)}): allowed is the directory of an earlier run with at least "
+                         "one readable checkpoint.")
+    merged, _, programs = prepared
     if bad:
         aside = os.path.join(config.logdir, "corrupt_checkpoints")
         os.makedirs(aside, exist_ok=True)
@@ -393,30 +415,24 @@ def learner_only_checkpoint(logdir: str, dest_logdir: str) -> int:
         raise ValueError(f"logdir={logdir!r} holds no checkpoints folder: allowed is the directory of a run with "
                          "at least one readable checkpoint.")
     ckpt = Checkpointer(folder)
+
+    def prepare(step, saved):
+        config = dataclasses.replace(saved, devices=1)  # a run field: restoring needs no other device
+        return config, programs_for(config)  # an error here is not damage: it propagates
+
+    def load(step, prepared):
+        config, programs = prepared
+        abstract = programs.abstract_state
+        return ckpt.restore(step, abstract if config.checkpoint_envs else _learner_only(abstract, programs.learner))[0]
+
     try:
-        damaged = []
-        for step in sorted(ckpt.manager.all_steps(), reverse=True):
-            try:
-                config = config_from_json(ckpt.restore_config(step))
-            except Exception as error:  # orbax / tensorstore / json raise many types on a damaged file
-                damaged.append(f"{ckpt.step_dir(step)}: {_first_line(error)}")
-                continue
-            config = dataclasses.replace(config, devices=1)  # a run field: restoring needs no other device
-            programs = programs_for(config)  # an error here is not damage: it propagates
-            abstract = programs.abstract_state
-            if not config.checkpoint_envs:
-                abstract = _learner_only(abstract, programs.learner)
-            try:
-                state, _ = ckpt.restore(step, abstract)
-            except Exception as error:
-                damaged.append(f"{ckpt.step_dir(step)}: {_first_line(error)}")
-                continue
-            break
-        else:
-            raise ValueError(f"logdir={logdir!r} holds no intact checkpoint ({'; '.join(damaged) or 'none found'}): "
-                             "allowed is the directory of a run with at least one readable checkpoint.")
+        step, prepared, state, bad = _newest_intact(ckpt, prepare, load)
+        if step is None:
+            raise ValueError(f"logdir={logdir!r} holds no intact checkpoint ({_damage_report(ckpt, bad)}): allowed "
+                             "is the directory of a run with at least one readable checkpoint.")
     finally:
         ckpt.close()
+    config, programs = prepared
     out = Checkpointer(os.path.join(dest_logdir, "checkpoints"), keep=1)
     try:
         save_checkpoint(out, step, state, dataclasses.replace(config, checkpoint_envs=False), programs.learner)

@@ -916,8 +916,8 @@ def parallel_items(selection, runs_dir: str, max_seeds: int | None = None, out: 
     left where their checkpoints are, then the parts still to train (`pending_parts`, at most `max_seeds` seeds
     each), run after run. `round_robin`: the parts with a checkpoint first (a machine that goes back loses
     them), then the new parts by how many seeds their run has before them (done, started, or in its earlier new
-    parts), so that a time-limited call screening several runs gets a seed of each before a second seed of any. Runs that share a folder are
-    planned once (`planners`), so no part is listed twice."""
+    parts), so that a time-limited call screening several runs gets a seed of each before a second seed of any.
+    Runs that share a folder are planned once (`planners`), so no part is listed twice."""
     plans = planners(selection, runs_dir, out, registry)
     crosses = [(st.key, part.name) for exp, st in plans
                for _, _, part, _ in folder_crosses(exp, st, runs_dir, out, registry)]
