@@ -175,6 +175,37 @@ def test_pack_fills_bundles_first_fit_within_what_a_call_brings_back(tmp_path, m
     assert bundles()["."] == ["big", "small"] and bundles()["more-1"] == ["mid", "tail"]
 
 
+def test_pack_takes_only_the_named_runs_parts(tmp_path, monkeypatch):
+    """Two commands may train different runs in one runs folder side by side: each packs only its own runs'
+    unfinished parts (`runs`, or the CLI's names resolved to the folders that train them)."""
+    runs_dir = tmp_path / "runs"
+    steps = {"sac-fast/panda-reach-plus-200m/seeds-2-2": 56, "sac-fast/panda-reach-avoid-plus-200m/seeds-3-3": 168,
+             "sac-fast/panda-reach-avoid-plus-200m/seeds-4-4": 12, "action-space/relative/seeds-0-0": 7}
+    for rel, step in steps.items():
+        os.makedirs(runs_dir / rel / "checkpoints" / str(step))
+    monkeypatch.setattr(carry_parts, "_part_archive", lambda runs, rel, staging: (b"x" * 1000, steps[rel]))
+    to = str(tmp_path / "carry")
+
+    def packed():
+        return sorted(os.path.basename(p) for p in os.listdir(to) if p.endswith(".000"))
+
+    carry_parts.pack(str(runs_dir), to, runs=["sac-fast/panda-reach-avoid-plus-200m"], log=lambda s: None)
+    assert packed() == ["sac-fast__panda-reach-avoid-plus-200m__seeds-3-3.tgz.000",
+                        "sac-fast__panda-reach-avoid-plus-200m__seeds-4-4.tgz.000"]
+    lines = []
+    assert carry_parts.pack(str(runs_dir), to, runs=["sac-fast/panda-reach"], log=lines.append) == []  # no prefix match
+    assert lines == [f"no unfinished part under {runs_dir} in sac-fast/panda-reach"]
+    carry_parts.main(["pack", "--runs-dir", str(runs_dir), "--to", to, "sac-fast/panda-reach-plus-200m",
+                      "sac-fast/ur5e-reach-ppo"])  # the PPO row trains in action-space/relative
+    assert packed() == ["action-space__relative__seeds-0-0.tgz.000", "sac-fast__panda-reach-plus-200m__seeds-2-2.tgz.000"]
+    carry_parts.main(["pack", "--runs-dir", str(runs_dir), "--to", to])
+    assert len(packed()) == 4
+    with pytest.raises(ValueError, match="unpack needs --from DIR \\(and no names"):
+        carry_parts.main(["unpack", "--from", to, "sac-fast"])
+    with pytest.raises(ValueError, match="experiment 'nope' is unknown"):
+        carry_parts.main(["pack", "--runs-dir", str(runs_dir), "--to", to, "nope"])
+
+
 def test_bad_arguments_are_refused_naming_the_option(tmp_path):
     with pytest.raises(ValueError, match="pack needs --to"):
         carry_parts.main(["pack", "--runs-dir", str(tmp_path)])

@@ -691,12 +691,18 @@ def test_run_carries_unfinished_parts_in_and_out_within_its_time_limit(monkeypat
     common = ["--runs-dir", runs_dir, "--no-build", "--carry-in", carry_in, "--carry-out", carry_out]
     ex.main(["run", "sac-fast", "--parallel", "--time-limit", "500", *common])
     assert [e[0] for e in events] == ["unpack", "train", "pack"]
-    assert events[0][1:] == (carry_in, runs_dir) and events[2][1:] == (runs_dir, carry_out, {"max_total_mb": 15.0})
+    everything = ex.run_folders(ex.select(["sac-fast"]))
+    assert "sac-fast/panda-reach-plus-200m" in everything and "action-space/relative" in everything  # its PPO row's
+    assert events[0][1:] == (carry_in, runs_dir) and events[2][1:] == (
+        runs_dir, carry_out, {"max_total_mb": 18.0, "runs": everything})
     assert events[1][1] == ["0", "1"] and 438.0 < events[1][2] <= 440.0  # 500 s less 30 + 2 x 15
     events.clear()
     os.remove(os.path.join(carry_in, "toy__a__seeds-0-0.tgz.000"))  # nothing to unpack; no limit, no reserve
-    ex.main(["run", "sac-fast", *common, "--carry-max-mb", "40"])
-    assert events == [("train", None, None), ("pack", runs_dir, carry_out, {"max_total_mb": 40.0})]
+    # Only the named runs' parts are packed (another command may train other runs in the same folder), in the
+    # folder that trains them (sac-fast's UR5e reach PPO row shares action-space/relative).
+    ex.main(["run", "sac-fast/panda-reach-plus-200m", "sac-fast/ur5e-reach-ppo", *common, "--carry-max-mb", "40"])
+    assert events == [("train", None, None), ("pack", runs_dir, carry_out, {
+        "max_total_mb": 40.0, "runs": ["action-space/relative", "sac-fast/panda-reach-plus-200m"]})]
     with pytest.raises(ValueError, match=r"--carry-max-mb=0.0 is invalid"):
         ex.main(["run", "sac-fast", *common, "--carry-max-mb", "0"])
     with pytest.raises(ValueError, match=r"--carry-max-mb without --carry-out is meaningless"):

@@ -10,7 +10,7 @@ first) is lost with it; its learner-only checkpoint lets the next machine resume
 (`agents.driver.learner_only_checkpoint`: no env states, no replay buffer; per seed about 3-5 MB for the PPO
 presets, 16 MB for the fast SAC ones) beside its `config.json` and `metrics.csv`, and writes each part as its own
 gzipped tar, `<experiment>__<run>__<part>.tgz.NNN`, split into pieces of at most `--max-mb`, in bundles of at
-most `--max-total-mb` (default 15: a device call brings back files of at most 16 MiB, and the next call's working
+most `--max-total-mb` (default 18: a device call brings back files of at most 16 MiB, and the next call's working
 tree, which carries one bundle in a git-ignored folder beside the repository and its wheels, is limited to 64 MiB):
 the first bundle in `--to`, the parts that do not fit beside it in `--to`/more-1, more-2, ... (first fit), each
 for another call of the next machine (`--to` at most one folder below the call's $OUT: a call brings back files at
@@ -35,14 +35,15 @@ import shutil
 import tarfile
 import tempfile
 
-from tools.experiments import checkpoint_steps, parse_part
+from tools.experiments import checkpoint_steps, parse_part, run_folders, select
 
 PIECE = re.compile(r"(?P<archive>.+\.tgz)\.(?P<index>\d{3})")
 PIECE_MB = 15.0
 """The largest piece `pack` writes, in MiB: a device call brings back files of at most 16 MiB."""
-TOTAL_MB = 15.0
+TOTAL_MB = 18.0
 """A bundle's size in MiB, what one device call carries: its working tree holds the bundle beside the repository
-(~22 MiB) and its wheels (~20 MiB), within 64 MiB."""
+(~22 MiB) and its wheels (~20 MiB), within 64 MiB; 18 holds one fast-SAC part (~15.2 MiB) and leaves the
+repository room to grow."""
 RETURN_FILES = 7
 """The most pieces `pack` writes in all its bundles: a device call brings back at most 8 files, one kept for the
 call's logs."""
@@ -50,15 +51,18 @@ RETURN_MB = 60.0
 """The most MiB `pack` writes in all its bundles: a device call brings back at most 64 MiB."""
 
 
-def unfinished_parts(runs_dir: str) -> list[str]:
+def unfinished_parts(runs_dir: str, runs: list[str] | None = None) -> list[str]:
     """The part folders under `runs_dir` (relative, `<experiment>/<run>/seeds-F-L`) with a checkpoint and no
-    eval.json, sorted by name."""
+    eval.json, sorted by name; with `runs` (`<experiment>/<run>` folders), only theirs."""
     found = []
     for root, dirs, files in os.walk(runs_dir):
         if parse_part(os.path.basename(root)) is not None:
             dirs[:] = []
             if "eval.json" not in files and newest_step(root) is not None:
                 found.append(os.path.relpath(root, runs_dir))
+    if runs is not None:
+        folders = {os.path.normpath(r) for r in runs}
+        found = [rel for rel in found if os.path.dirname(rel) in folders]
     return sorted(found)
 
 
@@ -95,8 +99,10 @@ def bundle_dir(to: str, index: int) -> str:
 
 
 def pack(runs_dir: str, to: str, max_mb: float = PIECE_MB, max_total_mb: float = TOTAL_MB,
-         max_files: int = RETURN_FILES, max_all_mb: float = RETURN_MB, log=print) -> list[str]:
-    """Writes the unfinished parts of `runs_dir`, learner-only, as `<archive>.NNN` pieces in bundles of at most
+         max_files: int = RETURN_FILES, max_all_mb: float = RETURN_MB, runs: list[str] | None = None,
+         log=print) -> list[str]:
+    """Writes the unfinished parts of `runs_dir` (with `runs`, `<experiment>/<run>` folders, only theirs: two
+    commands training different runs side by side each pack their own), learner-only, as `<archive>.NNN` pieces in bundles of at most
     `max_total_mb` each (what one device call's tree carries): the first in `to`, the parts that do not fit
     beside it in `to/more-1`, then `to/more-2`, ... (first fit, the parts with the most steps first), so that the
     next machine's calls carry one bundle each; at most `max_files` pieces and `max_all_mb` MiB in all (what a
@@ -115,7 +121,7 @@ def pack(runs_dir: str, to: str, max_mb: float = PIECE_MB, max_total_mb: float =
                 os.remove(os.path.join(folder, name))
         if folder != to and not os.listdir(folder):
             os.rmdir(folder)
-    parts = sorted(unfinished_parts(runs_dir), key=lambda rel: -newest_step(os.path.join(runs_dir, rel)))
+    parts = sorted(unfinished_parts(runs_dir, runs), key=lambda rel: -newest_step(os.path.join(runs_dir, rel)))
     size, budget, paths = int(max_mb * 2**20), int(max_total_mb * 2**20), []
     written: list[int] = []  # bytes in each bundle
     with tempfile.TemporaryDirectory() as staging:
@@ -147,7 +153,7 @@ def pack(runs_dir: str, to: str, max_mb: float = PIECE_MB, max_total_mb: float =
             log(f"packed {rel} at {step:,} env steps: {len(blob) / 2**20:.1f} MiB"
                 + (f", in {folder} (bundle {index + 1}: carry it in a call of its own)" if index else ""))
     if not parts:
-        log(f"no unfinished part under {runs_dir}")
+        log(f"no unfinished part under {runs_dir}" + (f" in {', '.join(runs)}" if runs is not None else ""))
     elif paths:
         log(f"{len(paths)} piece(s), {sum(written) / 2**20:.1f} MiB, in {len(written)} bundle(s): "
             + ", ".join(f"{bundle_dir(to, i)} {used / 2**20:.1f} MiB" for i, used in enumerate(written)))
@@ -228,6 +234,8 @@ def unpack(source: str, runs_dir: str, log=print) -> list[str]:
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="python -m tools.carry_parts", description=__doc__.split("\n\n")[0])
     p.add_argument("action", choices=("pack", "unpack"))
+    p.add_argument("names", nargs="*", help="pack: only the parts of these experiments or experiment/run names "
+                                            "(default: every unfinished part)")
     p.add_argument("--runs-dir", default=os.path.join("runs", "experiments"),
                    help="the experiments' runs folder (default runs/experiments)")
     p.add_argument("--to", help="pack: the folder for the pieces (carry it to the next machine in a git-ignored "
@@ -237,15 +245,17 @@ def main(argv=None) -> int:
     p.add_argument("--max-total-mb", type=float,
                    help=f"pack: each bundle's total in MiB, what one call carries (default {TOTAL_MB:g}); first fit, "
                         "the parts with the most steps first")
-    args = p.parse_args(argv)
+    args = p.parse_intermixed_args(argv)  # names after the options too
     if args.action == "pack":
         if args.to is None or args.source is not None:
             raise ValueError("pack needs --to DIR (and no --from): allowed is `pack --to DIR`.")
         pack(args.runs_dir, args.to, PIECE_MB if args.max_mb is None else args.max_mb,
-             TOTAL_MB if args.max_total_mb is None else args.max_total_mb)
+             TOTAL_MB if args.max_total_mb is None else args.max_total_mb,
+             runs=run_folders(select(args.names)) if args.names else None)
     else:
-        if args.source is None or args.to is not None or args.max_total_mb is not None or args.max_mb is not None:
-            raise ValueError("unpack needs --from DIR (and no --to, --max-mb or --max-total-mb): allowed is "
+        if (args.source is None or args.to is not None or args.max_total_mb is not None or args.max_mb is not None
+                or args.names):
+            raise ValueError("unpack needs --from DIR (and no names, --to, --max-mb or --max-total-mb): allowed is "
                              "`unpack --from DIR`.")
         unpack(args.source, args.runs_dir)
     return 0

@@ -31,8 +31,8 @@ its `stop_after_seconds` (the driver starts a chunk of updates only if it ends i
 started when its measured speed (its `metrics.csv`, or another part's of at least as many seeds) leaves no time
 for one log interval. The next call resumes where this one stopped. A part stopped half way resumes only where
 its checkpoints are: for the last call on a machine that will not keep `runs/`, `--whole-parts` trains only the
-parts predicted to finish in the time left and leaves the others untouched, or `--carry-out DIR` packs the
-unfinished parts learner-only into DIR for the next machine's `--carry-in DIR` (`tools/carry_parts.py`).
+parts predicted to finish in the time left and leaves the others untouched, or `--carry-out DIR` packs its
+runs' unfinished parts learner-only into DIR for the next machine's `--carry-in DIR` (`tools/carry_parts.py`).
 
 The experiments are registered in `tools/experiment_registry.py` (types: `tools/experiment_spec.py`); this
 module trains, lists and tabulates them. It imports only the standard library at the top, so the results
@@ -307,6 +307,11 @@ def storage(experiment: Experiment, run: Run, registry: dict | None = None) -> t
                 if other is run or recipe(other) == key:
                     return exp.name, other.name
     return experiment.name, run.name
+
+
+def run_folders(selection: list[tuple[Experiment, list[Run]]]) -> list[str]:
+    """The `<experiment>/<run>` folders (under a runs folder) that train the selected runs (`storage`)."""
+    return sorted({"/".join(storage(exp, run)) for exp, runs in selection for run in runs})
 
 
 def record_folder(record: str, experiment: str, run: str) -> str:
@@ -1316,9 +1321,9 @@ def main(argv=None) -> int:
                    "$JAX_COMPILATION_CACHE_DIR, else .jax_cache/ in the repository; 'off' for none)")
     p.add_argument("--carry-in", metavar="DIR", help="run: first put the parts packed in DIR (by --carry-out on "
                    "another machine) into --runs-dir (`tools.carry_parts unpack`)")
-    p.add_argument("--carry-out", metavar="DIR", help="run: last, pack the unfinished parts learner-only into DIR "
-                   "(`tools.carry_parts pack`), for a machine that will not keep its runs/; with --time-limit, "
-                   "training stops early enough for it")
+    p.add_argument("--carry-out", metavar="DIR", help="run: last, pack the unfinished parts of the named runs "
+                   "learner-only into DIR (`tools.carry_parts pack`), for a machine that will not keep its runs/; with "
+                   "--time-limit, training stops early enough for it")
     p.add_argument("--carry-max-mb", type=float, help="run --carry-out: each bundle's total in MiB, what one call "
                    "carries (default: `tools.carry_parts.TOTAL_MB`; first fit, the parts with the most steps first, "
                    "into DIR, DIR/more-1, ...)")
@@ -1402,7 +1407,8 @@ def main(argv=None) -> int:
                                      record=args.out, whole_parts=args.whole_parts, record_each=True,
                                      only_part=args.only_part)
         if args.carry_out is not None:
-            carry_parts.pack(args.runs_dir, args.carry_out,
+            # Only this command's runs: another command may be training other runs in the same folder.
+            carry_parts.pack(args.runs_dir, args.carry_out, runs=run_folders(selection),
                              max_total_mb=carry_parts.TOTAL_MB if args.carry_max_mb is None else args.carry_max_mb)
         if not args.no_build:
             for path in record(selection, args.runs_dir, args.out):
