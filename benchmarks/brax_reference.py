@@ -22,6 +22,7 @@ it.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import datetime
 import functools
@@ -107,6 +108,60 @@ def brax_sac(config, env, total, num_evals, on_params, on_progress):
     on_params(last["step"], make_policy, params)
 
 
+def brax_sac_epochs(total: int, num_envs: int, min_replay_size: int, num_evals: int) -> tuple[int, int]:
+    """(prefill vector steps, training vector steps per epoch) of Brax's SAC run with `num_timesteps=total`: it
+    prefills ceil(min_replay_size / num_envs) vector steps, counted in the budget, then splits the rest over
+    max(num_evals - 1, 1) epochs (`brax.training.agents.sac.train`), so an epoch is shorter than ours."""
+    prefill = -(-min_replay_size // num_envs)
+    return prefill, -(-(total - prefill * num_envs) // (max(num_evals - 1, 1) * num_envs))
+
+
+class EpochTrace:
+    """Profiles Brax's second training epoch alone (its first compiles): from Brax's second progress call to
+    the start of the next evaluation, Brax's evaluator or ours of the epoch's parameters, whichever comes
+    first, so that no evaluation's kernels fall in the trace."""
+
+    def __init__(self, directory: str, start=None, stop=None):
+        self.directory = directory
+        self.start = start or (lambda d: jax.profiler.start_trace(d, create_perfetto_trace=True))
+        self.stop_trace = stop or jax.profiler.stop_trace
+        self.on = False
+
+    def progress(self, calls: int):
+        """Brax's progress_fn was called for the `calls`-th time (the first at step 0, then after each epoch
+        and its evaluations)."""
+        if calls == 2:
+            self.start(self.directory)
+            self.on = True
+        elif calls > 2:
+            self.stop()
+
+    def stop(self):
+        """An evaluation starts (or Brax's progress comes): end the trace if it runs."""
+        if self.on:
+            self.stop_trace()
+            self.on = False
+
+
+@contextlib.contextmanager
+def before_brax_evaluations(hook):
+    """Calls `hook()` at the start of each of Brax's own evaluations (`acting.Evaluator.run_evaluation`,
+    which its PPO and SAC run after every training epoch) while the context lasts."""
+    from brax.training import acting
+
+    original = acting.Evaluator.run_evaluation
+
+    def run_evaluation(self, *args, **kwargs):
+        hook()
+        return original(self, *args, **kwargs)
+
+    acting.Evaluator.run_evaluation = run_evaluation
+    try:
+        yield
+    finally:
+        acting.Evaluator.run_evaluation = original
+
+
 BRAX_TRAINERS = {"ppo": brax_ppo, "sac": brax_sac}
 """Registered algorithm name -> the function that trains Brax's version of it on our env."""
 
@@ -144,8 +199,9 @@ def main(argv=None):
     parser.add_argument("--out", default="results/throughput/brax_reference")
     parser.add_argument("--trace", metavar="DIR", help="also write profiler traces of one evaluation period of "
                         "training (--updates-per-eval updates) to DIR/ours (after the timed training, with the "
-                        "program's HLO) and DIR/brax (its second training epoch and the evaluations after it: Brax's, and for "
-                        "PPO ours of its parameters, so keep --eval-envs small): "
+                        "program's HLO) and DIR/brax (its second training epoch, stopped when an evaluation starts; "
+                        "Brax's SAC epochs are shorter: it spends ceil(min_replay_size / num_envs) vector steps of the "
+                        "budget on its prefill first, then splits the rest over --evals epochs): "
                         "`python -m benchmarks.trace_summary DIR/ours`")
     args = parser.parse_args(argv)
     for flag, value in (("--evals", args.evals), ("--updates-per-eval", args.updates_per_eval),
@@ -163,10 +219,12 @@ def main(argv=None):
     spu = config.algo.env_steps_per_update
     updates_per_eval = args.updates_per_eval or DEFAULT_UPDATES_PER_EVAL[algo_name]
     total = args.evals * updates_per_eval * spu
-    if algo_name == "sac" and args.skip != "brax" and total <= config.algo.min_replay_size:
+    prefill = -(-config.algo.min_replay_size // spu) * spu if algo_name == "sac" else 0
+    if algo_name == "sac" and args.skip != "brax" and total <= prefill:
         raise ValueError(f"--evals={args.evals} x --updates-per-eval={updates_per_eval} x {spu} env steps = {total:,} "
                          f"env steps is invalid for SAC: allowed is more than algo.min_replay_size="
-                         f"{config.algo.min_replay_size:,} (Brax's SAC trains only after its buffer holds that many).")
+                         f"{config.algo.min_replay_size:,} in whole vector steps ({prefill:,}; Brax's SAC trains only "
+                         "after its buffer holds that many).")
     env = envs.from_config(config.env_name, config.env)
     config = brax_comparable(config, algo_name, env.action_size)
     config = config.__class__(**{**config.__dict__, "num_timesteps": total})
@@ -217,8 +275,12 @@ def main(argv=None):
         evaluate = None
         sps = []
 
+        trace = EpochTrace(str(Path(args.trace) / "brax")) if args.trace else None
+
         def on_params(step, make_policy, params):
             nonlocal evaluate
+            if trace:
+                trace.stop()
             if evaluate is None:
                 evaluate = jax.jit(make_evaluate(batched, BraxPolicy(make_policy), args.eval_envs,
                                                  config.env.episode_length))
@@ -232,19 +294,25 @@ def main(argv=None):
         def on_progress(step, metrics):
             # Brax calls this at step 0, then after each training epoch: trace the second epoch (the first compiles).
             progress_calls.append(int(step))
-            if args.trace and len(progress_calls) == 2:
-                jax.profiler.start_trace(str(Path(args.trace) / "brax"), create_perfetto_trace=True)
-            elif args.trace and len(progress_calls) == 3:
-                jax.profiler.stop_trace()
-                report["brax"]["trace"] = {"dir": str(Path(args.trace) / "brax"),
-                                           "vector_steps": (progress_calls[2] - progress_calls[1]) // config.algo.num_envs}
+            if trace:
+                trace.progress(len(progress_calls))
+                if len(progress_calls) == 3:
+                    report["brax"]["trace"] = {
+                        "dir": trace.directory, "what": "its second training epoch, without evaluations",
+                        "vector_steps": (progress_calls[2] - progress_calls[1]) // config.algo.num_envs}
             report["brax"]["last_step"] = int(step)
             if "training/sps" in metrics:
                 sps.append(float(metrics["training/sps"]))
                 report["brax"]["sps_per_epoch"] = sps
                 save()
 
-        BRAX_TRAINERS[algo_name](config, env, total, args.evals + 1, on_params, on_progress)
+        if algo_name == "sac":
+            prefill, epoch = brax_sac_epochs(total, config.algo.num_envs, config.algo.min_replay_size, args.evals + 1)
+            report["brax"].update(prefill_vector_steps=prefill, epoch_vector_steps=epoch)
+            print(f"Brax's SAC: {prefill:,} prefill vector steps, then {args.evals} epochs of {epoch:,} vector steps "
+                  f"(ours: {updates_per_eval:,} vector steps between evaluations, its warm-up inside them)", flush=True)
+        with before_brax_evaluations(trace.stop if trace else lambda: None):
+            BRAX_TRAINERS[algo_name](config, env, total, args.evals + 1, on_params, on_progress)
         report["brax"]["steps_per_s"] = statistics.median(sps[1:]) if len(sps) > 1 else (sps[0] if sps else None)
         save()
 

@@ -62,6 +62,41 @@ def test_brax_reference_trace_needs_a_second_brax_epoch(tmp_path):
     assert not any(tmp_path.iterdir())
 
 
+def test_brax_sac_epochs_leave_out_the_prefill_and_the_trace_holds_one_epoch_alone():
+    """Brax's SAC spends ceil(min_replay_size / num_envs) vector steps of its budget on the prefill, then splits
+    the rest over num_evals - 1 epochs: the paper setting's 4 x 256 vector steps of 128 envs leave 56 a traced
+    epoch (what the ninth session's profile got), 4 x 456 leave 256. The trace starts at Brax's second progress
+    call and ends when the next evaluation starts, whichever evaluator that is."""
+    from benchmarks.brax_reference import EpochTrace, before_brax_evaluations, brax_sac_epochs
+
+    assert brax_sac_epochs(4 * 256 * 128, 128, 102_400, 5) == (800, 56)
+    assert brax_sac_epochs(4 * 456 * 128, 128, 102_400, 5) == (800, 256)
+    assert brax_sac_epochs(1_100, 16, 1_000, 2) == (63, 6)  # ceil(1000/16) = 63; ceil((1100 - 1008) / 16) = 6
+    events = []
+    trace = EpochTrace("dir", start=lambda d: events.append(("start", d)), stop=lambda: events.append("stop"))
+    from brax.training import acting
+
+    calls = []
+    original = acting.Evaluator.run_evaluation
+    try:
+        acting.Evaluator.run_evaluation = lambda self, *a: calls.append(a)
+        with before_brax_evaluations(trace.stop):
+            trace.progress(1)                                   # step 0
+            acting.Evaluator.run_evaluation(None, "params", 1)  # after epoch 1 (it compiled)
+            trace.progress(2)
+            assert events == [("start", "dir")] and trace.on
+            acting.Evaluator.run_evaluation(None, "params", 2)  # after epoch 2: the trace ends here
+            assert events == [("start", "dir"), "stop"] and not trace.on
+            trace.progress(3)
+            trace.stop()                                        # ours, later: nothing more to stop
+        assert events == [("start", "dir"), "stop"] and calls == [("params", 1), ("params", 2)]
+        assert acting.Evaluator.run_evaluation is not original  # the test's stand-in is back
+        acting.Evaluator.run_evaluation(None, "after")
+        assert events == [("start", "dir"), "stop"] and calls[-1] == ("after",)
+    finally:
+        acting.Evaluator.run_evaluation = original
+
+
 def test_brax_reference_refuses_a_sac_run_too_short_to_leave_the_replay_warmup(tmp_path):
     """Brax's SAC raises deep inside its train() when its steps do not pass min_replay_size: point-mass-sac
     (16 env steps a vector step, min_replay_size 1,024) with 2 x 32 updates is 1,024 env steps, refused before
