@@ -121,17 +121,17 @@ class EpochTrace:
     the start of the next evaluation, Brax's evaluator or ours of the epoch's parameters, whichever comes
     first, so that no evaluation's kernels fall in the trace."""
 
-    def __init__(self, directory: str, start=None, stop=None):
+    def __init__(self, directory: str, start_trace=None, stop_trace=None):
         self.directory = directory
-        self.start = start or (lambda d: jax.profiler.start_trace(d, create_perfetto_trace=True))
-        self.stop_trace = stop or jax.profiler.stop_trace
+        self.start_trace = start_trace or (lambda d: jax.profiler.start_trace(d, create_perfetto_trace=True))
+        self.stop_trace = stop_trace or jax.profiler.stop_trace
         self.on = False
 
     def progress(self, calls: int):
         """Brax's progress_fn was called for the `calls`-th time (the first at step 0, then after each epoch
         and its evaluations)."""
         if calls == 2:
-            self.start(self.directory)
+            self.start_trace(self.directory)
             self.on = True
         elif calls > 2:
             self.stop()
@@ -219,12 +219,12 @@ def main(argv=None):
     spu = config.algo.env_steps_per_update
     updates_per_eval = args.updates_per_eval or DEFAULT_UPDATES_PER_EVAL[algo_name]
     total = args.evals * updates_per_eval * spu
-    prefill = -(-config.algo.min_replay_size // spu) * spu if algo_name == "sac" else 0
-    if algo_name == "sac" and args.skip != "brax" and total <= prefill:
+    prefill_env_steps = -(-config.algo.min_replay_size // spu) * spu if algo_name == "sac" else 0
+    if algo_name == "sac" and args.skip != "brax" and total <= prefill_env_steps:
         raise ValueError(f"--evals={args.evals} x --updates-per-eval={updates_per_eval} x {spu} env steps = {total:,} "
                          f"env steps is invalid for SAC: allowed is more than algo.min_replay_size="
-                         f"{config.algo.min_replay_size:,} in whole vector steps ({prefill:,}; Brax's SAC trains only "
-                         "after its buffer holds that many).")
+                         f"{config.algo.min_replay_size:,} in whole vector steps ({prefill_env_steps:,}; Brax's SAC "
+                         "trains only after its buffer holds that many).")
     env = envs.from_config(config.env_name, config.env)
     config = brax_comparable(config, algo_name, env.action_size)
     config = config.__class__(**{**config.__dict__, "num_timesteps": total})

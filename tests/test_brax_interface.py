@@ -73,7 +73,8 @@ def test_brax_sac_epochs_leave_out_the_prefill_and_the_trace_holds_one_epoch_alo
     assert brax_sac_epochs(4 * 456 * 128, 128, 102_400, 5) == (800, 256)
     assert brax_sac_epochs(1_100, 16, 1_000, 2) == (63, 6)  # ceil(1000/16) = 63; ceil((1100 - 1008) / 16) = 6
     events = []
-    trace = EpochTrace("dir", start=lambda d: events.append(("start", d)), stop=lambda: events.append("stop"))
+    trace = EpochTrace("dir", start_trace=lambda d: events.append(("start", d)),
+                       stop_trace=lambda: events.append("stop"))
     from brax.training import acting
 
     calls = []

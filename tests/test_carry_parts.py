@@ -197,7 +197,8 @@ def test_pack_takes_only_the_named_runs_parts(tmp_path, monkeypatch):
     assert lines == [f"no unfinished part under {runs_dir} in sac-fast/panda-reach"]
     carry_parts.main(["pack", "--runs-dir", str(runs_dir), "--to", to, "sac-fast/panda-reach-plus-200m",
                       "sac-fast/ur5e-reach-ppo"])  # the PPO row trains in action-space/relative
-    assert packed() == ["action-space__relative__seeds-0-0.tgz.000", "sac-fast__panda-reach-plus-200m__seeds-2-2.tgz.000"]
+    assert packed() == ["action-space__relative__seeds-0-0.tgz.000",
+                        "sac-fast__panda-reach-plus-200m__seeds-2-2.tgz.000"]
     carry_parts.main(["pack", "--runs-dir", str(runs_dir), "--to", to])
     assert len(packed()) == 4
     with pytest.raises(ValueError, match="unpack needs --from DIR \\(and no names"):

@@ -102,12 +102,12 @@ def pack(runs_dir: str, to: str, max_mb: float = PIECE_MB, max_total_mb: float =
          max_files: int = RETURN_FILES, max_all_mb: float = RETURN_MB, runs: list[str] | None = None,
          log=print) -> list[str]:
     """Writes the unfinished parts of `runs_dir` (with `runs`, `<experiment>/<run>` folders, only theirs: two
-    commands training different runs side by side each pack their own), learner-only, as `<archive>.NNN` pieces in bundles of at most
-    `max_total_mb` each (what one device call's tree carries): the first in `to`, the parts that do not fit
-    beside it in `to/more-1`, then `to/more-2`, ... (first fit, the parts with the most steps first), so that the
-    next machine's calls carry one bundle each; at most `max_files` pieces and `max_all_mb` MiB in all (what a
-    device call brings back), the parts beyond named and left out. The old pieces there are removed first; returns
-    the pieces' paths."""
+    commands training different runs side by side each pack their own), learner-only, as `<archive>.NNN` pieces
+    in bundles of at most `max_total_mb` each (what one device call's tree carries): the first in `to`, the parts
+    that do not fit beside it in `to/more-1`, then `to/more-2`, ... (first fit, the parts with the most steps
+    first), so that the next machine's calls carry one bundle each; at most `max_files` pieces and `max_all_mb`
+    MiB in all (what a device call brings back), the parts beyond named and left out. The old pieces there are
+    removed first; returns the pieces' paths."""
     for name, value in (("max_mb", max_mb), ("max_total_mb", max_total_mb), ("max_all_mb", max_all_mb)):
         if not value > 0:
             raise ValueError(f"{name}={value!r} is invalid: allowed is a number > 0.")
