@@ -507,6 +507,45 @@ def test_a_time_limited_call_trains_one_part_until_the_clock_stops_it(tmp_path, 
     assert "[toy/b seeds-0-1] resuming at 5,120; to the end of 10,240 steps x 2 seeds or 100 s" in log[0], log
 
 
+def test_a_part_another_live_process_trains_is_left_alone_and_a_stale_lock_is_taken_over(tmp_path, monkeypatch):
+    """Two commands sharing a runs folder: a part whose lock a live process holds is not trained (the run is
+    left unfinished), a lock whose process is gone is taken over, and the lock is gone after training."""
+    import socket
+    import subprocess
+
+    runs_dir = str(tmp_path / "runs")
+    b = TOY.runs[1]
+    _part(b, runs_dir, "toy", "b", 0, 2, steps=[5120], metrics=([2560, 5120], 2, 10.0, [286.0, 256.0]))
+    logdir = os.path.join(runs_dir, "toy", "b", "seeds-0-1")
+    lock = os.path.join(runs_dir, "toy", "b", ".seeds-0-1.lock")
+    calls = []
+
+    def fake_train(config, learner_cls=None):
+        calls.append(open(lock).read())  # held while training, by this process
+        return driver.TrainResult(None, 5120, "stopped", config.logdir, config, None, None)
+
+    monkeypatch.setattr(driver, "train", fake_train)
+    selection = ex.select(["toy/b"], {"toy": TOY})
+    with ex.part_lock(logdir) as taken:  # as another driver on this host would hold it
+        assert taken is None and os.path.isfile(lock)
+        with ex.part_lock(logdir) as again:
+            assert again == f"another process (pid {os.getpid()}) is training it ({lock})"
+        log = []
+        assert not ex.train_pending(selection, runs_dir, log=log.append)
+        assert calls == [] and log == [f"[toy/b seeds-0-1] left alone: another process (pid {os.getpid()}) is "
+                                       f"training it ({lock})"], log
+    assert not os.path.exists(lock)
+    with open(lock, "w") as f:  # a process on another host: cannot be asked, so taken as alive
+        f.write(f"{os.getpid() + 1} not-{socket.gethostname()}")
+    assert not ex.train_pending(selection, runs_dir, log=lambda s: None) and calls == []
+    gone = subprocess.Popen(["true"])
+    gone.wait()
+    with open(lock, "w") as f:  # its process is gone: stale
+        f.write(f"{gone.pid} {socket.gethostname()}")
+    assert not ex.train_pending(selection, runs_dir, log=lambda s: None)  # stopped without progress, as above
+    assert calls == [f"{os.getpid()} {socket.gethostname()}"] and not os.path.exists(lock)
+
+
 def test_each_part_is_cross_evaluated_and_recorded_before_the_next_trains(tmp_path, monkeypatch):
     """With `--max-seeds 1`, part 0's cross-evaluations (its run's and those of a run of another experiment
     sharing its folder) and its record happen before part 1 trains, so a call killed during part 1 keeps them."""

@@ -53,6 +53,7 @@ import math
 import os
 import shlex
 import signal
+import socket
 import statistics
 import subprocess
 import sys
@@ -751,6 +752,55 @@ def start_verdict(st: RunState, part: PartState, seconds: float | None, compiled
     return "start", ""
 
 
+def _lock_holder(path: str) -> int | None:
+    """The pid in lock file `path` if that process still runs (or runs on another host, which cannot be asked),
+    else None (a stale lock: its process is gone, or the file is unreadable)."""
+    try:
+        with open(path) as f:
+            pid_text, _, host = f.read().partition(" ")
+        pid = int(pid_text)
+    except (OSError, ValueError):
+        return None
+    if host.strip() != socket.gethostname():
+        return pid
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return None
+    except PermissionError:  # alive, another user's
+        return pid
+    return pid
+
+
+@contextlib.contextmanager
+def part_lock(logdir: str):
+    """Holds `<run folder>/.<part>.lock` (this process's pid and host) while a part trains, so that two commands
+    sharing a runs folder (a driver per GPU, or a second call by mistake) never train one part at once. Yields
+    None while held, or why the part is taken: another live process holds its lock (a stale one is taken over)."""
+    path = os.path.join(os.path.dirname(logdir), f".{os.path.basename(logdir)}.lock")
+    os.makedirs(os.path.dirname(path), exist_ok=True)
+    for _ in range(2):
+        try:
+            fd = os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY)
+        except FileExistsError:
+            holder = _lock_holder(path)
+            if holder is not None:
+                yield f"another process (pid {holder}) is training it ({path})"
+                return
+            with contextlib.suppress(FileNotFoundError):
+                os.remove(path)  # stale: its process is gone
+            continue
+        with os.fdopen(fd, "w") as f:
+            f.write(f"{os.getpid()} {socket.gethostname()}")
+        try:
+            yield None
+        finally:
+            with contextlib.suppress(FileNotFoundError):
+                os.remove(path)
+        return
+    yield f"its lock {path} was taken again while a stale one was cleared"
+
+
 def train_pending(selection, runs_dir: str, deadline: float | None = None, reserve: float = 0.0,
                   log=print, learner_cls=None, max_seeds: int | None = None, record: str | None = None,
                   registry: dict | None = None, whole_parts: bool = False, record_each: bool = False,
@@ -824,16 +874,24 @@ def train_pending(selection, runs_dir: str, deadline: float | None = None, reser
                 if verdict == "stop":
                     log(f"{where} {why}")
                     return False
-                resume = part.steps > 0
-                # A part stopped before its first checkpoint (a killed call) left config.json and logs: start it afresh.
-                fresh_over = not resume and os.path.isdir(part.logdir) and bool(os.listdir(part.logdir))
-                log(f"{where} {'resuming at ' + format(part.steps, ',') if resume else 'starting'}; "
-                    f"to the end of {part.budget:,} steps x {part.count} seeds"
-                    + ("" if seconds is None else f" or {seconds:.0f} s"))
-                t0 = time.monotonic()
-                config = run.config(part.logdir, first_seed=part.first, seeds=part.count, resume=resume,
-                                    overwrite=fresh_over, stop_after_steps=0, stop_after_seconds=seconds or 0.0)
-                result = driver.train(config, learner_cls)
+                with part_lock(part.logdir) as taken:
+                    if taken is None:
+                        resume = part.steps > 0
+                        # A part stopped before its first checkpoint (a killed call) left config.json and logs:
+                        # start it afresh.
+                        fresh_over = not resume and os.path.isdir(part.logdir) and bool(os.listdir(part.logdir))
+                        log(f"{where} {'resuming at ' + format(part.steps, ',') if resume else 'starting'}; "
+                            f"to the end of {part.budget:,} steps x {part.count} seeds"
+                            + ("" if seconds is None else f" or {seconds:.0f} s"))
+                        t0 = time.monotonic()
+                        config = run.config(part.logdir, first_seed=part.first, seeds=part.count, resume=resume,
+                                            overwrite=fresh_over, stop_after_steps=0,
+                                            stop_after_seconds=seconds or 0.0)
+                        result = driver.train(config, learner_cls)
+                if taken is not None:
+                    log(f"{where} left alone: {taken}")
+                    finished = False
+                    break
                 if part.logdir not in compiled:
                     measured = part_state(run, part.logdir, part.first, part.count).startup
                     if measured is not None:
