@@ -219,7 +219,8 @@ def main(argv=None):
     spu = config.algo.env_steps_per_update
     updates_per_eval = args.updates_per_eval or DEFAULT_UPDATES_PER_EVAL[algo_name]
     total = args.evals * updates_per_eval * spu
-    prefill_env_steps = -(-config.algo.min_replay_size // spu) * spu if algo_name == "sac" else 0
+    prefill_env_steps = (brax_sac_epochs(total, spu, config.algo.min_replay_size, args.evals + 1)[0] * spu
+                         if algo_name == "sac" else 0)
     if algo_name == "sac" and args.skip != "brax" and total <= prefill_env_steps:
         raise ValueError(f"--evals={args.evals} x --updates-per-eval={updates_per_eval} x {spu} env steps = {total:,} "
                          f"env steps is invalid for SAC: allowed is more than algo.min_replay_size="

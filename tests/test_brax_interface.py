@@ -65,7 +65,7 @@ def test_brax_reference_trace_needs_a_second_brax_epoch(tmp_path):
 def test_brax_sac_epochs_leave_out_the_prefill_and_the_trace_holds_one_epoch_alone():
     """Brax's SAC spends ceil(min_replay_size / num_envs) vector steps of its budget on the prefill, then splits
     the rest over num_evals - 1 epochs: the paper setting's 4 x 256 vector steps of 128 envs leave 56 a traced
-    epoch (what the ninth session's profile got), 4 x 456 leave 256. The trace starts at Brax's second progress
+    epoch, 4 x 456 leave 256. The trace starts at Brax's second progress
     call and ends when the next evaluation starts, whichever evaluator that is."""
     from benchmarks.brax_reference import EpochTrace, before_brax_evaluations, brax_sac_epochs
 
@@ -79,8 +79,12 @@ def test_brax_sac_epochs_leave_out_the_prefill_and_the_trace_holds_one_epoch_alo
 
     calls = []
     original = acting.Evaluator.run_evaluation
+
+    def stand_in(self, *a):
+        calls.append(a)
+
     try:
-        acting.Evaluator.run_evaluation = lambda self, *a: calls.append(a)
+        acting.Evaluator.run_evaluation = stand_in
         with before_brax_evaluations(trace.stop):
             trace.progress(1)                                   # step 0
             acting.Evaluator.run_evaluation(None, "params", 1)  # after epoch 1 (it compiled)
@@ -91,23 +95,32 @@ def test_brax_sac_epochs_leave_out_the_prefill_and_the_trace_holds_one_epoch_alo
             trace.progress(3)
             trace.stop()                                        # ours, later: nothing more to stop
         assert events == [("start", "dir"), "stop"] and calls == [("params", 1), ("params", 2)]
-        assert acting.Evaluator.run_evaluation is not original  # the test's stand-in is back
-        acting.Evaluator.run_evaluation(None, "after")
-        assert events == [("start", "dir"), "stop"] and calls[-1] == ("after",)
+        assert acting.Evaluator.run_evaluation is stand_in  # what was there before the context is back
     finally:
         acting.Evaluator.run_evaluation = original
 
 
-def test_brax_reference_refuses_a_sac_run_too_short_to_leave_the_replay_warmup(tmp_path):
+def test_brax_reference_refuses_a_sac_run_too_short_to_leave_the_replay_warmup(tmp_path, monkeypatch):
     """Brax's SAC raises deep inside its train() when its steps do not pass min_replay_size: point-mass-sac
     (16 env steps a vector step, min_replay_size 1,024) with 2 x 32 updates is 1,024 env steps, refused before
     anything is built or written."""
+    from agents import presets
     from benchmarks import brax_reference
 
     with pytest.raises(ValueError, match=r"--evals=2 x --updates-per-eval=32 x 16 env steps = 1,024 env steps is "
                                          r"invalid for SAC: allowed is more than algo.min_replay_size=1,024"):
         brax_reference.main(["--preset", "point-mass-sac", "--evals", "2", "--updates-per-eval", "32",
                              "--out", str(tmp_path / "sub" / "out")])
+    # A min_replay_size between vector steps: Brax prefills whole vector steps, ceil(1,000 / 16) x 16 = 1,008 env
+    # steps, so 63 vector steps leave it nothing to train although they pass min_replay_size.
+    make_config = presets.make_config
+    monkeypatch.setattr(presets, "make_config", lambda name, **kw: dataclasses.replace(
+        make_config(name, **kw), algo=dataclasses.replace(make_config(name, **kw).algo, min_replay_size=1000)))
+    with pytest.raises(ValueError, match=r"= 1,008 env steps is invalid for SAC: allowed is more than "
+                                         r"algo.min_replay_size=1,000 in whole vector steps \(1,008;"):
+        brax_reference.main(["--preset", "point-mass-sac", "--evals", "1", "--updates-per-eval", "63",
+                             "--out", str(tmp_path / "sub" / "out")])
+    monkeypatch.undo()
     for flag in ("--evals", "--updates-per-eval", "--eval-envs"):
         with pytest.raises(ValueError, match=f"{flag}=0 is invalid: allowed is an integer >= 1"):
             brax_reference.main(["--preset", "point-mass-sac", flag, "0", "--out", str(tmp_path / "sub" / "out")])

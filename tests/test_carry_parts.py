@@ -192,6 +192,14 @@ def test_pack_takes_only_the_named_runs_parts(tmp_path, monkeypatch):
     carry_parts.pack(str(runs_dir), to, runs=["sac-fast/panda-reach-avoid-plus-200m"], log=lambda s: None)
     assert packed() == ["sac-fast__panda-reach-avoid-plus-200m__seeds-3-3.tgz.000",
                         "sac-fast__panda-reach-avoid-plus-200m__seeds-4-4.tgz.000"]
+    # A part whose lock is held (a command training it) is left out, named.
+    with ex.part_lock(str(runs_dir / "sac-fast/panda-reach-avoid-plus-200m/seeds-4-4")) as held:
+        assert held is None
+        lines = []
+        carry_parts.pack(str(runs_dir), to, runs=["sac-fast/panda-reach-avoid-plus-200m"], log=lines.append)
+    assert packed() == ["sac-fast__panda-reach-avoid-plus-200m__seeds-3-3.tgz.000"]
+    assert any(line.startswith("left out sac-fast/panda-reach-avoid-plus-200m/seeds-4-4: another process (pid ")
+               for line in lines), lines
     lines = []
     assert carry_parts.pack(str(runs_dir), to, runs=["sac-fast/panda-reach"], log=lines.append) == []  # no prefix match
     assert lines == [f"no unfinished part under {runs_dir} in sac-fast/panda-reach"]

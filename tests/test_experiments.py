@@ -7,6 +7,7 @@ import dataclasses
 import importlib.util
 import json
 import os
+import re
 import signal
 import shutil
 import time
@@ -504,46 +505,53 @@ def test_a_time_limited_call_trains_one_part_until_the_clock_stops_it(tmp_path, 
     assert len(calls) == 1, log
     assert calls[0].resume and calls[0].stop_after_steps == 0
     assert 95.0 < calls[0].stop_after_seconds <= 100.0
-    assert "[toy/b seeds-0-1] resuming at 5,120; to the end of 10,240 steps x 2 seeds or 100 s" in log[0], log
+    assert re.search(r"\[toy/b seeds-0-1\] resuming at 5,120; to the end of 10,240 steps x 2 seeds or (9[5-9]|100) s",
+                     log[0]), log  # 100 s less what the call took so far (a loaded CPU: a second or more)
 
 
-def test_a_part_another_live_process_trains_is_left_alone_and_a_stale_lock_is_taken_over(tmp_path, monkeypatch):
-    """Two commands sharing a runs folder: a part whose lock a live process holds is not trained (the run is
-    left unfinished), a lock whose process is gone is taken over, and the lock is gone after training."""
-    import socket
+def test_a_part_another_process_holds_is_left_alone_until_that_process_ends(tmp_path, monkeypatch):
+    """Two commands sharing a runs folder: a part whose lock another process holds (here a child process) is
+    not trained and the run is left unfinished; once that process is killed the lock is free (the kernel drops a
+    dead process's flock; the file it leaves holds nothing), and the part trains under this process's lock."""
     import subprocess
+    import sys
 
     runs_dir = str(tmp_path / "runs")
     b = TOY.runs[1]
     _part(b, runs_dir, "toy", "b", 0, 2, steps=[5120], metrics=([2560, 5120], 2, 10.0, [286.0, 256.0]))
     logdir = os.path.join(runs_dir, "toy", "b", "seeds-0-1")
-    lock = os.path.join(runs_dir, "toy", "b", ".seeds-0-1.lock")
+    lock = ex.lock_path(logdir)
+    assert lock == os.path.join(runs_dir, "toy", "b", ".seeds-0-1.lock")
     calls = []
 
     def fake_train(config, learner_cls=None):
-        calls.append(open(lock).read())  # held while training, by this process
+        with ex.part_lock(logdir) as inner:  # held by this process while it trains: a second taker is refused
+            calls.append(inner)
         return driver.TrainResult(None, 5120, "stopped", config.logdir, config, None, None)
 
     monkeypatch.setattr(driver, "train", fake_train)
     selection = ex.select(["toy/b"], {"toy": TOY})
-    with ex.part_lock(logdir) as taken:  # as another driver on this host would hold it
-        assert taken is None and os.path.isfile(lock)
-        with ex.part_lock(logdir) as again:
-            assert again == f"another process (pid {os.getpid()}) is training it ({lock})"
+    child = ("import fcntl, os, sys, time\n"
+             "f = open(sys.argv[1], 'a+'); fcntl.flock(f, fcntl.LOCK_EX)\n"
+             "f.write(f'pid {os.getpid()}'); f.flush(); print('held', flush=True)\n"
+             "time.sleep(120)")
+    holder = subprocess.Popen([sys.executable, "-c", child, lock], stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "held"
         log = []
         assert not ex.train_pending(selection, runs_dir, log=log.append)
-        assert calls == [] and log == [f"[toy/b seeds-0-1] left alone: another process (pid {os.getpid()}) is "
-                                       f"training it ({lock})"], log
-    assert not os.path.exists(lock)
-    with open(lock, "w") as f:  # a process on another host: cannot be asked, so taken as alive
-        f.write(f"{os.getpid() + 1} not-{socket.gethostname()}")
-    assert not ex.train_pending(selection, runs_dir, log=lambda s: None) and calls == []
-    gone = subprocess.Popen(["true"])
-    gone.wait()
-    with open(lock, "w") as f:  # its process is gone: stale
-        f.write(f"{gone.pid} {socket.gethostname()}")
-    assert not ex.train_pending(selection, runs_dir, log=lambda s: None)  # stopped without progress, as above
-    assert calls == [f"{os.getpid()} {socket.gethostname()}"] and not os.path.exists(lock)
+        assert calls == [] and log == [f"[toy/b seeds-0-1] left alone: another process (pid {holder.pid}) holds its "
+                                       f"lock {lock}"], log
+    finally:
+        holder.kill()
+        holder.wait()
+    assert os.path.isfile(lock)  # left behind by the killed process, holding nothing
+    log = []
+    assert not ex.train_pending(selection, runs_dir, log=log.append)  # stopped without progress, as above
+    assert len(calls) == 1 and calls[0].startswith("another process (pid ") and f"pid {os.getpid()} on " in calls[0]
+    assert "resuming at 5,120" in log[0], log
+    with ex.part_lock(logdir) as free:  # released after training
+        assert free is None
 
 
 def test_each_part_is_cross_evaluated_and_recorded_before_the_next_trains(tmp_path, monkeypatch):

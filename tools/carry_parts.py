@@ -2,22 +2,24 @@
 for half an hour goes back with its `runs/`, and a part trained half way (by a `run --time-limit` call that ended
 first) is lost with it; its learner-only checkpoint lets the next machine resume it.
 
-    python -m tools.carry_parts pack --runs-dir runs/experiments --to $OUT/carry     # the last call on a machine
-    python -m tools.carry_parts unpack --from DIR --runs-dir runs/experiments        # the first call on the next
+    python -m tools.carry_parts pack --runs-dir runs/experiments --to $OUT/carry [NAMES]  # a machine's last call
+    python -m tools.carry_parts unpack --from DIR --runs-dir runs/experiments             # the next one's first
 
-`pack` takes every part folder (`<experiment>/<run>/seeds-<first>-<last>/`) that has a checkpoint and no
-`eval.json` (not done), the one with the most env steps first, saves its newest intact checkpoint learner-only
-(`agents.driver.learner_only_checkpoint`: no env states, no replay buffer; per seed about 3-5 MB for the PPO
-presets, 16 MB for the fast SAC ones) beside its `config.json` and `metrics.csv`, and writes each part as its own
-gzipped tar, `<experiment>__<run>__<part>.tgz.NNN`, split into pieces of at most `--max-mb`, in bundles of at
-most `--max-total-mb` (default 18: a device call brings back files of at most 16 MiB, and the next call's working
-tree, which carries one bundle in a git-ignored folder beside the repository and its wheels, is limited to 64 MiB):
-the first bundle in `--to`, the parts that do not fit beside it in `--to`/more-1, more-2, ... (first fit), each
-for another call of the next machine (`--to` at most one folder below the call's $OUT: a call brings back files at
-most two folders down, 8 of them, 64 MiB in all, which `pack` keeps to). A part that cannot be saved, is larger
-than a bundle or passes those limits is left out and named. Until its bundle is unpacked there, a part in a later
-bundle looks new to the next machine: leave its run out of the calls before that one, or it starts afresh. A resume from the copy starts fresh episodes and, for SAC, refills the replay buffer:
-not bit-for-bit the run that would have gone on, the same as any learner-only resume.
+`pack` takes every part folder (`<experiment>/<run>/seeds-<first>-<last>/`; with NAMES, experiments or
+experiment/run names, only theirs) that has a checkpoint and no `eval.json` (not done) and that no other command
+holds the lock of (`tools.experiments.part_lock`: it is training there), the one with the most env steps first,
+saves its newest intact checkpoint learner-only (`agents.driver.learner_only_checkpoint`: no env states, no replay
+buffer; per seed about 3-5 MB for the PPO presets, 16 MB for the fast SAC ones) beside its `config.json` and
+`metrics.csv`, and writes each part as its own gzipped tar, `<experiment>__<run>__<part>.tgz.NNN`, split into pieces
+of at most `--max-mb`, in bundles of at most `--max-total-mb` (default 18: a device call brings back files of at
+most 16 MiB, and the next call's working tree, which carries one bundle in a git-ignored folder beside the
+repository and its wheels, is limited to 64 MiB): the first bundle in `--to`, the parts that do not fit beside it in
+`--to`/more-1, more-2, ... (first fit), each for another call of the next machine (`--to` at most one folder below
+the call's $OUT: a call brings back files at most two folders down, 8 of them, 64 MiB in all, which `pack` keeps
+to). A part that cannot be saved, is larger than a bundle or passes those limits is left out and named. Until its
+bundle is unpacked there, a part in a later bundle looks new to the next machine: leave its run out of the calls
+before that one, or it starts afresh. A resume from the copy starts fresh episodes and, for SAC, refills the replay
+buffer: not bit-for-bit the run that would have gone on, the same as any learner-only resume.
 
 `unpack` puts each complete archive's part into the runs folder, except where the folder there is done
 (`eval.json`), has a checkpoint at that step or later, or holds another config; an archive with a piece missing or
@@ -35,7 +37,7 @@ import shutil
 import tarfile
 import tempfile
 
-from tools.experiments import checkpoint_steps, parse_part, run_folders, select
+from tools.experiments import checkpoint_steps, parse_part, part_lock, run_folders, select
 
 PIECE = re.compile(r"(?P<archive>.+\.tgz)\.(?P<index>\d{3})")
 PIECE_MB = 15.0
@@ -126,10 +128,15 @@ def pack(runs_dir: str, to: str, max_mb: float = PIECE_MB, max_total_mb: float =
     written: list[int] = []  # bytes in each bundle
     with tempfile.TemporaryDirectory() as staging:
         for rel in parts:
-            try:
-                blob, step = _part_archive(runs_dir, rel, staging)
-            except Exception as error:  # a damaged part must not cost the others their carry
-                log(f"left out {rel}: {type(error).__name__}: {str(error).splitlines()[0] if str(error) else ''}")
+            # Under the part's lock: a part another command is training is not packed half-written.
+            with part_lock(os.path.join(runs_dir, rel)) as taken:
+                if taken is None:
+                    try:
+                        blob, step = _part_archive(runs_dir, rel, staging)
+                    except Exception as error:  # a damaged part must not cost the others their carry
+                        taken = f"{type(error).__name__}: {str(error).splitlines()[0] if str(error) else ''}"
+            if taken is not None:
+                log(f"left out {rel}: {taken}")
                 continue
             if len(blob) > budget:
                 log(f"left out {rel} at {step:,} env steps: {len(blob) / 2**20:.2f} MiB is more than "

@@ -46,6 +46,7 @@ import collections
 import contextlib
 import csv
 import dataclasses
+import fcntl
 import datetime
 import functools
 import json
@@ -752,53 +753,35 @@ def start_verdict(st: RunState, part: PartState, seconds: float | None, compiled
     return "start", ""
 
 
-def _lock_holder(path: str) -> int | None:
-    """The pid in lock file `path` if that process still runs (or runs on another host, which cannot be asked),
-    else None (a stale lock: its process is gone, or the file is unreadable)."""
-    try:
-        with open(path) as f:
-            pid_text, _, host = f.read().partition(" ")
-        pid = int(pid_text)
-    except (OSError, ValueError):
-        return None
-    if host.strip() != socket.gethostname():
-        return pid
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return None
-    except PermissionError:  # alive, another user's
-        return pid
-    return pid
+def lock_path(logdir: str) -> str:
+    """The lock file of part folder `logdir`: `<run folder>/.<part>.lock`, beside the part (not in it, which a
+    fresh start may clear and `tools.carry_parts` packs)."""
+    return os.path.join(os.path.dirname(logdir), f".{os.path.basename(logdir)}.lock")
 
 
 @contextlib.contextmanager
 def part_lock(logdir: str):
-    """Holds `<run folder>/.<part>.lock` (this process's pid and host) while a part trains, so that two commands
-    sharing a runs folder (a driver per GPU, or a second call by mistake) never train one part at once. Yields
-    None while held, or why the part is taken: another live process holds its lock (a stale one is taken over)."""
-    path = os.path.join(os.path.dirname(logdir), f".{os.path.basename(logdir)}.lock")
+    """Holds an exclusive `flock` on the part's lock file while the part trains (or is packed), so that two
+    commands sharing a runs folder never work on one part at once. The kernel drops the lock when its process
+    ends, even killed, so a leftover file holds nothing. Yields None while held, or why the part is taken (the
+    holder's pid and host, which it writes into the file for this message)."""
+    path = lock_path(logdir)
     os.makedirs(os.path.dirname(path), exist_ok=True)
-    for _ in range(2):
+    with open(path, "a+") as f:
         try:
-            fd = os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY)
-        except FileExistsError:
-            holder = _lock_holder(path)
-            if holder is not None:
-                yield f"another process (pid {holder}) is training it ({path})"
-                return
-            with contextlib.suppress(FileNotFoundError):
-                os.remove(path)  # stale: its process is gone
-            continue
-        with os.fdopen(fd, "w") as f:
-            f.write(f"{os.getpid()} {socket.gethostname()}")
+            fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            f.seek(0)
+            yield f"another process ({f.read().strip() or 'pid unknown'}) holds its lock {path}"
+            return
         try:
+            f.seek(0)
+            f.truncate()
+            f.write(f"pid {os.getpid()} on {socket.gethostname()}")
+            f.flush()
             yield None
         finally:
-            with contextlib.suppress(FileNotFoundError):
-                os.remove(path)
-        return
-    yield f"its lock {path} was taken again while a stale one was cleared"
+            fcntl.flock(f, fcntl.LOCK_UN)
 
 
 def train_pending(selection, runs_dir: str, deadline: float | None = None, reserve: float = 0.0,
@@ -874,8 +857,12 @@ def train_pending(selection, runs_dir: str, deadline: float | None = None, reser
                 if verdict == "stop":
                     log(f"{where} {why}")
                     return False
+                result = None
                 with part_lock(part.logdir) as taken:
                     if taken is None:
+                        # Read again under the lock: another command may have trained it since `st` was read.
+                        part = part_state(run, part.logdir, part.first, part.count)
+                    if taken is None and part.status not in ("done", "changed"):
                         resume = part.steps > 0
                         # A part stopped before its first checkpoint (a killed call) left config.json and logs:
                         # start it afresh.
@@ -891,7 +878,9 @@ def train_pending(selection, runs_dir: str, deadline: float | None = None, reser
                 if taken is not None:
                     log(f"{where} left alone: {taken}")
                     finished = False
-                    break
+                    break  # the run's later parts wait for the next call, as after a time limit
+                if result is None:
+                    continue  # done or changed by another command meanwhile: read the run again
                 if part.logdir not in compiled:
                     measured = part_state(run, part.logdir, part.first, part.count).startup
                     if measured is not None:
