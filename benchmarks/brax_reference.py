@@ -219,12 +219,13 @@ def main(argv=None):
     spu = config.algo.env_steps_per_update
     updates_per_eval = args.updates_per_eval or DEFAULT_UPDATES_PER_EVAL[algo_name]
     total = args.evals * updates_per_eval * spu
-    prefill_env_steps = (brax_sac_epochs(total, spu, config.algo.min_replay_size, args.evals + 1)[0] * spu
-                         if algo_name == "sac" else 0)
-    if algo_name == "sac" and args.skip != "brax" and total <= prefill_env_steps:
+    # Brax's SAC: (prefill vector steps, training vector steps per epoch); SAC's update is one vector step.
+    brax_epochs = (brax_sac_epochs(total, spu, config.algo.min_replay_size, args.evals + 1)
+                   if algo_name == "sac" else None)
+    if brax_epochs and args.skip != "brax" and total <= brax_epochs[0] * spu:
         raise ValueError(f"--evals={args.evals} x --updates-per-eval={updates_per_eval} x {spu} env steps = {total:,} "
                          f"env steps is invalid for SAC: allowed is more than algo.min_replay_size="
-                         f"{config.algo.min_replay_size:,} in whole vector steps ({prefill_env_steps:,}; Brax's SAC "
+                         f"{config.algo.min_replay_size:,} in whole vector steps ({brax_epochs[0] * spu:,}; Brax's SAC "
                          "trains only after its buffer holds that many).")
     env = envs.from_config(config.env_name, config.env)
     config = brax_comparable(config, algo_name, env.action_size)
@@ -307,8 +308,8 @@ def main(argv=None):
                 report["brax"]["sps_per_epoch"] = sps
                 save()
 
-        if algo_name == "sac":
-            prefill, epoch = brax_sac_epochs(total, config.algo.num_envs, config.algo.min_replay_size, args.evals + 1)
+        if brax_epochs:
+            prefill, epoch = brax_epochs
             report["brax"].update(prefill_vector_steps=prefill, epoch_vector_steps=epoch)
             print(f"Brax's SAC: {prefill:,} prefill vector steps, then {args.evals} epochs of {epoch:,} vector steps "
                   f"(ours: {updates_per_eval:,} vector steps between evaluations, its warm-up inside them)", flush=True)

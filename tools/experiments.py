@@ -859,9 +859,8 @@ def train_pending(selection, runs_dir: str, deadline: float | None = None, reser
                     return False
                 result = None
                 with part_lock(part.logdir) as taken:
-                    if taken is None:
-                        # Read again under the lock: another command may have trained it since `st` was read.
-                        part = part_state(run, part.logdir, part.first, part.count)
+                    # Read again under the lock: another command may have trained it since `st` was read.
+                    part = part_state(run, part.logdir, part.first, part.count) if taken is None else part
                     if taken is None and part.status not in ("done", "changed"):
                         resume = part.steps > 0
                         # A part stopped before its first checkpoint (a killed call) left config.json and logs:
