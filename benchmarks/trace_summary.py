@@ -6,7 +6,8 @@
 Reads the `perfetto_trace.json.gz` that `jax.profiler.trace(..., create_perfetto_trace=True)`
 writes (the newest one under the given directory). For each device it reports the traced span,
 the time at least one kernel ran (busy; the rest of the span is launch and synchronisation
-overhead), the kernel count, and the device time per *scope*. A kernel's scope is the first of
+overhead), the kernel count, the device time per *scope*, and per CUDA graph its launches,
+kernels and device time (which attributes a program without our scopes). A kernel's scope is the first of
 `--scopes` in the name stack of the HLO op that launched it, read from the compiled program's HLO
 text (`--hlo`; train_throughput.py writes `chunk.hlo.txt` beside its trace): `agents.loop` labels
 "act", "env_step" and "update", `agents.ppo` "advantages", "minibatches" and "sgd_step" (with
@@ -123,11 +124,34 @@ def summarize(events: list[dict], process_names: dict[int, str], scopes=DEFAULT_
             "kernels": len(kernels),
             "scopes": {s: {"us": per_scope[s], "kernels": count_scope[s]} for s, _ in per_scope.most_common()},
             "top_kernels": [{"name": f, "us": t, "count": family_count[f]} for f, t in families.most_common(top)],
+            "graphs": graph_summary(kernels, names, top),
         }
         if detail:
             rows = scope_kernels(op_time, op_count, detail)
             out[pname]["scope_kernels"] = {s: rows[s] for s in per_scope}
     return out
+
+
+def graph_summary(kernels: list[dict], names: dict[str, str], top: int = 10) -> list[dict]:
+    """The CUDA graphs (XLA command buffers) that launched `kernels`, by device time: each one's launches (the
+    kernels of one launch share the launch's correlation id), kernels, device time, and the name stack of its
+    most expensive kernel that has one. Attributes a program without our named scopes (Brax's, say): a
+    graph launched 20 times per vector step is a physics substep's loop body. Kernels outside graphs are left out."""
+    time, count, launches = collections.Counter(), collections.Counter(), collections.defaultdict(set)
+    named, costliest = {}, {}
+    for e in sorted(kernels, key=lambda e: -e["dur"]):
+        graph = e.get("args", {}).get("cuda_graph_id")
+        if graph is None:
+            continue
+        time[graph] += e["dur"]
+        count[graph] += 1
+        launches[graph].add(e["args"].get("correlation_id"))
+        stack = e["args"].get("name") or names.get(_key(e["name"]))
+        if stack:
+            named.setdefault(graph, stack)
+        costliest.setdefault(graph, name_stack(e, names))
+    return [{"graph": g, "launches": len(launches[g]), "kernels": count[g], "us": t,
+             "where": named.get(g, costliest[g])} for g, t in time.most_common(top)]
 
 
 def scope_kernels(op_time: collections.Counter, op_count: collections.Counter, n: int) -> dict[str, list[dict]]:
@@ -174,6 +198,12 @@ def format_summary(summary: dict, host: list[dict] | None = None) -> str:
         lines += ["", "| kernel family | device ms | count |", "|---|---:|---:|"]
         lines += [f"| {k['name'][:70]} | {k['us'] / 1e3:.1f} | {k['count']:,} |" for k in d["top_kernels"]]
         lines.append("")
+        if d.get("graphs"):
+            lines += ["| CUDA graph | launches | kernels | kernels per launch | device ms | us per launch | from (name stack "
+                      "of its costliest kernel) |", "|---|---:|---:|---:|---:|---:|---|"]
+            lines += [f"| {g['graph']} | {g['launches']:,} | {g['kernels']:,} | {g['kernels'] / g['launches']:.0f} | "
+                      f"{g['us'] / 1e3:.1f} | {g['us'] / g['launches']:.1f} | {g['where'][-90:]} |" for g in d["graphs"]]
+            lines.append("")
         for scope, rows in d.get("scope_kernels", {}).items():
             lines += [f"### {scope}: top kernel families", "", "| kernel family | device ms | count | from (name stack) |",
                       "|---|---:|---:|---|"]

@@ -22,11 +22,12 @@ def _trace(tmp_path):
         {"ph": "M", "pid": gpu, "name": "process_name", "args": {"name": "/device:GPU:0"}},
         {"ph": "M", "pid": host, "name": "process_name", "args": {"name": "/host:CPU"}},
         # inside a CUDA graph: the hlo_op names the graph, the kernel name is the fusion's
-        x(gpu, 0.0, 10.0, "loop_add_fusion_12", hlo_op="command_buffer_7"),
-        x(gpu, 5.0, 10.0, "loop_add_fusion_12", hlo_op="command_buffer_7"),   # overlaps the first by 5
+        # (graph 7 launched twice: each launch's kernels share its correlation id)
+        x(gpu, 0.0, 10.0, "loop_add_fusion_12", hlo_op="command_buffer_7", cuda_graph_id="7", correlation_id="1"),
+        x(gpu, 5.0, 10.0, "loop_add_fusion_12", hlo_op="command_buffer_7", cuda_graph_id="7", correlation_id="2"),
         x(gpu, 30.0, 4.0, "potrf_kernel", hlo_op="cholesky.95"),                # a library call outside graphs
-        x(gpu, 40.0, 6.0, "gemm_fusion_dot_3", hlo_op="command_buffer_9"),
-        x(gpu, 50.0, 2.0, "memcpy32_post", hlo_op="command_buffer_9"),          # no op: "other"
+        x(gpu, 40.0, 6.0, "gemm_fusion_dot_3", hlo_op="command_buffer_9", cuda_graph_id="9", correlation_id="3"),
+        x(gpu, 50.0, 2.0, "memcpy32_post", hlo_op="command_buffer_9", cuda_graph_id="9", correlation_id="3"),  # "other"
     ] + [x(host, float(i), 3.0, "cuGraphLaunch") for i in range(10)] + [x(host, 0.0, 50.0, "$python frame")]
     with gzip.open(tmp_path / "perfetto_trace.json.gz", "wt") as f:
         json.dump({"traceEvents": events}, f)
@@ -65,6 +66,22 @@ def test_per_scope_detail_names_where_kernels_come_from(tmp_path):
     assert [(k["name"], k["us"], k["count"]) for k in env] == [("loop_add_fusion", 20.0, 2), ("potrf_kernel", 4.0, 1)]
     assert env[0]["where"] == "jit(chunk)/while/body/env_step/vmap()/add"
     assert d["scope_kernels"]["other"] == [{"name": "memcpy32_post", "us": 2.0, "count": 1,
-                                            "where": "memcpy32_post command_buffer_9"}]
+                                            "where": "memcpy32_post command_buffer_9 9 3"}]
     assert "### sgd_step: top kernel families" in ts.format_summary({"/device:GPU:0": d})
     assert "scope_kernels" not in ts.summarize(events, names, hlo_names=hlo_names)["/device:GPU:0"]
+
+
+def test_cuda_graphs_counted_by_launch(tmp_path):
+    _trace(tmp_path)
+    events, names = ts.load_events(tmp_path)
+    hlo_names = ts.op_names((tmp_path / "chunk.hlo.txt").read_text())
+    d = ts.summarize(events, names, hlo_names=hlo_names)["/device:GPU:0"]
+    # graph 7: two launches of one add kernel (20 us); graph 9: one launch of two kernels, named by its
+    # costlier one (the 6 us GEMM); the library Cholesky runs outside graphs and is left out
+    assert d["graphs"] == [
+        {"graph": "7", "launches": 2, "kernels": 2, "us": 20.0, "where": "jit(chunk)/while/body/env_step/vmap()/add"},
+        {"graph": "9", "launches": 1, "kernels": 2, "us": 8.0,
+         "where": "jit(chunk)/while/body/update/while/body/sgd_step/dot_general"}]
+    text = ts.format_summary({"/device:GPU:0": d})
+    assert "| 7 | 2 | 2 | 1 | 0.0 | 10.0 | jit(chunk)/while/body/env_step/vmap()/add |" in text
+    assert "| 9 | 1 | 2 | 2 | 0.0 | 8.0 |" in text
