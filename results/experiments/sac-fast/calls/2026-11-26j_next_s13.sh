@@ -6,7 +6,7 @@
 # GPUs $PPO_GPUS (3): PPO rows $PPO_ROWS (--max-seeds 3, run after run).
 # last: the Panda and SAC drivers pack their unfinished parts: $OUT/carry (Panda; none if seed 4 is done),
 #   $OUT/carry_sac (30 MiB bundles: one five-seed SAC part each, 2 pieces). The PPO drivers train only the parts
-#   that finish (--whole-parts): a 3-seed PPO part is ~15 MiB and the 64 MiB a call brings back hold the SAC parts.
+#   that finish (--whole-parts): a 3-seed PPO part is 9-14 MiB and the 64 MiB a call brings back hold the SAC parts.
 LIMIT=$1; LAST=$2
 start=$(date +%s)
 RA_GPU=${RA_GPU-0}; SAC_GPUS=${SAC_GPUS-1,2}; PPO_GPUS=${PPO_GPUS-3}
