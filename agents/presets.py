@@ -114,7 +114,7 @@ PRESETS: dict[str, Preset] = {
                                   run=dict(num_timesteps=100_000_000, **_FAST_RUN)),
     "panda-reach-sac-fast": Preset("Panda reach with fast SAC (4,096 envs, n-step, categorical critic) + joint sin/cos and "
                                    "self-collision distances observed", "panda-reach", SAC_FAST,
-                                   env=dict(observation=_PLUS_REACH), run=dict(num_timesteps=100_000_000, **_FAST_RUN)),
+                                   env=dict(observation=_PLUS_REACH), run=dict(num_timesteps=200_000_000, **_FAST_RUN)),
     "ur5e-reach-avoid-sac-fast": Preset("UR5e reach-avoid with fast SAC (4,096 envs, n-step, categorical critic), "
                                         "ur5e-reach-avoid-ppo's env options + joint sin/cos and self-collision "
                                         "distances observed", "ur5e-reach-avoid", SAC_FAST_REACH_AVOID,
@@ -123,7 +123,7 @@ PRESETS: dict[str, Preset] = {
     "panda-reach-avoid-sac-fast": Preset("Panda reach-avoid with fast SAC (4,096 envs, n-step, categorical critic) + "
                                          "joint sin/cos and self-collision distances observed", "panda-reach-avoid",
                                          SAC_FAST_REACH_AVOID, env=dict(observation=_PLUS_REACH_AVOID),
-                                         run=dict(num_timesteps=100_000_000, **_FAST_RUN)),
+                                         run=dict(num_timesteps=200_000_000, **_FAST_RUN)),
     "ur5e-reach-avoid-ppo": Preset("UR5e reach-avoid, 0.1 m obstacle, semi-sparse reward (paper) with a joint-limit "
                                    "penalty of 1.0, 4x256 (paper), action scale 0.3", "ur5e-reach-avoid",
                                    PPO_PAPER_REACH_AVOID, env=_UR5E_REACH_AVOID, run=dict(num_timesteps=192_000_000)),
