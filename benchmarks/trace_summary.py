@@ -62,14 +62,27 @@ def op_names(hlo_text: str) -> dict[str, str]:
     return out
 
 
-def name_stack(event: dict, names: dict[str, str]) -> str:
-    """The JAX name stack of the HLO op that launched a kernel (from the compiled HLO's metadata),
-    or, without one, the event's name and arguments."""
+def op_stack(event: dict, names: dict[str, str]) -> str | None:
+    """The JAX name stack of the HLO op that launched a kernel: from the compiled HLO's metadata, else
+    the trace's own `name` argument (recent profilers record it); None without either."""
     args = event.get("args", {})
     # A kernel inside a CUDA graph names the graph ("command_buffer_12") as its hlo_op, but its
     # own name is its fusion's; ops outside graphs carry the name stack in args["name"].
-    return (names.get(_key(event["name"])) or names.get(_key(args.get("hlo_op", "")))
-            or event["name"] + " " + " ".join(str(v) for v in args.values()))
+    return names.get(_key(event["name"])) or names.get(_key(args.get("hlo_op", ""))) or args.get("name") or None
+
+
+LAUNCH_ARGS = ("correlation_id", "cuda_graph_id", "cuda_graph_node_id", "scope_range_id")
+"""Kernel arguments that change from one launch of an op to the next: left out of `name_stack`'s
+fallback, so that the kernels of one op group together."""
+
+
+def name_stack(event: dict, names: dict[str, str]) -> str:
+    """`op_stack`, or without one the kernel's name and its arguments that do not change between launches."""
+    stack = op_stack(event, names)
+    if stack:
+        return stack
+    args = event.get("args", {})
+    return " ".join([event["name"]] + [str(v) for k, v in args.items() if k not in LAUNCH_ARGS])
 
 
 def scope_of(event: dict, scopes, names: dict[str, str]) -> str:
@@ -133,25 +146,40 @@ def summarize(events: list[dict], process_names: dict[int, str], scopes=DEFAULT_
 
 
 def graph_summary(kernels: list[dict], names: dict[str, str], top: int = 10) -> list[dict]:
-    """The CUDA graphs (XLA command buffers) that launched `kernels`, by device time: each one's launches (the
-    kernels of one launch share the launch's correlation id), kernels, device time, and the name stack of its
-    most expensive kernel that has one. Attributes a program without our named scopes (Brax's, say): a
-    graph launched 20 times per vector step is a physics substep's loop body. Kernels outside graphs are left out."""
-    time, count, launches = collections.Counter(), collections.Counter(), collections.defaultdict(set)
-    named, costliest = {}, {}
-    for e in sorted(kernels, key=lambda e: -e["dur"]):
-        graph = e.get("args", {}).get("cuda_graph_id")
+    """The CUDA graphs (XLA command buffers) that launched `kernels`, by device time: each one's launches
+    (the kernels of one launch share its correlation id; None where a kernel has none), kernels, device
+    time, and the op whose kernels took most of its time (`op_stack`, among the stacks no other of the
+    graph extends; without one, its costliest kernel's `name_stack`). Attributes a program without our named scopes (Brax's, say): a graph
+    launched 20 times per vector step is a physics substep's loop body. Kernels outside graphs are
+    left out."""
+    time, count, unmarked = collections.Counter(), collections.Counter(), collections.Counter()
+    launches, op_time, costliest = collections.defaultdict(set), collections.Counter(), {}
+    for e in kernels:
+        args = e.get("args", {})
+        graph = args.get("cuda_graph_id")
         if graph is None:
             continue
         time[graph] += e["dur"]
         count[graph] += 1
-        launches[graph].add(e["args"].get("correlation_id"))
-        stack = e["args"].get("name") or names.get(_key(e["name"]))
+        if args.get("correlation_id") is None:
+            unmarked[graph] += 1
+        else:
+            launches[graph].add(args["correlation_id"])
+        stack = op_stack(e, names)
         if stack:
-            named.setdefault(graph, stack)
-        costliest.setdefault(graph, name_stack(e, names))
-    return [{"graph": g, "launches": len(launches[g]), "kernels": count[g], "us": t,
-             "where": named.get(g, costliest[g])} for g, t in time.most_common(top)]
+            op_time[graph, stack] += e["dur"]
+        if graph not in costliest or e["dur"] > costliest[graph][0]:
+            costliest[graph] = (e["dur"], name_stack(e, names))
+    stacks = collections.defaultdict(set)
+    for graph, stack in op_time:
+        stacks[graph].add(stack)
+    where = {}
+    for (graph, stack), _ in op_time.most_common():
+        # a leaf op: the enclosing stacks (".../while/body") hold the loose kernels of many ops
+        if not any(other.startswith(stack + "/") for other in stacks[graph]):
+            where.setdefault(graph, stack)
+    return [{"graph": g, "launches": None if unmarked[g] else len(launches[g]), "kernels": count[g], "us": t,
+             "where": where.get(g, costliest[g][1])} for g, t in time.most_common(top)]
 
 
 def scope_kernels(op_time: collections.Counter, op_count: collections.Counter, n: int) -> dict[str, list[dict]]:
@@ -199,10 +227,13 @@ def format_summary(summary: dict, host: list[dict] | None = None) -> str:
         lines += [f"| {k['name'][:70]} | {k['us'] / 1e3:.1f} | {k['count']:,} |" for k in d["top_kernels"]]
         lines.append("")
         if d.get("graphs"):
-            lines += ["| CUDA graph | launches | kernels | kernels per launch | device ms | us per launch | from (name stack "
-                      "of its costliest kernel) |", "|---|---:|---:|---:|---:|---:|---|"]
-            lines += [f"| {g['graph']} | {g['launches']:,} | {g['kernels']:,} | {g['kernels'] / g['launches']:.0f} | "
-                      f"{g['us'] / 1e3:.1f} | {g['us'] / g['launches']:.1f} | {g['where'][-90:]} |" for g in d["graphs"]]
+            lines += ["| CUDA graph | launches | kernels | kernels per launch | device ms | us per launch | from (the op "
+                      "with most of its time) |", "|---|---:|---:|---:|---:|---:|---|"]
+            for g in d["graphs"]:
+                n = g["launches"]
+                per = (f"{n:,} | {g['kernels']:,} | {g['kernels'] / n:.0f} | {g['us'] / 1e3:.1f} | {g['us'] / n:.1f}" if n
+                       else f"? | {g['kernels']:,} | ? | {g['us'] / 1e3:.1f} | ?")
+                lines.append(f"| {g['graph']} | {per} | {g['where'][-90:]} |")
             lines.append("")
         for scope, rows in d.get("scope_kernels", {}).items():
             lines += [f"### {scope}: top kernel families", "", "| kernel family | device ms | count | from (name stack) |",
@@ -216,7 +247,7 @@ def main():
     parser = argparse.ArgumentParser(prog="python -m benchmarks.trace_summary", description=__doc__.split("\n\n")[0])
     parser.add_argument("trace", help="trace directory (or perfetto_trace.json.gz file)")
     parser.add_argument("--scopes", nargs="+", default=list(DEFAULT_SCOPES), help="scope names, most specific first")
-    parser.add_argument("--top", type=int, default=15, help="kernel families listed per device")
+    parser.add_argument("--top", type=int, default=15, help="kernel families and CUDA graphs listed per device")
     parser.add_argument("--hlo", help="compiled HLO text of the traced program (default: *.hlo.txt beside the trace)")
     parser.add_argument("--process", default="GPU|TPU", help="regex of the trace processes to summarise (CPU: host:CPU)")
     parser.add_argument("--detail", type=int, default=0, metavar="N",

@@ -17,6 +17,7 @@ import jax
 import pytest
 
 import train
+from agents import presets
 from agents import driver
 from agents.config import config_json
 from tools import experiments as ex
@@ -48,8 +49,8 @@ SEEDS = {"action-space": {5}, "reward": {3}, "joint-penalties": {3}, "reach-obse
          "relative-step": {3}, "reach-avoid-joint-margin": {3}}
 """5 seeds where the paper states numbers to compare (tables, results text) and for the rows of our own studies
 (issues 25 and 29), 3 for curve-only comparisons, the static side of the moving-obstacle cross-evaluation and the
-relative-step and joint-margin studies; for `sac-fast`, 3 for the rows planned as a screening (the 200M rows) and
-1-3 for rows stopped at the seeds they have once their question was answered."""
+relative-step and joint-margin studies; for `sac-fast`, 5 for the rows of issue 25's protocol (the four tasks' and
+the 200M Panda rows) and 1-3 for rows stopped at the seeds they have once their question was answered."""
 
 
 def test_registry_covers_the_issue_with_its_seeds():
@@ -84,6 +85,17 @@ def test_every_recorded_part_still_reads_as_its_registry_run():
                     assert part.status == "done", (exp.name, run.name, name, part.status, part.reason)
                     checked += 1
     assert checked >= 50  # the parts recorded under results/experiments
+
+
+def test_table_names_a_budget_other_than_the_presets():
+    preset = presets.PRESETS["panda-reach-sac-fast"].run["num_timesteps"]
+    run = ex.Run("x", "panda-reach-sac-fast", {"algo.compute_dtype": "float32", "env.observation": ("joint_pos", "ee_pos")},
+                 num_timesteps=100_000_000)
+    assert preset == 200_000_000
+    assert ex.describe_overrides(run) == "algo.compute_dtype=float32, env.observation=joint_pos+ee_pos, num_timesteps=100M"
+    assert ex.describe_overrides(dataclasses.replace(run, num_timesteps=preset)) == (
+        "algo.compute_dtype=float32, env.observation=joint_pos+ee_pos")  # the preset's own budget: not repeated
+    assert ex.describe_overrides(ex.Run("y", "panda-reach-sac-fast")) == ""
 
 
 def test_bad_overrides_and_names_raise():

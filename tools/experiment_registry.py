@@ -4,7 +4,8 @@ list` shows it, and `tests/test_experiments.py` validates every run's config.
 
 Seeds: 5 where the paper states numbers (tables, text), 3 for comparisons it shows only as curves or words;
 fewer where a row's question was answered before its seeds were all trained (its experiment's note says so).
-Budgets: the presets' (the paper states none per experiment), except where a comment says otherwise.
+Budgets: the presets' (the paper states none per experiment), except where a run's `num_timesteps` says otherwise
+(its table names it beside the overrides).
 """
 
 from tools.experiment_spec import Cross, Experiment, Run, register
@@ -182,8 +183,8 @@ _PPO_ROWS = {"ur5e-reach": dict(target_reached=0.961, self_collision=0.022),
              "ur5e-reach-avoid": dict(target_reached=0.868, self_collision=0.027, obstacle_collision=0.048),
              "panda-reach-avoid": dict(target_reached=0.952, self_collision=0.001, obstacle_collision=0.025)}
 _PAPER_OBS = {"env.observation": _REACH_OBS}
-_100M = 100_000_000  # rows trained at 100M env steps (the Panda fast presets' own budget is 200M)
 _PAPER_AVOID_OBS = {"env.observation": _AVOID_OBS}
+_100M = 100_000_000  # the budget of the rows trained at 100M env steps
 
 
 def _fast(name: str, env: str, label: str, overrides: dict | None = None, **fields) -> Run:
@@ -234,12 +235,13 @@ register(Experiment(
     paper="PPO (the paper's best): UR5e reach 96.1 %, Panda reach 98.8 %, UR5e reach-avoid 86.8 %, Panda "
           "reach-avoid 95.2 %; the paper's own SAC reached 61.6 % (UR5e reach) and 87.9 % (Panda reach).",
     note="Rows without an observation override observe the fast presets' `plus` observation (joint sin/cos and "
-         "self-collision distances added); the \"paper's observation\" rows override it. The rows named by a budget "
-         "(100M, 200M, 300M steps) or `f32` (float32 instead of bfloat16 hidden layers) ask whether more steps or "
-         "precision close a gap; the `jl` rows add the UR5e presets' joint-limit penalty and the `ent14` row lowers "
-         "the entropy target from -7 to -14, each against the Panda rows' misses (results/failures). The 200M rows"
-         " plan 5 seeds (issue 25's protocol: they are the Panda rows' candidates); the other rows with fewer than 5 stopped once their question was answered; the findings "
-         "and figures are in results/sac/fast. "
+         "self-collision distances added); the \"paper's observation\" rows override it. The `100m` and `300m` rows "
+         "(more steps than the row without the suffix) and the `f32` row (float32 instead of bfloat16 hidden layers) "
+         "ask whether more steps or precision close a gap; the `jl` rows add the UR5e presets' joint-limit penalty "
+         "and the `ent14` row lowers the entropy target from -7 to -14, each against the Panda rows' misses at 100M "
+         "(results/failures). The 200M rows train the Panda presets' budget with issue 25's 5 seeds; the other rows "
+         "with fewer than 5 stopped once their question was answered; the findings and figures are in "
+         "results/sac/fast. "
          "One seed per process (`--max-seeds 1`): vmapped fast-SAC seeds train no faster in all than one. The "
          "`sampled` rows evaluate the same policies with sampled actions; they hold the seeds whose checkpoints were"
          " at hand (the seeds x episodes column). The `-ppo` rows are our PPO presets, for the training curves on "

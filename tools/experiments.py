@@ -1096,13 +1096,17 @@ def header(metric: str) -> str:
 
 
 def describe_overrides(run: Run) -> str:
-    """'algo.q_hidden_sizes=512x512, env.observation=joint_pos+ee_pos': sizes joined by x, names by +."""
+    """'algo.q_hidden_sizes=512x512, env.observation=joint_pos+ee_pos, num_timesteps=100M': sizes joined by x,
+    names by +; the budget where the run sets one other than its preset's."""
     def value(v) -> str:
         if isinstance(v, (tuple, list)):
             return ("+" if all(isinstance(x, str) for x in v) else "x").join(map(str, v))
         return str(v)
 
-    return ", ".join(f"{k}={value(v)}" for k, v in run.overrides.items())
+    parts = [f"{k}={value(v)}" for k, v in run.overrides.items()]
+    if run.num_timesteps is not None and run.num_timesteps != dataclasses.replace(run, num_timesteps=None).budget():
+        parts.append(f"num_timesteps={millions(run.num_timesteps)}")
+    return ", ".join(parts)
 
 
 def merged_evaluation(state: RunState, files: dict[str, str] | None = None) -> dict:
@@ -1193,7 +1197,8 @@ def build_default(experiment: Experiment, states: list[RunState], out_dir: str, 
             row.update(wall_seconds=st.wall_seconds, steps_per_second=st.rate,
                        parts=[{"seeds": p.name, "env_steps": p.steps, "wall_seconds": p.wall_seconds,
                                "steps_per_second_per_seed": p.rate} for p in st.done_parts])
-        cells = [run.title, f"`{run.preset}`" + (f" {describe_overrides(run)}" if run.overrides else "")]
+        overrides = describe_overrides(run)
+        cells = [run.title, f"`{run.preset}`" + (f" {overrides}" if overrides else "")]
         add(cells, row, run.paper, merged_evaluation(st) if st.done_parts else None, st, run.seeds)
     by_name = {st.run.name: st for st in states}
     for cross in experiment.cross:

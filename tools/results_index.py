@@ -410,7 +410,7 @@ def sampled_table(ctx: Context) -> list[list[str]]:
     return rows
 
 
-EXPERIMENT_HEADLINE = (  # the runs of the fast presets as they stand (the plus observation)
+EXPERIMENT_HEADLINE = (  # fast SAC with the plus observation: per task its best run with every seed evaluated
     ("UR5e reach, fast SAC, 4,096 envs (not in the paper; beside the paper's SAC)", "sac-fast", "ur5e-reach",
      "ur5e-reach-sac"),
     ("Panda reach, fast SAC, 4,096 envs (not in the paper; beside the paper's SAC)", "sac-fast",
