@@ -149,9 +149,9 @@ def graph_summary(kernels: list[dict], names: dict[str, str], top: int = 10) -> 
     """The CUDA graphs (XLA command buffers) that launched `kernels`, by device time: each one's launches
     (the kernels of one launch share its correlation id; None where a kernel has none), kernels, device
     time, and the op whose kernels took most of its time (`op_stack`, among the stacks no other of the
-    graph extends; without one, its costliest kernel's `name_stack`). Attributes a program without our named scopes (Brax's, say): a graph
-    launched 20 times per vector step is a physics substep's loop body. Kernels outside graphs are
-    left out."""
+    graph extends; without one, its costliest kernel's `name_stack`). Attributes a program without our
+    named scopes (Brax's, say): a graph launched 20 times per vector step is a physics substep's loop
+    body. Kernels outside graphs are left out."""
     time, count, unmarked = collections.Counter(), collections.Counter(), collections.Counter()
     launches, op_time, costliest = collections.defaultdict(set), collections.Counter(), {}
     for e in kernels:

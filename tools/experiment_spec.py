@@ -41,8 +41,10 @@ class Run:
 
     def budget(self) -> int:
         """Env steps per seed (the preset's when `num_timesteps` is None)."""
-        if self.num_timesteps is not None:
-            return self.num_timesteps
+        return self.num_timesteps if self.num_timesteps is not None else self.preset_budget()
+
+    def preset_budget(self) -> int:
+        """The preset's env steps per seed (0 for an unknown preset, which validation reports)."""
         from agents.presets import PRESETS
 
         return PRESETS[self.preset].run.get("num_timesteps", 1_000_000) if self.preset in PRESETS else 0

@@ -46,8 +46,8 @@ import collections
 import contextlib
 import csv
 import dataclasses
-import fcntl
 import datetime
+import fcntl
 import functools
 import json
 import math
@@ -1104,7 +1104,7 @@ def describe_overrides(run: Run) -> str:
         return str(v)
 
     parts = [f"{k}={value(v)}" for k, v in run.overrides.items()]
-    if run.num_timesteps is not None and run.num_timesteps != dataclasses.replace(run, num_timesteps=None).budget():
+    if run.budget() != run.preset_budget():
         parts.append(f"num_timesteps={millions(run.num_timesteps)}")
     return ", ".join(parts)
 
