@@ -418,7 +418,7 @@ EXPERIMENT_HEADLINE = (  # fast SAC with the plus observation: per task its best
     ("UR5e reach-avoid, fast SAC, 4,096 envs (not in the paper; beside the paper's PPO)", "sac-fast",
      "ur5e-reach-avoid-plus", "ur5e-reach-avoid-ppo"),
     ("Panda reach-avoid, fast SAC, 4,096 envs (not in the paper; beside the paper's PPO)", "sac-fast",
-     "panda-reach-avoid-plus", "panda-reach-avoid-ppo"),
+     "panda-reach-avoid-plus-200m", "panda-reach-avoid-ppo"),
 )
 """README rows taken from a registered experiment's table.json: (label, experiment, run, PAPER_ROWS key of the
 paper's row beside it); a row appears once every seed of its run is evaluated."""
