@@ -47,8 +47,10 @@ PAPER_METRICS = {
 is read from; all are an episode's values at its last step. `distance` is the mean end-effector to
 target distance over the episode's last 10 steps (the env's `distance_last10`)."""
 EXTRA_METRICS = {"episode_length": "episode/length", "return": "episode/return", "physics_nan": "episode/physics_nan",
-                 "reset_fallback": "episode/reset_fallback"}
-"""Also reported (JSON / CSV), not part of the paper's tables."""
+                 "reset_fallback": "episode/reset_fallback", "joint_vel": "episode/joint_vel",
+                 "joint_acc": "episode/joint_acc"}
+"""Also reported (JSON / CSV), not part of the paper's tables; `joint_vel` and `joint_acc` (rad/s, rad/s^2) are
+an episode's mean joint speed and acceleration norms (`envs.arm.METRICS`)."""
 DEFAULT_EVAL_SEED = 1_000_000
 """The training driver's `eval_seed`: eval.py on a run's own env config reproduces its eval.json."""
 

@@ -27,9 +27,11 @@ LAST_DISTANCES = 10
 
 METRICS = (
     "distance", "distance_last10", "in_target", "target_reached", "steps_in_target", "times_left_target",
-    "self_collision", "obstacle_collision", "physics_nan", "reset_fallback",
+    "self_collision", "obstacle_collision", "physics_nan", "reset_fallback", "joint_vel", "joint_acc",
 )
-"""Per-step metrics; on the last step of an episode they describe the whole episode."""
+"""Per-step metrics; on the last step of an episode they describe the whole episode. `joint_vel` and `joint_acc`:
+the episode's mean so far of ||qvel|| and ||qacc|| at the ends of its steps, the norms the joint penalties weigh
+(paper, "Reward formulations": the acceleration penalty's effect on the mean acceleration)."""
 
 
 def _take(tree, index):
@@ -117,6 +119,8 @@ class ArmEnv(Env):
             "reached": jnp.zeros(()),
             "steps_in_target": jnp.zeros(()),
             "times_left_target": jnp.zeros(()),
+            "mean_joint_vel": jnp.zeros(()),
+            "mean_joint_acc": jnp.zeros(()),
             "recent_distances": jnp.full((LAST_DISTANCES,), distance),
             "num_steps": jnp.zeros((), jnp.int32),
             "reset_fallback": fallback,
@@ -164,6 +168,8 @@ class ArmEnv(Env):
         left = (info["in_target"] > 0) & ~in_target & ~failed
         recent = jnp.roll(info["recent_distances"], 1).at[0].set(distance)
         num_steps = info["num_steps"] + 1
+        mean_vel = self.running_mean(info["mean_joint_vel"], jnp.linalg.norm(data.qvel), num_steps, nan)
+        mean_acc = self.running_mean(info["mean_joint_acc"], jnp.linalg.norm(data.qacc), num_steps, nan)
 
         reward = self.reward(data, distance, in_target.astype(jnp.float32), info)
         reward = jnp.where(failed, -cfg.collision_penalty * collided, reward)
@@ -176,6 +182,8 @@ class ArmEnv(Env):
             reached=reached,
             steps_in_target=info["steps_in_target"] + in_target,
             times_left_target=info["times_left_target"] + left,
+            mean_joint_vel=mean_vel,
+            mean_joint_acc=mean_acc,
             recent_distances=recent,
             num_steps=num_steps,
         )
@@ -195,6 +203,8 @@ class ArmEnv(Env):
             "obstacle_collision": obstacle_collision.astype(jnp.float32),
             "physics_nan": nan.astype(jnp.float32),
             "reset_fallback": info["reset_fallback"],
+            "joint_vel": mean_vel,
+            "joint_acc": mean_acc,
         }
         return state.replace(pipeline_state=data, obs=obs, reward=reward, done=done.astype(jnp.float32),
                              metrics=metrics, info=info)
@@ -206,6 +216,11 @@ class ArmEnv(Env):
     def noisy(self) -> bool:
         """Whether observations carry sensor noise (then `info["noise_key"]` seeds it)."""
         return self.config.joint_noise_std > 0
+
+    @staticmethod
+    def running_mean(mean, value, count, nan) -> jax.Array:
+        """The mean of `count` values from that of the first `count - 1` and `value`; a NaN step adds nothing."""
+        return jnp.where(nan | ~jnp.isfinite(value), mean, mean + (value - mean) / count)
 
     def hold_action(self, qpos: jax.Array) -> jax.Array:
         """The action whose joint targets are `qpos` (within the joint range)."""

@@ -309,6 +309,32 @@ def test_collision_terminates_without_truncation_and_hand_built_metrics(compiled
     np.testing.assert_array_equal(s4.reward, 0)
 
 
+def test_joint_speed_and_acceleration_metrics_are_episode_means_restarted_by_a_reset(compiled):
+    """`joint_vel` / `joint_acc`: the mean over the episode's steps of ||qvel|| / ||qacc|| at each step's end, by
+    a plain-Python sum; the step after a termination (auto-reset) starts a new mean."""
+    c = compiled("ur5e-reach")
+    state = c.start(seed=22)
+    actions = jax.random.uniform(jax.random.PRNGKey(23), (4, N, c.env.action_size), minval=-1, maxval=1)
+    vel, acc = [], []
+    for k in range(4):
+        state = c.step(state, actions[k])
+        vel.append(np.linalg.norm(np.asarray(state.pipeline_state.qvel), axis=-1))
+        acc.append(np.linalg.norm(np.asarray(state.pipeline_state.qacc), axis=-1))
+        assert float(state.done.max()) == 0.0
+        np.testing.assert_allclose(state.metrics["joint_vel"], sum(vel) / (k + 1), rtol=1e-4)
+        np.testing.assert_allclose(state.metrics["joint_acc"], sum(acc) / (k + 1), rtol=1e-4)
+    assert (acc[-1] > 1.0).all() and not np.allclose(acc[0], acc[-1])  # moving: the means are not trivially 0
+    q = colliding_configuration(c.env.robot, seed=15)
+    data = state.pipeline_state.replace(qpos=jnp.tile(q, (N, 1)), qvel=jnp.zeros_like(state.pipeline_state.qvel))
+    ended = c.step(state.replace(pipeline_state=data), standstill(c.env))
+    np.testing.assert_array_equal(ended.done, 1)
+    after = c.step(ended, actions[0])  # the first step of the episode the auto-reset began
+    np.testing.assert_allclose(after.metrics["joint_acc"],
+                               np.linalg.norm(np.asarray(after.pipeline_state.qacc), axis=-1), rtol=1e-4)
+    np.testing.assert_allclose(after.metrics["joint_vel"],
+                               np.linalg.norm(np.asarray(after.pipeline_state.qvel), axis=-1), rtol=1e-4)
+
+
 def test_obstacle_collision_terminates(compiled):
     c = compiled("ur5e-reach-avoid")
     state = c.start(seed=16)

@@ -279,6 +279,31 @@ def test_a_cross_row_holds_the_parts_evaluated(tmp_path):
     assert (row["status"], row["seeds_evaluated"], row["per_seed"]["target_reached"]) == ("partly evaluated", 1, [0.75])
 
 
+def test_a_table_shows_the_joint_speed_and_acceleration_means_where_evaluated(tmp_path):
+    """joint_vel / joint_acc columns: mean ± std over seeds from eval.json's episode/joint_* keys, with their own
+    headers and decimals; an eval.json from before the env reported them leaves the cells empty."""
+    runs_dir, out = str(tmp_path / "runs"), str(tmp_path / "out")
+    a, b = TOY.runs
+    exp = dataclasses.replace(TOY, cross=(), metrics=("target_reached", "joint_vel", "joint_acc"))
+    ex.validate_experiment(exp)
+    with pytest.raises(ValueError, match=r"metric 'joint_jerk' is unknown: allowed are .*joint_vel, joint_acc"):
+        ex.validate_experiment(dataclasses.replace(exp, metrics=("joint_jerk",)))
+    new = _part(a, runs_dir, "toy", "a", 0, 2, steps=[10240], evaluated=10240)
+    _write(os.path.join(new, "eval.json"), json.dumps({"env_steps": 10240, "eval_envs": 16, "per_seed": {
+        "episode/target_reached": [0.5, 0.7], "episode/joint_vel": [0.5, 0.7], "episode/joint_acc": [10.0, 14.0]}}))
+    _part(b, runs_dir, "toy", "b", 0, 2, steps=[10240], evaluated=10240)  # target_reached only
+    ex.build([(exp, list(exp.runs))], runs_dir, out, registry={"toy": exp}, log=lambda s: None)
+    with open(os.path.join(out, "toy", "table.md")) as f:
+        lines = [line for line in f.read().splitlines() if line.startswith("| ")]
+    assert "| mean joint speed (rad/s) | mean joint acceleration (rad/s²) |" in lines[0]
+    cells = {line.split(" | ")[0]: line.split(" | ") for line in lines}
+    assert cells["| a"][4:6] == ["0.60 ± 0.10", "12.0 ± 2.0"]  # after the paper's target reached and ours
+    assert cells["| b"][4:6] == ["", ""]
+    with open(os.path.join(out, "toy", "table.json")) as f:
+        rows = {r["run"]: r for r in json.load(f)["rows"]}
+    assert rows["a"]["mean"]["joint_acc"] == pytest.approx(12.0) and "joint_acc" not in rows["b"]["mean"]
+
+
 def test_a_partial_run_builds_a_row_of_its_done_seeds(tmp_path):
     """A run with one of two seeds done: its row and its cross row hold that seed and say how many are planned;
     a run with no seed done stays empty."""
@@ -659,6 +684,41 @@ def test_a_part_with_one_logged_chunk_takes_its_speed_from_a_comparable_run(tmp_
     assert not ex.train_pending(selection, runs_dir, deadline=time.monotonic() + 255.0, reserve=30.0, log=log.append,
                                 registry=registry, whole_parts=True)
     assert calls == [os.path.join(runs_dir, "toy2", "long", "seeds-0-0")], log
+
+
+def test_whole_parts_guesses_from_the_preset_where_no_comparable_run_was_timed(tmp_path, monkeypatch):
+    """--whole-parts predicts a part of a config never timed from its preset's runs under other overrides
+    (`guess_speed(rough=True)`) instead of leaving the GPU idle: it starts only where that prediction fits."""
+    runs_dir = str(tmp_path / "runs")
+    other = ex.Run("other", "point-mass-ppo", {**TOY_RUN, "env.dt": 0.2}, seeds=1, num_timesteps=10_240)
+    fresh = ex.Run("fresh", "point-mass-ppo", {**TOY_RUN, "env.dt": 0.3}, seeds=1, num_timesteps=20_480)
+    exp = ex.Experiment("toy3", "point mass: other overrides", "not in the paper", (other, fresh))
+    registry = {"toy3": exp}
+    # other: 1,000 env steps/s after 10 s of start-up; fresh: never trained, no run trains its config.
+    _part(other, runs_dir, "toy3", "other", 0, 1, steps=[10240], evaluated=10240,
+          metrics=([5120, 10240], 1, 1000.0, [15.12, 5.12]))
+    st = ex.run_state(exp, fresh, runs_dir, registry=registry)
+    part = ex.pending_parts(st)[0]
+    assert ex.guess_speed(st, part, runs_dir, registry=registry) == (None, None)
+    assert ex.guess_speed(st, part, runs_dir, registry=registry, rough=True) == (1000.0, 10.0)
+    calls, log = [], []
+
+    def fake_train(config, learner_cls=None):
+        calls.append(config.logdir)
+        return driver.TrainResult(None, 0, "stopped", config.logdir, config, None, None)
+
+    monkeypatch.setattr(driver, "train", fake_train)
+    selection = ex.select(["toy3/fresh"], registry)
+    # 10 s of start-up + 20,480 steps at 1,000/s: 30.5 s; 20 s after the reserve: left, the guess named.
+    assert not ex.train_pending(selection, runs_dir, deadline=time.monotonic() + 50.0, reserve=30.0, log=log.append,
+                                registry=registry, whole_parts=True)
+    assert calls == [] and any("it needs ~30 s (guessed from its preset's runs under other overrides)" in line
+                               for line in log), log
+    # 170 s after the reserve: started (the time limit's own rule, which takes no rough guess, asks for more than
+    # twice the assumed start-up without a speed: 170 s > 2 x ex.ASSUMED_STARTUP).
+    ex.train_pending(selection, runs_dir, deadline=time.monotonic() + 200.0, reserve=30.0, log=log.append,
+                     registry=registry, whole_parts=True)
+    assert calls == [os.path.join(runs_dir, "toy3", "fresh", "seeds-0-0")], log
 
 
 def test_whole_parts_leaves_a_part_that_cannot_finish(tmp_path):

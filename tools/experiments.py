@@ -71,6 +71,15 @@ OUT_DIR = os.path.join("results", "experiments")
 RATE_METRICS = ("target_reached", "self_collision", "obstacle_collision")
 """Metrics shown as percentages (rates in [0, 1] in eval.json and in `Run.paper`)."""
 TIMING_COLUMNS = {"wall_clock": "training wall-clock (s)", "steps_per_second": "env steps/s per seed"}
+EXTRA_COLUMNS = {"joint_vel": ("mean joint speed (rad/s)", 2), "joint_acc": ("mean joint acceleration (rad/s²)", 1)}
+"""Table columns beyond the paper's (agents.evaluation.EXTRA_METRICS): header and decimals."""
+
+
+def table_metrics() -> dict[str, str]:
+    """Metric name -> eval.json key, for the metrics a table may show (besides `TIMING_COLUMNS`)."""
+    from agents.evaluation import EXTRA_METRICS, PAPER_METRICS
+
+    return {**PAPER_METRICS, **{m: EXTRA_METRICS[m] for m in EXTRA_COLUMNS}}
 """Table columns read from metrics.csv instead of eval.json."""
 
 
@@ -108,9 +117,9 @@ def validate_experiment(experiment: Experiment) -> None:
     if len(set(names)) != len(names):
         raise ValueError(f"experiment {experiment.name!r} has crosses {names}: allowed are distinct names.")
     for m in experiment.metrics:
-        if m not in PAPER_METRICS and m not in TIMING_COLUMNS:
+        if m not in table_metrics() and m not in TIMING_COLUMNS:
             raise ValueError(f"experiment {experiment.name!r}: metric {m!r} is unknown: allowed are "
-                             f"{', '.join([*PAPER_METRICS, *TIMING_COLUMNS])}.")
+                             f"{', '.join([*table_metrics(), *TIMING_COLUMNS])}.")
 
 
 # ------------------------------------------------------------------------------------------------
@@ -418,7 +427,7 @@ def cross_evaluate(run: Run, part: PartState, cross: Cross) -> str:
     config = run.config(part.logdir, first_seed=part.first, seeds=part.count)
     result = evaluation.run(evaluation.checkpoint_policy(part.logdir), config.env_name, cross_env(run, cross),
                             num_envs=config.eval_envs, eval_seeds=(config.eval_seed,), stochastic=cross.stochastic)
-    per_seed = {key: [u["metrics"][name] for u in result.units] for name, key in evaluation.PAPER_METRICS.items()
+    per_seed = {key: [u["metrics"][name] for u in result.units] for name, key in table_metrics().items()
                 if all(name in u["metrics"] for u in result.units)}
     path = os.path.join(part.logdir, f"cross-{cross.name}.json")
     write_atomic(path, json.dumps({"env_steps": part.steps, "eval_envs": config.eval_envs, "env": cross.env,
@@ -736,18 +745,25 @@ def start_verdict(st: RunState, part: PartState, seconds: float | None, compiled
     """Whether `part` of run state `st` starts with `seconds` left after the reserve (None: no limit): ("start",
     ""), ("later", why) where `whole_parts` predicts it cannot finish (the next run is tried), or ("stop", why)
     where `may_start` refuses it. Its speed is its own, else a part's of its run or of a comparable run
-    (`speed_guess`); its start-up the longest of that guess and `startup_seen` (this call's). Used by a training
+    (`speed_guess`); its start-up the longest of that guess and `startup_seen` (this call's). With none of these,
+    `whole_parts` predicts from `guess_speed(rough=True)` (its preset's runs under other overrides) rather than
+    leave the GPU idle; `may_start` never uses a rough guess. Used by a training
     process before each part and by the `--parallel` driver before it starts a worker (a worker that would stop
     at once still costs its process start, 10-20 s past the parts' stop)."""
     rate_guess, startup_guess = guess_speed(st, part, runs_dir, record, registry)
     seen = [x for x in (startup_seen, startup_guess) if x is not None]
     startup_guess = max(seen) if seen else None
     if whole_parts and seconds is not None:
-        need = seconds_to_finish(part, compiled, startup_guess, rate_guess)
+        need, rough = seconds_to_finish(part, compiled, startup_guess, rate_guess), ""
+        if need is None:  # better a rough guess than an idle GPU: a part it misjudges stops with the call
+            rate, startup = guess_speed(st, part, runs_dir, record, registry, rough=True)
+            need = seconds_to_finish(part, compiled, max([x for x in (startup, startup_seen) if x is not None],
+                                                         default=None), rate)
+            rough = " (guessed from its preset's runs under other overrides)"
         if need is None or need > seconds:
             return "later", (f"left for a later call: it needs "
-                             f"{'an unknown time (no speed measured)' if need is None else f'~{need:.0f} s'} to "
-                             f"finish, {max(0.0, seconds):.0f} s are left")
+                             f"{'an unknown time (no speed measured)' if need is None else f'~{need:.0f} s'}{rough} "
+                             f"to finish, {max(0.0, seconds):.0f} s are left")
     if not may_start(part, seconds, compiled, startup_guess, rate_guess):
         return "stop", f"time limit: stopped at {part.steps:,} of {part.budget:,} steps; run again to continue"
     return "start", ""
@@ -1080,7 +1096,7 @@ def fmt_metric(metric: str, values) -> str:
     """'95.7 ± 0.4 %' for rates, '0.005 ± 0.001' for others (std over seeds; one seed: mean only)."""
     from agents.evaluation import COLUMNS
 
-    digits = {name: d for name, _, d in COLUMNS}.get(metric, 3)
+    digits = {name: d for name, _, d in COLUMNS}.get(metric, EXTRA_COLUMNS.get(metric, ("", 3))[1])
     values = [float(v) for v in ([values] if isinstance(values, (int, float)) else values)]
     mean = sum(values) / len(values)
     std = statistics.pstdev(values) if len(values) > 1 else None
@@ -1092,7 +1108,8 @@ def fmt_metric(metric: str, values) -> str:
 def header(metric: str) -> str:
     from agents.evaluation import COLUMNS
 
-    return TIMING_COLUMNS.get(metric) or {name: h for name, h, _ in COLUMNS}.get(metric, metric)
+    return (TIMING_COLUMNS.get(metric) or {name: h for name, h, _ in COLUMNS}.get(metric)
+            or EXTRA_COLUMNS.get(metric, (metric,))[0])
 
 
 def describe_overrides(run: Run) -> str:
@@ -1155,11 +1172,11 @@ def timing_cell(state: RunState, metric: str) -> str:
 def build_default(experiment: Experiment, states: list[RunState], out_dir: str, code: str | None = None) -> list[str]:
     """table.md and table.json (one row per run: the paper's numbers beside ours, mean ± std over seeds of
     the driver's evaluation) and curves.png (training curves from metrics.csv) in `out_dir`."""
-    from agents.evaluation import PAPER_METRICS, code_version
+    from agents.evaluation import code_version
 
     code = code or code_version()  # before anything is written (a written file would mark the tree modified)
     rows, table = [], []
-    metrics = [m for m in experiment.metrics]
+    metrics, keys = list(experiment.metrics), table_metrics()
 
     def add(cells: list, row: dict, paper: dict, ev: dict | None, st: RunState, planned: int, timing: bool = True) -> None:
         """The metric cells (the paper's beside ours) of one row; `ev` None: not done; timing: the run's training
@@ -1171,7 +1188,7 @@ def build_default(experiment: Experiment, states: list[RunState], out_dir: str, 
             if m in TIMING_COLUMNS:
                 cells += ["", timing_cell(st, m) if ev is not None and timing else ""]
                 continue
-            values = ev["per_seed"].get(PAPER_METRICS[m]) if ev is not None else None
+            values = ev["per_seed"].get(keys[m]) if ev is not None else None
             cells += [fmt_metric(m, paper[m]) if m in paper else "", fmt_metric(m, values) if values is not None else ""]
             if values is not None:
                 row["per_seed"][m] = values
@@ -1379,7 +1396,8 @@ def main(argv=None) -> int:
                    "carries (default: `tools.carry_parts.TOTAL_MB`; first fit, the parts with the most steps first, "
                    "into DIR, DIR/more-1, ...)")
     p.add_argument("--whole-parts", action="store_true", help="run --time-limit: train only the parts predicted to "
-                   "finish in time (measured speeds), for a last call on a machine that will not keep its runs/")
+                   "finish in time (measured speeds; for a config never timed, its preset's), for a last call on a machine "
+                   "that will not keep its runs/")
     args = p.parse_args(argv)
     if args.max_seeds is not None and args.max_seeds < 1:
         raise ValueError(f"--max-seeds={args.max_seeds} is impossible: allowed is 1 or more (or leave it out).")
