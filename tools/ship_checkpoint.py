@@ -7,8 +7,8 @@ the chosen trained seeds, so the repository carries a few hundred kB per row ins
 
 SRC is a train.py logdir (its newest checkpoint), a checkpoint step directory or an export; a
 checkpoint without an export gets one written first. `--best-from` reads an `eval.py --json` file
-of that same checkpoint and keeps the seed with the highest target-reached rate (ties: fewer
-collisions).
+of that same checkpoint (or the run's own eval.json, which the training driver writes of its final
+checkpoint) and keeps the seed with the highest target-reached rate (ties: fewer collisions).
 """
 
 from __future__ import annotations
@@ -20,11 +20,25 @@ import os
 from agents import evaluation, export
 
 
-def best_seed(eval_json: str, env_steps: int) -> int:
+def _score(metrics: dict) -> tuple[float, float]:
+    """Target reached first, then fewer self + obstacle collisions."""
+    return metrics["target_reached"], -(metrics.get("self_collision", 0.0) + metrics.get("obstacle_collision", 0.0))
+
+
+def best_seed(eval_json: str, env_steps: int, seeds: list[int] | None = None) -> int:
     """The trained seed with the highest target-reached rate in an eval.py JSON of the checkpoint
-    that has `env_steps` (ties: the lower self + obstacle collision rate)."""
+    that has `env_steps` (ties: the lower self + obstacle collision rate), or in a run's own eval.json
+    (the training driver's, per seed in the order of the export's `seeds`)."""
     with open(eval_json) as f:
         data = json.load(f)
+    if "per_seed" in data:
+        if data.get("env_steps") != env_steps or seeds is None:
+            raise ValueError(f"--best-from {eval_json!r} is invalid: it evaluates {data.get('env_steps')} env steps, "
+                             f"the checkpoint has {env_steps}; allowed is the eval.json of that checkpoint's run.")
+        per_seed = {name: data["per_seed"].get(f"episode/{name}") for name in
+                    ("target_reached", "self_collision", "obstacle_collision")}
+        units = [{k: v[i] for k, v in per_seed.items() if v is not None} for i in range(len(seeds))]
+        return seeds[max(range(len(seeds)), key=lambda i: _score(units[i]))]
     runs = [e for e in data.get("evaluations", []) if e.get("policy", {}).get("env_steps") == env_steps]
     if not runs:
         found = sorted({e.get("policy", {}).get("env_steps") for e in data.get("evaluations", [])}, key=str)
@@ -32,8 +46,7 @@ def best_seed(eval_json: str, env_steps: int) -> int:
                          f"{env_steps} env steps (it has {found}); allowed is an eval.py --json of that checkpoint.")
     scores = {}
     for unit in runs[0]["units"]:
-        m = unit["metrics"]
-        score = (m["target_reached"], -(m.get("self_collision", 0.0) + m.get("obstacle_collision", 0.0)))
+        score = _score(unit["metrics"])
         seed = int(unit["policy_seed"])
         scores[seed] = max(score, scores.get(seed, score))
     return max(scores, key=lambda s: scores[s])
@@ -44,7 +57,7 @@ def ship(src: str, dst: str, seeds: list[int] | None = None, best_from: str | No
     if best_from:
         if seeds:
             raise ValueError("--seeds and --best-from are exclusive: allowed is one of them.")
-        seeds = [best_seed(best_from, policy.export.env_steps)]
+        seeds = [best_seed(best_from, policy.export.env_steps, policy.export.seeds)]
     return export.select(policy.export.path, dst, seeds)
 
 
@@ -53,7 +66,8 @@ def main(argv: list[str] | None = None) -> str:
     p.add_argument("src", help="train.py logdir (newest checkpoint), checkpoint step directory or policy export")
     p.add_argument("dst", help="directory to write the export to (e.g. results/checkpoints/<preset>)")
     p.add_argument("--seeds", type=int, nargs="+", help="trained seeds to keep (default: all)")
-    p.add_argument("--best-from", metavar="EVAL_JSON", help="keep the best seed of this eval.py --json file")
+    p.add_argument("--best-from", metavar="EVAL_JSON", help="keep the best seed of this eval.py --json file, or of "
+                   "the run's own eval.json (the training driver's, same checkpoint)")
     args = p.parse_args(argv)
     out = ship(args.src, args.dst, args.seeds, args.best_from)
     with open(os.path.join(out, "policy.json")) as f:
