@@ -1,6 +1,7 @@
 #!/bin/bash
 # Twelfth session's calls (four GPUs, one machine). Usage: bash .devcall/s15.sh CALL LIMIT   (CALL: 1, 2 or 3)
-#  call 1 (the install line first; carry .whl .devcall): PPO on all four GPUs.
+#  call 1 (the install line first; carry .whl .devcall): PPO on all four GPUs (GPUs 2-3 the moving-obstacle rows
+#         of issue 29 first; their finished parts' best seeds come back in $OUT/ship.tgz).
 #  call 2 (carry .devcall .carry_sac_b): GPU 0 sac-reach/panda from .carry_sac_b (27.2M of 40M); GPU 1 PPO,
 #         whole parts only (it trains SAC in call 3); GPUs 2-3 PPO.
 #  call 3 (carry .devcall .carry_sac): GPU 0 sac-reach/panda to the end (on this machine since call 2), then
@@ -14,8 +15,8 @@ left() { echo $(( LIMIT - ($(date +%s) - start) )); }
 nvidia-smi --query-gpu=index,name --format=csv,noheader > $L/gpus.txt
 ROWS0=${ROWS0:-"joint-penalties relative-step"}
 ROWS1=${ROWS1:-"reach-observation"}
-ROWS2=${ROWS2:-"network-size"}
-ROWS3=${ROWS3:-"reward reach-avoid-reward"}
+ROWS2=${ROWS2:-"obstacles-moving3/panda-moving obstacles-moving3/panda-static network-size"}
+ROWS3=${ROWS3:-"obstacles-moving3/ur5e-moving obstacles-moving3/ur5e-static reward"}
 ppo() {  # ppo GPU NAME WHOLE ROWS...: PPO rows on one GPU until the limit (WHOLE=1: whole parts only)
   local gpu=$1 name=$2 whole=$3; shift 3
   if [ "$whole" = 1 ]; then
@@ -42,6 +43,12 @@ case $CALL in
 *) echo "CALL must be 1, 2 or 3"; exit 2 ;;
 esac
 wait
+# Issue 29's shipped policies: the best seed of every finished part of the moving-obstacle rows (one picked here).
+for part in runs/experiments/obstacles-moving3/*-moving/seeds-*; do
+  [ -f $part/eval.json ] || continue
+  python -m tools.ship_checkpoint $part ship/$(basename $(dirname $part))/$(basename $part) --best-from $part/eval.json >> $L/ship.log 2>&1
+done
+[ -d ship ] && tar czf $OUT/ship.tgz ship
 tar czf $OUT/rec.tgz $L $(find runs/experiments \( -name config.json -o -name eval.json -o -name 'cross-*.json' -o -name metrics.csv \) -not -path '*/checkpoints/*' 2>/dev/null)
 cat $L/gpus.txt; for d in $L/driver*.log; do echo "== $d"; tail -5 $d; done
 for f in $L/w_*/*; do echo "== $f"; grep "steps/s" $f | tail -1; tail -2 $f; done
