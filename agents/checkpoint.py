@@ -18,6 +18,10 @@ import jax.numpy as jnp
 import orbax.checkpoint as ocp
 
 
+def _leaf_name(index: int, path) -> str:
+    return f"{index:05d}{re.sub(r'[^A-Za-z0-9]+', '_', jax.tree_util.keystr(path))}"
+
+
 def _nonempty_leaves(tree) -> dict:
     """{name: leaf} of the leaves with at least one element, named by position and tree path.
 
@@ -27,7 +31,7 @@ def _nonempty_leaves(tree) -> dict:
     out = {}
     for i, (path, leaf) in enumerate(jax.tree_util.tree_flatten_with_path(tree)[0]):
         if leaf.size:
-            out[f"{i:05d}{re.sub(r'[^A-Za-z0-9]+', '_', jax.tree_util.keystr(path))}"] = leaf
+            out[_leaf_name(i, path)] = leaf
     return out
 
 
@@ -72,6 +76,28 @@ class Checkpointer:
         state = [saved[next(it)] if a.size else jnp.zeros(a.shape, a.dtype, device=getattr(a, "sharding", None))
                  for _, a in leaves]
         return jax.tree_util.tree_unflatten(treedef, state), restored.config
+
+    def restore_matching(self, step: int, abstract_state):
+        """The leaves of `abstract_state` read from the state saved at `step` by their tree path, whatever else it
+        holds and in whichever order: a learner out of a checkpoint whose env state another env version wrote.
+        ValueError naming a leaf the checkpoint lacks or holds with another shape or dtype."""
+        saved = self.manager.restore(step, args=ocp.args.Composite(state=ocp.args.StandardRestore())).state
+        by_path = {name[5:]: value for name, value in saved.items()}  # the position prefix dropped
+        if len(by_path) != len(saved):
+            raise ValueError(f"checkpoint {self.step_dir(step)} names two leaves alike: allowed is unique tree paths.")
+        state = []
+        for i, (path, a) in enumerate(jax.tree_util.tree_flatten_with_path(abstract_state)[0]):
+            sharding = getattr(a, "sharding", None)
+            if not a.size:
+                state.append(jnp.zeros(a.shape, a.dtype, device=sharding))
+                continue
+            value = by_path.get(_leaf_name(i, path)[5:])
+            if value is None or value.shape != a.shape or value.dtype != a.dtype:
+                found = "none" if value is None else f"{value.dtype}{list(value.shape)}"
+                raise ValueError(f"checkpoint {self.step_dir(step)} has no leaf {jax.tree_util.keystr(path)} of "
+                                 f"{a.dtype}{list(a.shape)} (found: {found}).")
+            state.append(jax.device_put(value, sharding) if sharding is not None else value)
+        return jax.tree_util.tree_unflatten(jax.tree_util.tree_structure(abstract_state), state)
 
     def restore_config(self, step: int) -> dict:
         return self.manager.restore(step, args=ocp.args.Composite(config=ocp.args.JsonRestore())).config

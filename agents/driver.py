@@ -395,10 +395,21 @@ def save_checkpoint(ckpt: Checkpointer, step: int, state, config: TrainConfig, l
 
 def restore_state(ckpt: Checkpointer, step: int, programs: Programs, config: TrainConfig, with_envs: bool):
     """The `TrainState` saved at `step`. A checkpoint saved without env states gets fresh episodes,
-    drawn from keys that depend on the seed and the step (not on the start's keys)."""
+    drawn from keys that depend on the seed and the step (not on the start's keys); so does one whose env
+    states do not fit this code's env (another version of it wrote them), with a warning."""
+    learner_only = _learner_only(programs.abstract_state, programs.learner)
     if with_envs:
-        return ckpt.restore(step, programs.abstract_state)[0]
-    saved, _ = ckpt.restore(step, _learner_only(programs.abstract_state, programs.learner))
+        try:
+            return ckpt.restore(step, programs.abstract_state)[0]
+        except Exception as error:  # damage, or a state layout this code does not have
+            try:
+                saved = ckpt.restore_matching(step, learner_only)
+            except Exception:
+                raise error from None  # the learner does not read either: damage (or another learner)
+            warnings.warn(f"checkpoint {ckpt.step_dir(step)}: its env states do not fit this env's "
+                          f"({_first_line(error)}); resuming its learner with fresh episodes.", stacklevel=2)
+    else:
+        saved, _ = ckpt.restore(step, learner_only)
     fresh = programs.init(jax.vmap(jax.random.fold_in, (0, None))(seed_keys(config), step))
     transient = {name: getattr(fresh.learner, name) for name in _transient_fields(programs.learner)}
     return fresh.replace(learner=saved.learner.replace(**transient), key=saved.key, updates=saved.updates)

@@ -178,6 +178,35 @@ def test_resume_falls_back_to_the_newest_intact_checkpoint(earlier_run, tmp_path
     assert Checkpointer(str(logdir / "checkpoints")).manager.all_steps() == [10240, 20480, SHORT]  # saved again
 
 
+def test_a_checkpoint_whose_env_states_another_env_wrote_resumes_its_learner(earlier_run, tmp_path, monkeypatch):
+    """Env states saved by another version of the env (here: one metric more in this one) do not restore; the
+    learner does, by tree path (its leaves equal the full restore's), and the run resumes from that step with
+    fresh episodes and a warning, instead of setting the checkpoint aside as damaged."""
+    from envs.point_mass import PointMass
+
+    logdir = tmp_path / "run"
+    shutil.copytree(earlier_run, logdir)
+    config = _config(logdir, checkpoint_every=2 * 5120, log_every=5120)
+    ckpt = Checkpointer(str(logdir / "checkpoints"))
+    programs = driver.programs_for(config)
+    full = ckpt.restore(SHORT, programs.abstract_state)[0]
+    learner = ckpt.restore_matching(SHORT, driver._learner_only(programs.abstract_state, programs.learner))
+    for a, b in zip(jax.tree.leaves(learner.learner), jax.tree.leaves(full.learner)):
+        np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(learner.updates, full.updates)
+    assert (np.asarray(full.updates) > 0).all()
+    ckpt.close()
+    rows_before = len((logdir / "metrics.csv").read_text().splitlines())
+    original = PointMass._metrics
+    monkeypatch.setattr(PointMass, "_metrics", lambda self, d, r, n: {**original(self, d, r, n), "extra": d})
+    with pytest.warns(UserWarning, match=rf"checkpoint .*checkpoints/{SHORT}: its env states do not fit this env's"):
+        result = driver.train(presets.make_config("point-mass-ppo", num_timesteps=SHORT + 10240, logdir=str(logdir),
+                                                  resume=True, log_every=5120, **QUIET))
+    assert result.status == "done" and result.env_steps == SHORT + 10240
+    assert not (logdir / "corrupt_checkpoints").exists()
+    assert len((logdir / "metrics.csv").read_text().splitlines()) == rows_before + 2  # 2 rows after SHORT
+
+
 def test_resume_with_no_intact_checkpoint_names_them(earlier_run, tmp_path, capsys):
     logdir = tmp_path / "run"
     shutil.copytree(earlier_run, logdir)
