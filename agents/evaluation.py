@@ -47,10 +47,10 @@ PAPER_METRICS = {
 is read from; all are an episode's values at its last step. `distance` is the mean end-effector to
 target distance over the episode's last 10 steps (the env's `distance_last10`)."""
 EXTRA_METRICS = {"episode_length": "episode/length", "return": "episode/return", "physics_nan": "episode/physics_nan",
-                 "reset_fallback": "episode/reset_fallback", "joint_vel": "episode/joint_vel",
-                 "joint_acc": "episode/joint_acc"}
-"""Also reported (JSON / CSV), not part of the paper's tables; `joint_vel` and `joint_acc` (rad/s, rad/s^2) are
-an episode's mean joint speed and acceleration norms (`envs.arm.METRICS`)."""
+                 "reset_fallback": "episode/reset_fallback", "mean_joint_vel": "episode/mean_joint_vel",
+                 "mean_joint_acc": "episode/mean_joint_acc"}
+"""Also reported (JSON / CSV), not part of the paper's tables; `mean_joint_vel` and `mean_joint_acc` (rad/s,
+rad/s^2) are an episode's mean joint speed and acceleration norms (`envs.arm.METRICS`)."""
 DEFAULT_EVAL_SEED = 1_000_000
 """The training driver's `eval_seed`: eval.py on a run's own env config reproduces its eval.json."""
 
@@ -436,6 +436,9 @@ def pooled(results: list[Result]) -> dict | None:
 COLUMNS = [("target_reached", "target reached", 3), ("self_collision", "self collision", 3),
            ("obstacle_collision", "obstacle collision", 3), ("distance", "distance (m)", 3),
            ("steps_in_target", "steps in target", 1), ("times_left_target", "times left target", 2)]
+EXTRA_COLUMNS = [("mean_joint_vel", "mean joint speed (rad/s)", 2),
+                 ("mean_joint_acc", "mean joint acceleration (rad/s²)", 1)]
+"""(name, header, decimals) of the `EXTRA_METRICS` a results table may show (tools.experiments), beside `COLUMNS`."""
 
 
 def fmt(stats: dict | None, digits: int, spread: str = "std_units") -> str:

@@ -27,11 +27,13 @@ LAST_DISTANCES = 10
 
 METRICS = (
     "distance", "distance_last10", "in_target", "target_reached", "steps_in_target", "times_left_target",
-    "self_collision", "obstacle_collision", "physics_nan", "reset_fallback", "joint_vel", "joint_acc",
+    "self_collision", "obstacle_collision", "physics_nan", "reset_fallback", "mean_joint_vel",
+    "mean_joint_acc",
 )
-"""Per-step metrics; on the last step of an episode they describe the whole episode. `joint_vel` and `joint_acc`:
-the episode's mean so far of ||qvel|| and ||qacc|| at the ends of its steps, the norms the joint penalties weigh
-(paper, "Reward formulations": the acceleration penalty's effect on the mean acceleration)."""
+"""Per-step metrics; on the last step of an episode they describe the whole episode. `mean_joint_vel` and
+`mean_joint_acc`: the episode's mean so far of ||qvel|| and ||qacc|| as each step leaves them (qacc: the last
+physics substep's), the norms the joint penalties weigh (paper, "Reward formulations": the acceleration
+penalty's effect on the mean acceleration)."""
 
 
 def _take(tree, index):
@@ -203,8 +205,8 @@ class ArmEnv(Env):
             "obstacle_collision": obstacle_collision.astype(jnp.float32),
             "physics_nan": nan.astype(jnp.float32),
             "reset_fallback": info["reset_fallback"],
-            "joint_vel": mean_vel,
-            "joint_acc": mean_acc,
+            "mean_joint_vel": mean_vel,
+            "mean_joint_acc": mean_acc,
         }
         return state.replace(pipeline_state=data, obs=obs, reward=reward, done=done.astype(jnp.float32),
                              metrics=metrics, info=info)

@@ -310,7 +310,7 @@ def test_collision_terminates_without_truncation_and_hand_built_metrics(compiled
 
 
 def test_joint_speed_and_acceleration_metrics_are_episode_means_restarted_by_a_reset(compiled):
-    """`joint_vel` / `joint_acc`: the mean over the episode's steps of ||qvel|| / ||qacc|| at each step's end, by
+    """`mean_joint_vel` / `mean_joint_acc`: the mean over the episode's steps of ||qvel|| / ||qacc|| at each step's end, by
     a plain-Python sum; the step after a termination (auto-reset) starts a new mean."""
     c = compiled("ur5e-reach")
     state = c.start(seed=22)
@@ -321,18 +321,32 @@ def test_joint_speed_and_acceleration_metrics_are_episode_means_restarted_by_a_r
         vel.append(np.linalg.norm(np.asarray(state.pipeline_state.qvel), axis=-1))
         acc.append(np.linalg.norm(np.asarray(state.pipeline_state.qacc), axis=-1))
         assert float(state.done.max()) == 0.0
-        np.testing.assert_allclose(state.metrics["joint_vel"], sum(vel) / (k + 1), rtol=1e-4)
-        np.testing.assert_allclose(state.metrics["joint_acc"], sum(acc) / (k + 1), rtol=1e-4)
+        np.testing.assert_allclose(state.metrics["mean_joint_vel"], sum(vel) / (k + 1), rtol=1e-4)
+        np.testing.assert_allclose(state.metrics["mean_joint_acc"], sum(acc) / (k + 1), rtol=1e-4)
     assert (acc[-1] > 1.0).all() and not np.allclose(acc[0], acc[-1])  # moving: the means are not trivially 0
     q = colliding_configuration(c.env.robot, seed=15)
     data = state.pipeline_state.replace(qpos=jnp.tile(q, (N, 1)), qvel=jnp.zeros_like(state.pipeline_state.qvel))
     ended = c.step(state.replace(pipeline_state=data), standstill(c.env))
     np.testing.assert_array_equal(ended.done, 1)
-    after = c.step(ended, actions[0])  # the first step of the episode the auto-reset began
-    np.testing.assert_allclose(after.metrics["joint_acc"],
-                               np.linalg.norm(np.asarray(after.pipeline_state.qacc), axis=-1), rtol=1e-4)
-    np.testing.assert_allclose(after.metrics["joint_vel"],
-                               np.linalg.norm(np.asarray(after.pipeline_state.qvel), axis=-1), rtol=1e-4)
+    assert float(ended.metrics["mean_joint_acc"].min()) > 0  # the ended episode's mean, as evaluation reads it
+    np.testing.assert_array_equal(ended.info["mean_joint_acc"], 0)  # the episode the auto-reset began
+    np.testing.assert_array_equal(ended.info["mean_joint_vel"], 0)
+    vel, acc = [], []
+    for k in range(2):  # two steps: a mean the old episode's values would shift
+        ended = c.step(ended, actions[k])
+        vel.append(np.linalg.norm(np.asarray(ended.pipeline_state.qvel), axis=-1))
+        acc.append(np.linalg.norm(np.asarray(ended.pipeline_state.qacc), axis=-1))
+    np.testing.assert_allclose(ended.metrics["mean_joint_vel"], (vel[0] + vel[1]) / 2, rtol=1e-4)
+    np.testing.assert_allclose(ended.metrics["mean_joint_acc"], (acc[0] + acc[1]) / 2, rtol=1e-4)
+
+
+def test_running_mean_by_hand():
+    from envs.arm import ArmEnv
+
+    assert float(ArmEnv.running_mean(2.0, 5.0, 3, False)) == 3.0  # (2 + 2 + 5) / 3
+    assert float(ArmEnv.running_mean(2.0, 5.0, 3, True)) == 2.0  # a NaN step adds nothing
+    assert float(ArmEnv.running_mean(2.0, np.inf, 3, False)) == 2.0
+    assert float(ArmEnv.running_mean(0.0, 4.0, 1, False)) == 4.0
 
 
 def test_obstacle_collision_terminates(compiled):

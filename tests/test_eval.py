@@ -203,6 +203,22 @@ def test_export_of_one_seed_acts_as_that_seed_of_the_run(point_run, tmp_path):
                               str(point_run / "eval.json")])
 
 
+def test_best_seed_of_a_runs_own_eval_json(tmp_path):
+    """The driver's eval.json lists one value per seed in the export's seed order: seeds 5-7, two tied on target
+    reached, the one with fewer collisions wins; lists of another length or another checkpoint are refused."""
+    from tools.ship_checkpoint import best_seed
+
+    path = tmp_path / "eval.json"
+    path.write_text(json.dumps({"env_steps": 100, "per_seed": {
+        "episode/target_reached": [0.9, 0.95, 0.95], "episode/self_collision": [0.0, 0.03, 0.01],
+        "episode/obstacle_collision": [0.0, 0.0, 0.01]}}))
+    assert best_seed(str(path), 100, [5, 6, 7]) == 7  # 0.02 collisions against seed 6's 0.03
+    with pytest.raises(ValueError, match=r"do not hold one value for each of the export's seeds \[5, 6\]"):
+        best_seed(str(path), 100, [5, 6])
+    with pytest.raises(ValueError, match="it evaluates 100 env steps, the checkpoint has 200"):
+        best_seed(str(path), 200, [5, 6, 7])
+
+
 def test_stochastic_evaluation_samples_the_policy(point_run):
     """`eval.py --stochastic`: the actions are tanh(mean + std * noise) of the policy's distribution
     (mean and std by hand from the network's output), not the mode tanh(mean); the episodes are

@@ -280,17 +280,17 @@ def test_a_cross_row_holds_the_parts_evaluated(tmp_path):
 
 
 def test_a_table_shows_the_joint_speed_and_acceleration_means_where_evaluated(tmp_path):
-    """joint_vel / joint_acc columns: mean ± std over seeds from eval.json's episode/joint_* keys, with their own
+    """mean_joint_vel / mean_joint_acc columns: mean ± std over seeds from eval.json's episode/mean_joint_* keys, with their own
     headers and decimals; an eval.json from before the env reported them leaves the cells empty."""
     runs_dir, out = str(tmp_path / "runs"), str(tmp_path / "out")
     a, b = TOY.runs
-    exp = dataclasses.replace(TOY, cross=(), metrics=("target_reached", "joint_vel", "joint_acc"))
+    exp = dataclasses.replace(TOY, cross=(), metrics=("target_reached", "mean_joint_vel", "mean_joint_acc"))
     ex.validate_experiment(exp)
-    with pytest.raises(ValueError, match=r"metric 'joint_jerk' is unknown: allowed are .*joint_vel, joint_acc"):
+    with pytest.raises(ValueError, match=r"metric 'joint_jerk' is unknown: allowed are .*mean_joint_vel, mean_joint_acc"):
         ex.validate_experiment(dataclasses.replace(exp, metrics=("joint_jerk",)))
     new = _part(a, runs_dir, "toy", "a", 0, 2, steps=[10240], evaluated=10240)
     _write(os.path.join(new, "eval.json"), json.dumps({"env_steps": 10240, "eval_envs": 16, "per_seed": {
-        "episode/target_reached": [0.5, 0.7], "episode/joint_vel": [0.5, 0.7], "episode/joint_acc": [10.0, 14.0]}}))
+        "episode/target_reached": [0.5, 0.7], "episode/mean_joint_vel": [0.5, 0.7], "episode/mean_joint_acc": [10.0, 14.0]}}))
     _part(b, runs_dir, "toy", "b", 0, 2, steps=[10240], evaluated=10240)  # target_reached only
     ex.build([(exp, list(exp.runs))], runs_dir, out, registry={"toy": exp}, log=lambda s: None)
     with open(os.path.join(out, "toy", "table.md")) as f:
@@ -301,7 +301,7 @@ def test_a_table_shows_the_joint_speed_and_acceleration_means_where_evaluated(tm
     assert cells["| b"][4:6] == ["", ""]
     with open(os.path.join(out, "toy", "table.json")) as f:
         rows = {r["run"]: r for r in json.load(f)["rows"]}
-    assert rows["a"]["mean"]["joint_acc"] == pytest.approx(12.0) and "joint_acc" not in rows["b"]["mean"]
+    assert rows["a"]["mean"]["mean_joint_acc"] == pytest.approx(12.0) and "mean_joint_acc" not in rows["b"]["mean"]
 
 
 def test_a_partial_run_builds_a_row_of_its_done_seeds(tmp_path):
@@ -712,11 +712,11 @@ def test_whole_parts_guesses_from_the_preset_where_no_comparable_run_was_timed(t
     # 10 s of start-up + 20,480 steps at 1,000/s: 30.5 s; 20 s after the reserve: left, the guess named.
     assert not ex.train_pending(selection, runs_dir, deadline=time.monotonic() + 50.0, reserve=30.0, log=log.append,
                                 registry=registry, whole_parts=True)
-    assert calls == [] and any("it needs ~30 s (guessed from its preset's runs under other overrides)" in line
+    assert calls == [] and any("it needs ~30 s (a rough guess from other runs of its preset)" in line
                                for line in log), log
-    # 170 s after the reserve: started (the time limit's own rule, which takes no rough guess, asks for more than
-    # twice the assumed start-up without a speed: 170 s > 2 x ex.ASSUMED_STARTUP).
-    ex.train_pending(selection, runs_dir, deadline=time.monotonic() + 200.0, reserve=30.0, log=log.append,
+    # 40 s after the reserve: started, though the time limit's own rule (which takes no rough guess) would ask for
+    # more than twice the assumed start-up: 40 s < 2 x ex.ASSUMED_STARTUP.
+    ex.train_pending(selection, runs_dir, deadline=time.monotonic() + 70.0, reserve=30.0, log=log.append,
                      registry=registry, whole_parts=True)
     assert calls == [os.path.join(runs_dir, "toy3", "fresh", "seeds-0-0")], log
 

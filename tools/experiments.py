@@ -71,16 +71,15 @@ OUT_DIR = os.path.join("results", "experiments")
 RATE_METRICS = ("target_reached", "self_collision", "obstacle_collision")
 """Metrics shown as percentages (rates in [0, 1] in eval.json and in `Run.paper`)."""
 TIMING_COLUMNS = {"wall_clock": "training wall-clock (s)", "steps_per_second": "env steps/s per seed"}
-EXTRA_COLUMNS = {"joint_vel": ("mean joint speed (rad/s)", 2), "joint_acc": ("mean joint acceleration (rad/s²)", 1)}
-"""Table columns beyond the paper's (agents.evaluation.EXTRA_METRICS): header and decimals."""
+"""Table columns read from metrics.csv instead of eval.json."""
 
 
 def table_metrics() -> dict[str, str]:
-    """Metric name -> eval.json key, for the metrics a table may show (besides `TIMING_COLUMNS`)."""
-    from agents.evaluation import EXTRA_METRICS, PAPER_METRICS
+    """Metric name -> eval.json key, for the metrics a table may show (besides `TIMING_COLUMNS`): the paper's and
+    those of agents.evaluation.EXTRA_COLUMNS."""
+    from agents.evaluation import EXTRA_COLUMNS, EXTRA_METRICS, PAPER_METRICS
 
-    return {**PAPER_METRICS, **{m: EXTRA_METRICS[m] for m in EXTRA_COLUMNS}}
-"""Table columns read from metrics.csv instead of eval.json."""
+    return {**PAPER_METRICS, **{name: EXTRA_METRICS[name] for name, _, _ in EXTRA_COLUMNS}}
 
 
 # ------------------------------------------------------------------------------------------------
@@ -692,7 +691,8 @@ def comparable_parts(run: Run, runs_dir: str, record: str | None = None, registr
 
 def same_preset_parts(run: Run, runs_dir: str, record: str | None = None, registry: dict | None = None) -> list:
     """The parts of the other registered runs of `run`'s preset, whatever their overrides: a rough stand-in speed
-    for estimates (`time_left`), never for a time limit's decisions."""
+    for estimates (`time_left`) and for `--whole-parts`' prediction of a config never timed, never for
+    `may_start`'s."""
     return parts_of_runs_like(run, lambda other: other.preset == run.preset, runs_dir, record, registry)
 
 
@@ -746,8 +746,8 @@ def start_verdict(st: RunState, part: PartState, seconds: float | None, compiled
     ""), ("later", why) where `whole_parts` predicts it cannot finish (the next run is tried), or ("stop", why)
     where `may_start` refuses it. Its speed is its own, else a part's of its run or of a comparable run
     (`speed_guess`); its start-up the longest of that guess and `startup_seen` (this call's). With none of these,
-    `whole_parts` predicts from `guess_speed(rough=True)` (its preset's runs under other overrides) rather than
-    leave the GPU idle; `may_start` never uses a rough guess. Used by a training
+    `whole_parts` predicts from `guess_speed(rough=True)` (other runs of its preset) rather than leave the GPU
+    idle, and starts the part where the prediction fits; `may_start` never uses a rough guess. Used by a training
     process before each part and by the `--parallel` driver before it starts a worker (a worker that would stop
     at once still costs its process start, 10-20 s past the parts' stop)."""
     rate_guess, startup_guess = guess_speed(st, part, runs_dir, record, registry)
@@ -759,11 +759,12 @@ def start_verdict(st: RunState, part: PartState, seconds: float | None, compiled
             rate, startup = guess_speed(st, part, runs_dir, record, registry, rough=True)
             need = seconds_to_finish(part, compiled, max([x for x in (startup, startup_seen) if x is not None],
                                                          default=None), rate)
-            rough = " (guessed from its preset's runs under other overrides)"
+            rough = " (a rough guess from other runs of its preset)" if need is not None else ""
         if need is None or need > seconds:
             return "later", (f"left for a later call: it needs "
                              f"{'an unknown time (no speed measured)' if need is None else f'~{need:.0f} s'}{rough} "
                              f"to finish, {max(0.0, seconds):.0f} s are left")
+        return "start", ""  # predicted to finish: worth its start-up whatever `may_start` would guess
     if not may_start(part, seconds, compiled, startup_guess, rate_guess):
         return "stop", f"time limit: stopped at {part.steps:,} of {part.budget:,} steps; run again to continue"
     return "start", ""
@@ -1094,9 +1095,9 @@ def train_parallel(selection, runs_dir: str, gpus: list[str], deadline: float | 
 
 def fmt_metric(metric: str, values) -> str:
     """'95.7 ± 0.4 %' for rates, '0.005 ± 0.001' for others (std over seeds; one seed: mean only)."""
-    from agents.evaluation import COLUMNS
+    from agents.evaluation import COLUMNS, EXTRA_COLUMNS
 
-    digits = {name: d for name, _, d in COLUMNS}.get(metric, EXTRA_COLUMNS.get(metric, ("", 3))[1])
+    digits = {name: d for name, _, d in COLUMNS + EXTRA_COLUMNS}.get(metric, 3)
     values = [float(v) for v in ([values] if isinstance(values, (int, float)) else values)]
     mean = sum(values) / len(values)
     std = statistics.pstdev(values) if len(values) > 1 else None
@@ -1106,10 +1107,9 @@ def fmt_metric(metric: str, values) -> str:
 
 
 def header(metric: str) -> str:
-    from agents.evaluation import COLUMNS
+    from agents.evaluation import COLUMNS, EXTRA_COLUMNS
 
-    return (TIMING_COLUMNS.get(metric) or {name: h for name, h, _ in COLUMNS}.get(metric)
-            or EXTRA_COLUMNS.get(metric, (metric,))[0])
+    return TIMING_COLUMNS.get(metric) or {name: h for name, h, _ in COLUMNS + EXTRA_COLUMNS}.get(metric, metric)
 
 
 def describe_overrides(run: Run) -> str:
@@ -1189,6 +1189,8 @@ def build_default(experiment: Experiment, states: list[RunState], out_dir: str, 
                 cells += ["", timing_cell(st, m) if ev is not None and timing else ""]
                 continue
             values = ev["per_seed"].get(keys[m]) if ev is not None else None
+            if values is not None and len(values) != ev["seeds"]:  # a metric some parts' evaluations lack
+                values = None
             cells += [fmt_metric(m, paper[m]) if m in paper else "", fmt_metric(m, values) if values is not None else ""]
             if values is not None:
                 row["per_seed"][m] = values

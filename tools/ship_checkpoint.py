@@ -25,6 +25,24 @@ def _score(metrics: dict) -> tuple[float, float]:
     return metrics["target_reached"], -(metrics.get("self_collision", 0.0) + metrics.get("obstacle_collision", 0.0))
 
 
+def _best_of_run_eval(eval_json: str, data: dict, env_steps: int, seeds: list[int] | None) -> int:
+    """`best_seed` from a run's own eval.json: its per-seed lists, in the order of the export's `seeds`."""
+    bad = f"--best-from {eval_json!r} is invalid:"
+    if data.get("env_steps") != env_steps:
+        raise ValueError(f"{bad} it evaluates {data.get('env_steps')} env steps, the checkpoint has {env_steps}; "
+                         "allowed is the eval.json of that checkpoint's run.")
+    if not seeds:
+        raise ValueError(f"{bad} a run's eval.json names no seeds; allowed with the export's seeds only.")
+    per_seed = {name: data["per_seed"].get(f"episode/{name}")
+                for name in ("target_reached", "self_collision", "obstacle_collision")}
+    lengths = {k: len(v) for k, v in per_seed.items() if v is not None}
+    if "target_reached" not in lengths or set(lengths.values()) != {len(seeds)}:
+        raise ValueError(f"{bad} its per-seed lists {lengths} do not hold one value for each of the export's seeds "
+                         f"{seeds}; allowed is the eval.json of the run the export was taken from.")
+    units = [{k: v[i] for k, v in per_seed.items() if v is not None} for i in range(len(seeds))]
+    return seeds[max(range(len(seeds)), key=lambda i: _score(units[i]))]
+
+
 def best_seed(eval_json: str, env_steps: int, seeds: list[int] | None = None) -> int:
     """The trained seed with the highest target-reached rate in an eval.py JSON of the checkpoint
     that has `env_steps` (ties: the lower self + obstacle collision rate), or in a run's own eval.json
@@ -32,13 +50,7 @@ def best_seed(eval_json: str, env_steps: int, seeds: list[int] | None = None) ->
     with open(eval_json) as f:
         data = json.load(f)
     if "per_seed" in data:
-        if data.get("env_steps") != env_steps or seeds is None:
-            raise ValueError(f"--best-from {eval_json!r} is invalid: it evaluates {data.get('env_steps')} env steps, "
-                             f"the checkpoint has {env_steps}; allowed is the eval.json of that checkpoint's run.")
-        per_seed = {name: data["per_seed"].get(f"episode/{name}") for name in
-                    ("target_reached", "self_collision", "obstacle_collision")}
-        units = [{k: v[i] for k, v in per_seed.items() if v is not None} for i in range(len(seeds))]
-        return seeds[max(range(len(seeds)), key=lambda i: _score(units[i]))]
+        return _best_of_run_eval(eval_json, data, env_steps, seeds)
     runs = [e for e in data.get("evaluations", []) if e.get("policy", {}).get("env_steps") == env_steps]
     if not runs:
         found = sorted({e.get("policy", {}).get("env_steps") for e in data.get("evaluations", [])}, key=str)

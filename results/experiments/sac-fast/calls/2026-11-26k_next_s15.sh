@@ -6,12 +6,14 @@
 #         whole parts only (it trains SAC in call 3); GPUs 2-3 PPO.
 #  call 3 (carry .devcall .carry_sac): GPU 0 sac-reach/panda to the end (on this machine since call 2), then
 #         PPO whole parts; GPU 1 sac-reach/ur5e-limited from .carry_sac (32.0M) to the end; GPUs 2-3 PPO whole
-#         parts. The SAC drivers pack what they leave into $OUT/carry_sac (30 MiB bundles).
+#         parts. The SAC drivers pack what they leave into $OUT/carry_sac_panda and $OUT/carry_sac_ur5e (30 MiB
+#         bundles, one folder each: a pack clears its folder first).
 # PPO: three seeds a part; where a GPU's runs will not come back (its last PPO call), --whole-parts, first
 # three-seed parts and then, in the time left, one-seed parts.
 CALL=$1; LIMIT=$2; start=$(date +%s)
 L=/tmp/calllogs; rm -rf $L; mkdir -p $L/w_g0 $L/w_g1 $L/w_g2 $L/w_g3 $L/w_sac_panda $L/w_sac_ur5e .carry_sac .carry_sac_b
 left() { echo $(( LIMIT - ($(date +%s) - start) )); }
+tl() { echo $(( $(left) - 45 )); }  # the drivers' limit: 45 s kept for shipping policies and packing the logs
 nvidia-smi --query-gpu=index,name --format=csv,noheader > $L/gpus.txt
 ROWS0=${ROWS0:-"joint-penalties relative-step"}
 ROWS1=${ROWS1:-"reach-observation"}
@@ -21,24 +23,24 @@ ppo() {  # ppo GPU NAME WHOLE ROWS...: PPO rows on one GPU until the limit (WHOL
   local gpu=$1 name=$2 whole=$3; shift 3
   if [ "$whole" = 1 ]; then
     CUDA_VISIBLE_DEVICES=$gpu python -m tools.experiments run "$@" --parallel --max-seeds 3 --whole-parts \
-      --time-limit $(left) --no-build --worker-logs $L/w_$name > $L/driver_$name.log 2>&1
-    [ $(left) -gt 150 ] || return 0
+      --time-limit $(tl) --no-build --worker-logs $L/w_$name > $L/driver_$name.log 2>&1
+    [ $(tl) -gt 150 ] || return 0
     CUDA_VISIBLE_DEVICES=$gpu python -m tools.experiments run "$@" --parallel --max-seeds 1 --whole-parts \
-      --time-limit $(left) --no-build --worker-logs $L/w_$name > $L/driver_${name}_1.log 2>&1
+      --time-limit $(tl) --no-build --worker-logs $L/w_$name > $L/driver_${name}_1.log 2>&1
   else
     CUDA_VISIBLE_DEVICES=$gpu python -m tools.experiments run "$@" --parallel --max-seeds 3 \
-      --time-limit $(left) --no-build --worker-logs $L/w_$name > $L/driver_$name.log 2>&1
+      --time-limit $(tl) --no-build --worker-logs $L/w_$name > $L/driver_$name.log 2>&1
   fi
 }
-sac() {  # sac GPU NAME CARRY_IN RUN [last]: a paper-setting SAC part, packed into $OUT/carry_sac where unfinished
-  local co=""; [ "$5" = last ] && co="--carry-out $OUT/carry_sac --carry-max-mb 30"
-  CUDA_VISIBLE_DEVICES=$1 python -m tools.experiments run $4 --parallel --time-limit $(left) --no-build \
+sac() {  # sac GPU NAME CARRY_IN RUN [last]: a paper-setting SAC part, packed into $OUT/carry_NAME where unfinished
+  local co=""; [ "$5" = last ] && co="--carry-out $OUT/carry_$2 --carry-max-mb 30"  # one folder a driver: a pack clears its own
+  CUDA_VISIBLE_DEVICES=$1 python -m tools.experiments run $4 --parallel --time-limit $(tl) --no-build \
     --worker-logs $L/w_$2 --carry-in $3 $co > $L/driver_$2.log 2>&1
 }
 case $CALL in
 1) ppo 0 g0 1 $ROWS0 & ppo 1 g1 0 $ROWS1 & ppo 2 g2 0 $ROWS2 & ppo 3 g3 0 $ROWS3 & ;;
 2) sac 0 sac_panda .carry_sac_b sac-reach/panda & ppo 1 g1 1 $ROWS1 & ppo 2 g2 0 $ROWS2 & ppo 3 g3 0 $ROWS3 & ;;
-3) ( sac 0 sac_panda .carry_sac_b sac-reach/panda last; [ $(left) -gt 150 ] && ppo 0 g0 1 $ROWS1 $ROWS0 ) &
+3) ( sac 0 sac_panda .carry_sac_b sac-reach/panda last; [ $(tl) -gt 150 ] && ppo 0 g0 1 $ROWS1 $ROWS0 ) &
    sac 1 sac_ur5e .carry_sac sac-reach/ur5e-limited last & ppo 2 g2 1 $ROWS2 & ppo 3 g3 1 $ROWS3 & ;;
 *) echo "CALL must be 1, 2 or 3"; exit 2 ;;
 esac
