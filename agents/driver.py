@@ -431,10 +431,9 @@ def learner_only_checkpoint(logdir: str, dest_logdir: str) -> int:
         config = dataclasses.replace(saved, devices=1)  # a run field: restoring needs no other device
         return config, programs_for(config)  # an error here is not damage: it propagates
 
-    def load(step, prepared):
+    def load(step, prepared):  # the learner by tree path: whatever env states (and env version) the run saved
         config, programs = prepared
-        abstract = programs.abstract_state
-        return ckpt.restore(step, abstract if config.checkpoint_envs else _learner_only(abstract, programs.learner))[0]
+        return ckpt.restore_matching(step, _learner_only(programs.abstract_state, programs.learner))
 
     try:
         step, prepared, state, bad = _newest_intact(ckpt, prepare, load)
@@ -453,15 +452,15 @@ def learner_only_checkpoint(logdir: str, dest_logdir: str) -> int:
 
 
 def export_checkpoint(step_dir: str) -> str:
-    """Writes the policy export of an existing checkpoint (restoring its whole training state once:
-    slow for SAC's replay buffer); returns the export directory."""
+    """Writes the policy export of an existing checkpoint (reading its whole training state once: slow for
+    SAC's replay buffer; its learner by tree path, whatever env states it holds); returns the export directory."""
     step_dir = os.path.abspath(step_dir)
     step = int(os.path.basename(step_dir))
     ckpt = Checkpointer(os.path.dirname(step_dir))
     try:
         config_dict = ckpt.restore_config(step)
         programs = programs_for(config_from_json(config_dict))
-        state, _ = ckpt.restore(step, programs.abstract_state)
+        state = ckpt.restore_matching(step, _learner_only(programs.abstract_state, programs.learner))
     finally:
         ckpt.close()
     return export.save(os.path.join(step_dir, export.DIRNAME), programs.learner, state.learner, config_dict, step)

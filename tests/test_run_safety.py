@@ -180,8 +180,9 @@ def test_resume_falls_back_to_the_newest_intact_checkpoint(earlier_run, tmp_path
 
 def test_a_checkpoint_whose_env_states_another_env_wrote_resumes_its_learner(earlier_run, tmp_path, monkeypatch):
     """Env states saved by another version of the env (here: one metric more in this one) do not restore; the
-    learner does, by tree path (its leaves equal the full restore's), and the run resumes from that step with
-    fresh episodes and a warning, instead of setting the checkpoint aside as damaged."""
+    learner does, by tree path (its leaves equal the full restore's): a learner-only copy can be made, and the
+    run resumes from that step with fresh episodes and a warning, instead of setting the checkpoint aside as
+    damaged."""
     from envs.point_mass import PointMass
 
     logdir = tmp_path / "run"
@@ -199,6 +200,13 @@ def test_a_checkpoint_whose_env_states_another_env_wrote_resumes_its_learner(ear
     rows_before = len((logdir / "metrics.csv").read_text().splitlines())
     original = PointMass._metrics
     monkeypatch.setattr(PointMass, "_metrics", lambda self, d, r, n: {**original(self, d, r, n), "extra": d})
+    # A learner-only copy (what tools.carry_parts packs) of the old-layout checkpoint, under the new env.
+    assert driver.learner_only_checkpoint(str(logdir), str(tmp_path / "carried")) == SHORT
+    carried = Checkpointer(str(tmp_path / "carried" / "checkpoints"))
+    copy = carried.restore_matching(SHORT, driver._learner_only(programs.abstract_state, programs.learner))
+    carried.close()
+    for a, b in zip(jax.tree.leaves(copy.learner), jax.tree.leaves(full.learner)):
+        np.testing.assert_array_equal(a, b)
     with pytest.warns(UserWarning, match=rf"checkpoint .*checkpoints/{SHORT}: its env states do not fit this env's"):
         result = driver.train(presets.make_config("point-mass-ppo", num_timesteps=SHORT + 10240, logdir=str(logdir),
                                                   resume=True, log_every=5120, **QUIET))
