@@ -22,6 +22,15 @@ def _leaf_name(index: int, path) -> str:
     return f"{index:05d}{re.sub(r'[^A-Za-z0-9]+', '_', jax.tree_util.keystr(path))}"
 
 
+def _rebuild(abstract_state, value_of):
+    """`abstract_state`'s tree with each leaf `value_of(name, abstract leaf)` (name: `_leaf_name`), and each
+    zero-size leaf, which checkpoints leave out, as zeros."""
+    leaves, treedef = jax.tree_util.tree_flatten_with_path(abstract_state)
+    return jax.tree_util.tree_unflatten(treedef, [
+        value_of(_leaf_name(i, path), a) if a.size else jnp.zeros(a.shape, a.dtype, device=getattr(a, "sharding", None))
+        for i, (path, a) in enumerate(leaves)])
+
+
 def _nonempty_leaves(tree) -> dict:
     """{name: leaf} of the leaves with at least one element, named by position and tree path.
 
@@ -69,13 +78,7 @@ class Checkpointer:
             step, args=ocp.args.Composite(state=ocp.args.StandardRestore(_nonempty_leaves(abstract_state)),
                                           config=ocp.args.JsonRestore())
         )
-        saved = restored.state
-        leaves, treedef = jax.tree_util.tree_flatten_with_path(abstract_state)
-        names = list(_nonempty_leaves(abstract_state))
-        it = iter(names)
-        state = [saved[next(it)] if a.size else jnp.zeros(a.shape, a.dtype, device=getattr(a, "sharding", None))
-                 for _, a in leaves]
-        return jax.tree_util.tree_unflatten(treedef, state), restored.config
+        return _rebuild(abstract_state, lambda name, _: restored.state[name]), restored.config
 
     def restore_matching(self, step: int, abstract_state):
         """The leaves of `abstract_state` read from the state saved at `step` by their tree path, whatever else it
@@ -85,19 +88,17 @@ class Checkpointer:
         by_path = {name[5:]: value for name, value in saved.items()}  # the position prefix dropped
         if len(by_path) != len(saved):
             raise ValueError(f"checkpoint {self.step_dir(step)} names two leaves alike: allowed is unique tree paths.")
-        state = []
-        for i, (path, a) in enumerate(jax.tree_util.tree_flatten_with_path(abstract_state)[0]):
-            sharding = getattr(a, "sharding", None)
-            if not a.size:
-                state.append(jnp.zeros(a.shape, a.dtype, device=sharding))
-                continue
-            value = by_path.get(_leaf_name(i, path)[5:])
+
+        def value_of(name, a):
+            value = by_path.get(name[5:])
             if value is None or value.shape != a.shape or value.dtype != a.dtype:
                 found = "none" if value is None else f"{value.dtype}{list(value.shape)}"
-                raise ValueError(f"checkpoint {self.step_dir(step)} has no leaf {jax.tree_util.keystr(path)} of "
-                                 f"{a.dtype}{list(a.shape)} (found: {found}).")
-            state.append(jax.device_put(value, sharding) if sharding is not None else value)
-        return jax.tree_util.tree_unflatten(jax.tree_util.tree_structure(abstract_state), state)
+                raise ValueError(f"checkpoint {self.step_dir(step)} has no leaf {name[5:]} of {a.dtype}{list(a.shape)} "
+                                 f"(found: {found}).")
+            sharding = getattr(a, "sharding", None)
+            return jax.device_put(value, sharding) if sharding is not None else value
+
+        return _rebuild(abstract_state, value_of)
 
     def restore_config(self, step: int) -> dict:
         return self.manager.restore(step, args=ocp.args.Composite(config=ocp.args.JsonRestore())).config

@@ -310,8 +310,8 @@ def test_collision_terminates_without_truncation_and_hand_built_metrics(compiled
 
 
 def test_joint_speed_and_acceleration_metrics_are_episode_means_restarted_by_a_reset(compiled):
-    """`mean_joint_vel` / `mean_joint_acc`: the mean over the episode's steps of ||qvel|| / ||qacc|| at each step's end, by
-    a plain-Python sum; the step after a termination (auto-reset) starts a new mean."""
+    """`mean_joint_vel` / `mean_joint_acc`: the mean over the episode's steps of ||qvel|| / ||qacc|| at each step's
+    end, by a plain-Python sum; the step after a termination (auto-reset) starts a new mean."""
     c = compiled("ur5e-reach")
     state = c.start(seed=22)
     actions = jax.random.uniform(jax.random.PRNGKey(23), (4, N, c.env.action_size), minval=-1, maxval=1)

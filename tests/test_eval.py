@@ -196,7 +196,8 @@ def test_export_of_one_seed_acts_as_that_seed_of_the_run(point_run, tmp_path):
     reached = own["episode/target_reached"]  # the point mass reports no collisions
     assert "episode/self_collision" not in own and reached[0] != reached[1]
     scores = list(reached)
-    out = ship_checkpoint.main([str(point_run), str(tmp_path / "best_own"), "--best-from", str(point_run / "eval.json")])
+    out = ship_checkpoint.main([str(point_run), str(tmp_path / "best_own"), "--best-from",
+                                str(point_run / "eval.json")])
     assert evaluation.checkpoint_policy(out).units == [scores.index(max(scores))]
     with pytest.raises(ValueError, match=r"it evaluates 10240 env steps, the checkpoint has 5120"):
         ship_checkpoint.main([str(point_run / "checkpoints" / "5120"), str(tmp_path / "old"), "--best-from",

@@ -280,17 +280,19 @@ def test_a_cross_row_holds_the_parts_evaluated(tmp_path):
 
 
 def test_a_table_shows_the_joint_speed_and_acceleration_means_where_evaluated(tmp_path):
-    """mean_joint_vel / mean_joint_acc columns: mean ± std over seeds from eval.json's episode/mean_joint_* keys, with their own
-    headers and decimals; an eval.json from before the env reported them leaves the cells empty."""
+    """mean_joint_vel / mean_joint_acc columns: mean ± std over seeds from eval.json's episode/mean_joint_* keys,
+    with their own headers and decimals; an eval.json from before the env reported them leaves the cells empty."""
     runs_dir, out = str(tmp_path / "runs"), str(tmp_path / "out")
     a, b = TOY.runs
     exp = dataclasses.replace(TOY, cross=(), metrics=("target_reached", "mean_joint_vel", "mean_joint_acc"))
     ex.validate_experiment(exp)
-    with pytest.raises(ValueError, match=r"metric 'joint_jerk' is unknown: allowed are .*mean_joint_vel, mean_joint_acc"):
+    with pytest.raises(ValueError,
+                       match=r"metric 'joint_jerk' is unknown: allowed are .*mean_joint_vel, mean_joint_acc"):
         ex.validate_experiment(dataclasses.replace(exp, metrics=("joint_jerk",)))
     new = _part(a, runs_dir, "toy", "a", 0, 2, steps=[10240], evaluated=10240)
     _write(os.path.join(new, "eval.json"), json.dumps({"env_steps": 10240, "eval_envs": 16, "per_seed": {
-        "episode/target_reached": [0.5, 0.7], "episode/mean_joint_vel": [0.5, 0.7], "episode/mean_joint_acc": [10.0, 14.0]}}))
+        "episode/target_reached": [0.5, 0.7], "episode/mean_joint_vel": [0.5, 0.7],
+        "episode/mean_joint_acc": [10.0, 14.0]}}))
     _part(b, runs_dir, "toy", "b", 0, 2, steps=[10240], evaluated=10240)  # target_reached only
     ex.build([(exp, list(exp.runs))], runs_dir, out, registry={"toy": exp}, log=lambda s: None)
     with open(os.path.join(out, "toy", "table.md")) as f:

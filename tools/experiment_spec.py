@@ -108,8 +108,8 @@ class Experiment:
     """Where the paper has it: table, figure or section ("not in the paper" for our studies)."""
     runs: tuple[Run, ...]
     metrics: tuple[str, ...] = ("target_reached", "self_collision", "distance")
-    """Table columns: keys of agents.evaluation.PAPER_METRICS, joint_vel / joint_acc (the episode's mean joint speed
-    and acceleration norms), or wall_clock / steps_per_second (metrics.csv)."""
+    """Table columns: keys of agents.evaluation.PAPER_METRICS or of its EXTRA_COLUMNS (mean_joint_vel,
+    mean_joint_acc), or wall_clock / steps_per_second (metrics.csv)."""
     curves: tuple[str, ...] = ("episode/target_reached", "episode/self_collision")
     """metrics.csv columns drawn in the figure (() = no figure)."""
     curve_groups: tuple[tuple[str, tuple[str, ...]], ...] = ()

@@ -115,10 +115,11 @@ def validate_experiment(experiment: Experiment) -> None:
     names = [c.name for c in experiment.cross]
     if len(set(names)) != len(names):
         raise ValueError(f"experiment {experiment.name!r} has crosses {names}: allowed are distinct names.")
+    allowed = [*table_metrics(), *TIMING_COLUMNS]
     for m in experiment.metrics:
-        if m not in table_metrics() and m not in TIMING_COLUMNS:
+        if m not in allowed:
             raise ValueError(f"experiment {experiment.name!r}: metric {m!r} is unknown: allowed are "
-                             f"{', '.join([*table_metrics(), *TIMING_COLUMNS])}.")
+                             f"{', '.join(allowed)}.")
 
 
 # ------------------------------------------------------------------------------------------------
@@ -750,15 +751,16 @@ def start_verdict(st: RunState, part: PartState, seconds: float | None, compiled
     idle, and starts the part where the prediction fits; `may_start` never uses a rough guess. Used by a training
     process before each part and by the `--parallel` driver before it starts a worker (a worker that would stop
     at once still costs its process start, 10-20 s past the parts' stop)."""
+    def longest(*startups):
+        return max((x for x in startups if x is not None), default=None)
+
     rate_guess, startup_guess = guess_speed(st, part, runs_dir, record, registry)
-    seen = [x for x in (startup_seen, startup_guess) if x is not None]
-    startup_guess = max(seen) if seen else None
+    startup_guess = longest(startup_seen, startup_guess)
     if whole_parts and seconds is not None:
         need, rough = seconds_to_finish(part, compiled, startup_guess, rate_guess), ""
         if need is None:  # better a rough guess than an idle GPU: a part it misjudges stops with the call
             rate, startup = guess_speed(st, part, runs_dir, record, registry, rough=True)
-            need = seconds_to_finish(part, compiled, max([x for x in (startup, startup_seen) if x is not None],
-                                                         default=None), rate)
+            need = seconds_to_finish(part, compiled, longest(startup, startup_seen), rate)
             rough = " (a rough guess from other runs of its preset)" if need is not None else ""
         if need is None or need > seconds:
             return "later", (f"left for a later call: it needs "
@@ -1398,8 +1400,8 @@ def main(argv=None) -> int:
                    "carries (default: `tools.carry_parts.TOTAL_MB`; first fit, the parts with the most steps first, "
                    "into DIR, DIR/more-1, ...)")
     p.add_argument("--whole-parts", action="store_true", help="run --time-limit: train only the parts predicted to "
-                   "finish in time (measured speeds; for a config never timed, its preset's), for a last call on a machine "
-                   "that will not keep its runs/")
+                   "finish in time (measured speeds; for a config never timed, its preset's), for a last call on a "
+                   "machine that will not keep its runs/")
     args = p.parse_args(argv)
     if args.max_seeds is not None and args.max_seeds < 1:
         raise ValueError(f"--max-seeds={args.max_seeds} is impossible: allowed is 1 or more (or leave it out).")
