@@ -126,3 +126,6 @@ def test_experiment_rows_for_the_readme_only_when_every_seed_is_evaluated(tmp_pa
                                              "([table.md](experiments/x/table.md))")
     assert ri._experiment_ours(ctx, "x", precision=True).startswith(
         "done: 0.005 m, 99.0, 0.05; half: 0.005 m, 99.0, 0.05 (1 of 2 seeds); none: not done; ")
+    # One run's rows (a paper row that is one run of an experiment): its own row and its cross rows.
+    assert ri._experiment_ours(ctx, "x", run="done") == ("done: 96.5 ± 0.5 % reached; done, sampled: 100.0 % reached "
+                                                         "(1 of 2 seeds) ([table.md](experiments/x/table.md))")

@@ -627,10 +627,10 @@ def index_table(ctx: Context) -> list[list[str]]:
         paper = PAPER_ROWS[run.paper]
         rows.append([f"Results: {run.label}", f"{paper_pct(paper[0])} / {paper_collisions(run.paper)}",
                      _eval_cell(ctx, run.file), f"`{command}`", ctx.link(run.file)])
-    for key, label in (("panda-reach-sac", "Results: Panda reach, SAC"),
-                       ("ur5e-reach-sac-limited-init", "Results: UR5e reach, SAC, 360° initial range")):
+    for key, run, label in (("panda-reach-sac", "panda", "Results: Panda reach, SAC"),
+                            ("ur5e-reach-sac-limited-init", "ur5e-limited", "Results: UR5e reach, SAC, 360° initial range")):
         paper = PAPER_ROWS[key]
-        rows.append([label, f"{paper_pct(paper[0])} / {paper_collisions(key)}", _experiment_ours(ctx, "sac-reach"),
+        rows.append([label, f"{paper_pct(paper[0])} / {paper_collisions(key)}", _experiment_ours(ctx, "sac-reach", run=run),
                      "`python -m tools.experiments run sac-reach`", ""])
     b = _baseline_rows(ctx)
     for radius in (0.01, 0.02):
@@ -680,14 +680,17 @@ def index_table(ctx: Context) -> list[list[str]]:
 # The registered experiments (tools/experiment_registry.py): their budgets, the paper's finding and ours from the
 # table.json each build writes under results/experiments/<name>/.
 
-def _experiment_ours(ctx: Context, name: str, precision: bool = False) -> str:
+def _experiment_ours(ctx: Context, name: str, precision: bool = False, run: str | None = None) -> str:
     """Each row's target-reached rate (mean ± std over seeds), or with `precision` its distance, steps in target
-    and exits from the target (the action-space table's columns), from the experiment's table.json."""
+    and exits from the target (the action-space table's columns), from the experiment's table.json; with `run`,
+    only that run's rows (its own and its cross-evaluations)."""
     file = f"experiments/{name}/table.json"
     if not os.path.exists(os.path.join(ctx.results, file)):
         return "not run"
     cells = []
     for row in ctx.json(file)["rows"]:
+        if run is not None and row.get("run") != run:
+            continue
         values = row.get("per_seed", {}).get("target_reached")
         if not values and "cross" in row:
             continue  # a cross-evaluation not made yet (`tools.experiments list` says which parts are left)
