@@ -162,6 +162,19 @@ LAYOUT_FIELDS = ("observation", "action")
 meaning of its action (relative steps or absolute joint targets)."""
 
 
+def unseen_constants(trained_config, asked_config) -> list[str]:
+    """Observed parts that held one value in every training episode (`constant_observations` of the env config)
+    but vary, or hold another value, under `asked_config`. The network never saw them change, and its
+    observation normaliser, fit to one value (variance 0), divides any other by ~1e-4 and clips it: a static
+    agent evaluated on moving obstacles while observing their velocity reached 0 % where it reached 80 % on
+    static ones (results/experiments/obstacles-moving3)."""
+    trained = getattr(trained_config, "constant_observations", dict)()
+    asked = getattr(asked_config, "constant_observations", dict)()
+    observed = getattr(trained_config, "observation", ())
+    return [f"{part} (trained with {why}, here {asked.get(part, 'varying')})" for part, why in trained.items()
+            if part in observed and asked.get(part) != why]
+
+
 def check_compatible(policy: Policy, env_name: str, env, allow_env_mismatch: bool = False) -> None:
     """ValueError unless `policy` can act in `env` (same robot, matching observation and action
     sizes, and the trained observation layout and action mode; with `allow_env_mismatch` a different
@@ -199,6 +212,16 @@ def check_compatible(policy: Policy, env_name: str, env, allow_env_mismatch: boo
         raise ValueError(f"checkpoint {policy.name!r} cannot run with {'; '.join(differ)}: its network reads the "
                          "observation's parts in the trained order and its actions in the trained mode; allowed are "
                          "the trained values (or --allow-env-mismatch to evaluate anyway, with a warning).")
+    unseen = unseen_constants(policy.train_env_config, config)
+    if unseen and allow_env_mismatch:
+        warnings.warn(f"checkpoint {policy.name!r} observes {'; '.join(unseen)}: a value it never saw in training, "
+                      "which its observation normaliser scales to the clip (allowed by allow_env_mismatch).",
+                      stacklevel=3)
+    elif unseen:
+        raise ValueError(f"checkpoint {policy.name!r} cannot be evaluated fairly here: it observes {'; '.join(unseen)}. "
+                         "It saw one value of each in training, and its observation normaliser scales any other to "
+                         "the clip; allowed are the trained settings of those parts, or a policy trained without "
+                         "them in its observation (or --allow-env-mismatch to evaluate anyway, with a warning).")
 
 
 # ------------------------------------------------------------------------------------------------

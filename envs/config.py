@@ -235,6 +235,17 @@ class ReachAvoidConfig(ReachConfig):
     def allowed_observations(self) -> tuple[str, ...]:
         return REACH_OBSERVATIONS + OBSTACLE_OBSERVATIONS
 
+    def constant_observations(self) -> dict[str, str]:
+        """Observation parts that hold one value in every episode under this config, each with the setting that
+        fixes it: obstacle_vel (0) when the obstacles are static, obstacle_size and obstacle_radius when every
+        obstacle has one radius. A policy trained on one of them has never seen it change
+        (`agents.evaluation.unseen_constants`)."""
+        low, high = self.radius_bounds
+        fixed = {"obstacle_vel": f"obstacle_motion={self.obstacle_motion!r}"} if self.obstacle_motion == "static" else {}
+        if low == high:
+            fixed |= {part: f"obstacle radius {low:g} m" for part in ("obstacle_size", "obstacle_radius")}
+        return fixed
+
     def validate(self) -> None:
         super().validate()
         positive("obstacle_radius", self.obstacle_radius)

@@ -900,3 +900,35 @@ def test_failure_report_bins_outcomes_by_target_height():
     text = failure_report.markdown({"episodes": 7, "outcomes": {}, "ending_at_a_joint_limit": {},
                                     "by_target_height": bins}, "t")
     assert "| 0-10 cm | 2 | 50.0 % | 50.0 % | 0.0 % |" in text
+
+
+def test_a_part_observed_at_one_value_in_training_is_refused_where_it_changes():
+    """A static-obstacle agent that observed obstacle_vel (always 0) saw it as one value: its normaliser, variance
+    0, scales any motion to the clip (0 % reached where it reached 80 %: results/experiments/obstacles-moving3).
+    Evaluating it on moving obstacles is refused (warned with allow_env_mismatch); the agent trained on moving
+    obstacles may be evaluated on static ones, whose zero velocity it saw within its range."""
+    from types import SimpleNamespace
+
+    observation = ("joint_pos", "ee_pos", "target_pos", "obstacle_pos", "obstacle_radius", "obstacle_vel")
+    options = dict(num_obstacles=2, obstacle_radius_range=(0.05, 0.1), observation=observation, substeps=2)
+    static = envs.make("panda-reach-avoid", obstacle_motion="static", **options)
+    moving = envs.make("panda-reach-avoid", obstacle_motion="linear", **options)
+
+    def trained_on(env):
+        e = SimpleNamespace(env_name="panda-reach-avoid", config=SimpleNamespace(env=env.config),
+                            observation_size=env.observation_size, action_size=env.action_size)
+        return evaluation.Policy("checkpoint", "run", [0], export=e)
+
+    with pytest.raises(ValueError, match=r"cannot be evaluated fairly here: it observes obstacle_vel \(trained with "
+                                         r"obstacle_motion='static', here varying\)\. .*--allow-env-mismatch"):
+        evaluation.check_compatible(trained_on(static), "panda-reach-avoid", moving)
+    with pytest.warns(UserWarning, match=r"observes obstacle_vel .* scales to the clip"):
+        evaluation.check_compatible(trained_on(static), "panda-reach-avoid", moving, allow_env_mismatch=True)
+    evaluation.check_compatible(trained_on(moving), "panda-reach-avoid", static)
+    evaluation.check_compatible(trained_on(static), "panda-reach-avoid", static)
+    # A fixed radius observed in training, evaluated at another: the same refusal.
+    fixed = envs.make("panda-reach-avoid", **{**options, "obstacle_radius_range": None})
+    bigger = envs.make("panda-reach-avoid", **{**options, "obstacle_radius_range": None, "obstacle_radius": 0.2})
+    with pytest.raises(ValueError, match=r"obstacle_radius \(trained with obstacle radius 0.1 m, here obstacle radius "
+                                         r"0.2 m\)"):
+        evaluation.check_compatible(trained_on(fixed), "panda-reach-avoid", bigger)

@@ -133,6 +133,19 @@ def test_bad_overrides_and_names_raise():
                            (ex.Cross("a", "x", {}), r"env=\{\} with stochastic=False evaluates the run as trained again")):
         with pytest.raises(ValueError, match=message):
             ex.validate_experiment(dataclasses.replace(TOY, cross=(cross,)))
+    # A cross that moves obstacles under a run that observed their velocity as 0 in every episode is refused at
+    # registration (its policies would read the motion through a normaliser fit to one value), not after training.
+    static = ex.Run("static", "panda-reach-avoid-ppo-moving3", {"env.obstacle_motion": "static"})
+    blind = ex.Run("blind", "panda-reach-avoid-ppo-moving3", {
+        "env.obstacle_motion": "static", "env.observation": ("joint_pos", "ee_pos", "target_pos", "obstacle_pos")})
+    avoid = ex.Experiment("avoid", "static and moving", "not in the paper", (static, blind))
+    with pytest.raises(ValueError, match=r"cross 'static-on-moving': env=\{'obstacle_motion': 'linear'\} changes what "
+                                         r"run 'static' observed as one value in training: obstacle_vel \(trained with "
+                                         r"obstacle_motion='static', here varying\)"):
+        ex.validate_experiment(dataclasses.replace(avoid, cross=(ex.Cross("static", "static-on-moving",
+                                                                          {"obstacle_motion": "linear"}),)))
+    ex.validate_experiment(dataclasses.replace(avoid, cross=(ex.Cross("blind", "blind-on-moving",
+                                                                      {"obstacle_motion": "linear"}),)))
     assert ex.cli_option("algo.policy_hidden_sizes", (64, 64)) == ["--algo.policy-hidden-sizes", "64", "64"]
     assert ex.cli_option("tensorboard", False) == ["--no-tensorboard"]
 

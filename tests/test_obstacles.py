@@ -5,6 +5,7 @@ spheres as geoms; trajectories against hand-computed positions and their bounds;
 Two compiled variants, shared by the module (2 physics substeps keep MJX's CPU compile short).
 """
 
+import dataclasses
 import typing
 
 import jax
@@ -100,6 +101,19 @@ def test_bad_values_are_refused_naming_the_field(options, field, allowed):
     with pytest.raises(ValueError, match=rf"^{field}={value.replace('(', '[(]').replace(')', '[)]')} is invalid: "
                                          rf"allowed (is|are).*{allowed}"):
         envs.make_config("ur5e-reach-avoid", **options)
+
+
+def test_constant_observation_parts_are_named_with_their_setting():
+    """The parts a static or fixed-size config holds at one value in every episode: what a policy trained there
+    never saw change (agents.evaluation.unseen_constants)."""
+    paper = envs.registry.default_config("ur5e-reach-avoid")
+    assert paper.constant_observations() == {"obstacle_vel": "obstacle_motion='static'",
+                                             "obstacle_size": "obstacle radius 0.1 m",
+                                             "obstacle_radius": "obstacle radius 0.1 m"}
+    moving = dataclasses.replace(paper, obstacle_motion="sinusoid", obstacle_radius_range=(0.07, 0.07))
+    assert moving.constant_observations() == {"obstacle_size": "obstacle radius 0.07 m",
+                                              "obstacle_radius": "obstacle radius 0.07 m"}
+    assert dataclasses.replace(moving, obstacle_radius_range=(0.05, 0.1)).constant_observations() == {}
 
 
 def test_reach_task_has_noise_and_latency_but_no_obstacle_options():
@@ -308,6 +322,9 @@ def test_observations_and_penalty_of_several_moving_obstacles(moving):
         links = np.asarray(s.pipeline_state.xpos)[:, robot.link_bodies]
         d = np.linalg.norm(links[:, None] - pos.reshape(N, 3, 1, 3), axis=-1) - radii[..., None]
         np.testing.assert_allclose(parts["link_obstacle_dist"], d.min(axis=1), atol=1e-5)
+    # Radii and velocities vary between episodes here, so no part is constant (what evaluation checks use).
+    assert cfg.constant_observations() == {}
+    assert np.ptp(parts["obstacle_radius"]) > 0.01 and np.ptp(parts["obstacle_vel"]) > 0.01
     # The obstacles after one step: the closed form at 2 physics steps, a straight line from the centre here.
     motion = jax.tree.map(np.asarray, state.info["obstacle_motion"])
     free = motion["center"] + motion["velocity"] * 2 * env.physics_dt

@@ -8,6 +8,7 @@ Budgets: the presets' (the paper states none per experiment), except where a run
 (its table names it beside the overrides).
 """
 
+from agents.presets import MOVING_OBSTACLES_3
 from tools.experiment_spec import Cross, Experiment, Run, register
 
 _REACH_OBS = ("joint_pos", "ee_pos", "target_pos", "ee_to_target")
@@ -278,13 +279,18 @@ register(Experiment(
     note="Tests whether the preset's misses, many of which end stopped near the edge of the penalty's margin "
          "(results/failures/README.md), turn into reaches when the margin leaves the arm more room."))
 
+_MOVING3_STATIC_OBS = tuple(p for p in MOVING_OBSTACLES_3["observation"] if p != "obstacle_vel")
 register(Experiment(
     "obstacles-moving3", "Reach-avoid with 3 obstacles of random radius (0.05-0.1 m), moving or static, UR5e and Panda",
     "not in the paper (issue 29; the future work of its Discussion)",
     (Run("ur5e-moving", "ur5e-reach-avoid-ppo-moving3"),
      Run("panda-moving", "panda-reach-avoid-ppo-moving3"),
-     Run("ur5e-static", "ur5e-reach-avoid-ppo-moving3", {"env.obstacle_motion": "static"}, seeds=3),
-     Run("panda-static", "panda-reach-avoid-ppo-moving3", {"env.obstacle_motion": "static"}, seeds=3)),
+     Run("ur5e-static", "ur5e-reach-avoid-ppo-moving3",
+         {"env.obstacle_motion": "static", "env.observation": _MOVING3_STATIC_OBS}, seeds=3),
+     Run("panda-static", "panda-reach-avoid-ppo-moving3",
+         {"env.obstacle_motion": "static", "env.observation": _MOVING3_STATIC_OBS}, seeds=3),
+     Run("panda-static-vel", "panda-reach-avoid-ppo-moving3", {"env.obstacle_motion": "static"}, seeds=3,
+         label="panda-static, velocity observed (always 0)")),
     metrics=_AVOID_METRICS, curves=_AVOID_CURVES,
     cross=tuple(Cross(f"{robot}-{trained}", f"{robot}-{trained}-on-{other}", {"obstacle_motion": motion},
                       label=f"{robot}, trained {trained}, evaluated {other}")
@@ -293,5 +299,7 @@ register(Experiment(
     paper="Not in the paper; its one static 0.1 m obstacle: UR5e 86.8 % reached (4.8 % obstacle collisions), "
           "Panda 95.2 % (2.5 %).",
     note="Moving: linear paths at 0.05-0.2 m/s bouncing in the sampling cube, radii and velocities observed "
-         "(`agents/presets.py`, MOVING_OBSTACLES_3); static: the same obstacles held still (their velocity "
-         "observation is then 0), so each agent can be evaluated on the other motion (the cross rows)."))
+         "(`agents/presets.py`, MOVING_OBSTACLES_3); static: the same obstacles held still and their velocity not "
+         "observed, so each agent can be evaluated on the other motion (the cross rows). panda-static-vel observed "
+         "the velocity (0 in every episode): its normaliser then scales any motion to the clip, so it is not "
+         "cross-evaluated (agents.evaluation.unseen_constants; results/experiments/README.md)."))

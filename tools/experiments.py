@@ -89,7 +89,7 @@ def table_metrics() -> dict[str, str]:
 def validate_experiment(experiment: Experiment) -> None:
     """Builds and validates every run's TrainConfig (agents.config.validate; nothing compiles)."""
     from agents.config import validate
-    from agents.evaluation import PAPER_METRICS
+    from agents.evaluation import PAPER_METRICS, unseen_constants
     from agents.presets import PRESETS
 
     for run in experiment.runs:
@@ -111,7 +111,11 @@ def validate_experiment(experiment: Experiment) -> None:
         if not cross.env and not cross.stochastic:
             raise ValueError(f"{where}: env={{}} with stochastic=False evaluates the run as trained again: allowed are "
                              "env fields to change, stochastic=True, or both.")
-        cross_env(run, cross, where)
+        unseen = unseen_constants(run.config().env, cross_env(run, cross, where))
+        if unseen:
+            raise ValueError(f"{where}: env={cross.env!r} changes what run {run.name!r} observed as one value in "
+                             f"training: {'; '.join(unseen)}; allowed are crosses of runs that do not observe it "
+                             "(drop it from the run's env.observation).")
     names = [c.name for c in experiment.cross]
     if len(set(names)) != len(names):
         raise ValueError(f"experiment {experiment.name!r} has crosses {names}: allowed are distinct names.")
