@@ -204,24 +204,28 @@ def check_compatible(policy: Policy, env_name: str, env, allow_env_mismatch: boo
     differ = [f"{name}={getattr(config, name)!r} (trained: {getattr(e.config.env, name)!r})" for name in LAYOUT_FIELDS
               if hasattr(config, name) and hasattr(e.config.env, name)
               and getattr(config, name) != getattr(e.config.env, name)]
-    if differ and allow_env_mismatch:
-        warnings.warn(f"checkpoint {policy.name!r} is evaluated with {'; '.join(differ)}: its network reads and acts "
-                      "as trained, so the numbers describe a mismatched policy (allowed by allow_env_mismatch).",
-                      stacklevel=3)
-    elif differ:
-        raise ValueError(f"checkpoint {policy.name!r} cannot run with {'; '.join(differ)}: its network reads the "
-                         "observation's parts in the trained order and its actions in the trained mode; allowed are "
-                         "the trained values (or --allow-env-mismatch to evaluate anyway, with a warning).")
+    if differ:
+        _mismatch(allow_env_mismatch,
+                  f"checkpoint {policy.name!r} is evaluated with {'; '.join(differ)}: its network reads and acts as "
+                  "trained, so the numbers describe a mismatched policy (allowed by allow_env_mismatch).",
+                  f"checkpoint {policy.name!r} cannot run with {'; '.join(differ)}: its network reads the observation's "
+                  "parts in the trained order and its actions in the trained mode; allowed are the trained values")
     unseen = unseen_constants(policy.train_env_config, config)
-    if unseen and allow_env_mismatch:
-        warnings.warn(f"checkpoint {policy.name!r} observes {'; '.join(unseen)}: a value it never saw in training, "
-                      "which its observation normaliser scales to the clip (allowed by allow_env_mismatch).",
-                      stacklevel=3)
-    elif unseen:
-        raise ValueError(f"checkpoint {policy.name!r} cannot be evaluated fairly here: it observes {'; '.join(unseen)}. "
-                         "It saw one value of each in training, and its observation normaliser scales any other to "
-                         "the clip; allowed are the trained settings of those parts, or a policy trained without "
-                         "them in its observation (or --allow-env-mismatch to evaluate anyway, with a warning).")
+    if unseen:
+        _mismatch(allow_env_mismatch,
+                  f"checkpoint {policy.name!r} observes {'; '.join(unseen)}: a value it never saw in training, which "
+                  "its observation normaliser scales to the clip (allowed by allow_env_mismatch).",
+                  f"checkpoint {policy.name!r} cannot be evaluated fairly here: it observes {'; '.join(unseen)}. It saw "
+                  "one value of each in training, and its observation normaliser scales any other to the clip; "
+                  "allowed are the trained settings of those parts, or a policy trained without them in its observation")
+
+
+def _mismatch(allowed: bool, warning: str, refusal: str) -> None:
+    """Warns (the user asked for the mismatch: `allow_env_mismatch`) or raises, naming the escape hatch."""
+    if allowed:
+        warnings.warn(warning, stacklevel=4)
+    else:
+        raise ValueError(refusal + " (or --allow-env-mismatch to evaluate anyway, with a warning).")
 
 
 # ------------------------------------------------------------------------------------------------
