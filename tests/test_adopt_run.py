@@ -65,6 +65,8 @@ def test_a_matching_run_is_recorded_as_the_done_part(tmp_path):
     _, run = _run()
     state = ex.run_state(*_run(), str(tmp_path / "runs"), str(out))
     assert state.status == "done" and [p.name for p in state.done_parts] == ["seeds-0-4"]
+    # without timings, the table's timing cells stay empty (not 0 s)
+    assert ex.timing_cell(state, "wall_clock") == "" == ex.timing_cell(state, "steps_per_second")
     with pytest.raises(ValueError, match="exists: allowed is a run with no part recorded"):
         adopt_run.adopt(NAME, *_files(tmp_path), out=str(out))
 

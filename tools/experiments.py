@@ -222,8 +222,9 @@ class RunState:
 
     @property
     def wall_seconds(self) -> float:
-        """Training wall-clock of one process, mean over the done parts (compilation included)."""
-        parts = self.done_parts
+        """Training wall-clock of one process, mean over the done parts with timings (compilation included); 0
+        without any (a part recorded by tools.adopt_run --no-timing)."""
+        parts = [p for p in self.done_parts if p.wall_seconds > 0]
         return sum(p.wall_seconds for p in parts) / len(parts) if parts else 0.0
 
     @property
@@ -1165,7 +1166,7 @@ def timing_cell(state: RunState, metric: str) -> str:
     seed counts get one speed each ("500,000 (2 seeds) / 800,000 (1 seed)")."""
     parts = state.done_parts
     if metric == "wall_clock":
-        return f"{state.wall_seconds:,.0f}" if parts else ""
+        return f"{state.wall_seconds:,.0f}" if state.wall_seconds > 0 else ""
     by_count: dict[int, list[float]] = {}
     for p in parts:
         if p.rate is not None:
