@@ -65,8 +65,15 @@ def test_a_matching_run_is_recorded_as_the_done_part(tmp_path):
     _, run = _run()
     state = ex.run_state(*_run(), str(tmp_path / "runs"), str(out))
     assert state.status == "done" and [p.name for p in state.done_parts] == ["seeds-0-4"]
-    # without timings, the table's timing cells stay empty (not 0 s)
+    # without timings, the table's timing cells stay empty (not 0 s); the table names the source
     assert ex.timing_cell(state, "wall_clock") == "" == ex.timing_cell(state, "steps_per_second")
+    assert ex.merged_evaluation(state)["sources"] == [str(tmp_path / "eval.json")]
+    exp, run = _run()
+    ex.build_default(exp, [state], str(out / "reach-avoid-reward"), code="abc1234")
+    table = (out / "reach-avoid-reward" / "table.md").read_text()
+    assert (f"recorded with `tools.adopt_run` from the `eval.py` evaluation of the final checkpoint: dense from "
+            f"{tmp_path / 'eval.json'}.") in table
+    assert "| 82.0 ± 1.4 % |" in table
     with pytest.raises(ValueError, match="exists: allowed is a run with no part recorded"):
         adopt_run.adopt(NAME, *_files(tmp_path), out=str(out))
 

@@ -1148,6 +1148,8 @@ def merged_evaluation(state: RunState, files: dict[str, str] | None = None) -> d
         merged["seeds"] += keep
         if ev.get("device"):  # eval.json files written before the device was recorded lack it
             merged.setdefault("devices", []).extend([ev["device"]] * keep)  # one per seed
+        if ev.get("source"):  # a part recorded by tools.adopt_run: the evaluation it was made from
+            merged.setdefault("sources", []).append(ev["source"]["eval_json"])
         for name, values in ev["per_seed"].items():
             merged["per_seed"].setdefault(name, []).extend(values[:keep])
     return merged
@@ -1214,6 +1216,7 @@ def build_default(experiment: Experiment, states: list[RunState], out_dir: str, 
         rows.append(cells)
         table.append(row)
 
+    adopted = []  # runs trained by train.py before their experiment existed (tools.adopt_run)
     for st in states:
         run = st.run
         row = {"run": run.name, "label": run.title, "preset": run.preset, "overrides": run.overrides,
@@ -1225,7 +1228,11 @@ def build_default(experiment: Experiment, states: list[RunState], out_dir: str, 
                                "steps_per_second_per_seed": p.rate} for p in st.done_parts])
         overrides = describe_overrides(run)
         cells = [run.title, f"`{run.preset}`" + (f" {overrides}" if overrides else "")]
-        add(cells, row, run.paper, merged_evaluation(st) if st.done_parts else None, st, run.seeds)
+        evaluated = merged_evaluation(st) if st.done_parts else None
+        if evaluated and evaluated.get("sources"):
+            row["sources"] = evaluated["sources"]
+            adopted.append(f"{run.name} from {', '.join(evaluated['sources'])}")
+        add(cells, row, run.paper, evaluated, st, run.seeds)
     by_name = {st.run.name: st for st in states}
     for cross in experiment.cross:
         st = by_name[cross.run]
@@ -1253,7 +1260,9 @@ def build_default(experiment: Experiment, states: list[RunState], out_dir: str, 
               "distances in m. Each run's config.json, eval.json and metrics.csv per part (the "
               "seeds trained in one process): `runs/<run>/seeds-<first>-<last>/` beside this table"
               + (f" ({'; '.join(shared)}: the same training config, trained once)" if shared else "") + ".",
-              f"Runs (seeds x env steps): {budget}.", f"Command: `{command}`.",
+              f"Runs (seeds x env steps): {budget}.", f"Command: `{command}`."
+              + (f" Trained by `train.py` before this experiment and recorded with `tools.adopt_run` from the "
+                 f"`eval.py` evaluation of the final checkpoint: {'; '.join(adopted)}." if adopted else ""),
               f"Code {code}, built {datetime.date.today().isoformat()}.", ""]
     os.makedirs(out_dir, exist_ok=True)
     written = [os.path.join(out_dir, "table.md"), os.path.join(out_dir, "table.json")]
