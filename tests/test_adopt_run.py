@@ -101,6 +101,9 @@ def _short_metrics(tmp_path):
 
 @pytest.mark.parametrize("make, message", [
     (_discount_changed, r"evaluated a run that is not reach-avoid-reward/dense: algo.discount=0.\d+ differs"),
+    (lambda t: _edited(t, lambda e: e["policy"]["train_config"].update(num_timesteps=300_000_000)),
+     r"not reach-avoid-reward/dense: num_timesteps=300000000, the run has 192000000"),
+    (lambda t: _edited(t, lambda e: e["policy"]["train_config"].update(seeds=3)), r"seeds=3, the run has 5"),
     (lambda t: _files(t, num_envs=1024), r"num_envs=1024 differs from the driver's 4096"),
     (lambda t: _files(t, actions="stochastic"), r"actions='stochastic' differs from the driver's 'deterministic'"),
     (lambda t: _edited(t, lambda e: e["env_config"].update(obstacle_radius=0.2)), r"env_config=.*obstacle_radius=0.2.* differs"),

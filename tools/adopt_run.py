@@ -22,6 +22,7 @@ import csv
 import io
 import json
 import os
+import warnings
 
 from tools import experiments as ex
 
@@ -111,10 +112,15 @@ def adopt(name: str, eval_json: str, metrics: str, timing: bool = True, out: str
     os.makedirs(folder)
     try:
         write_atomic(os.path.join(folder, "config.json"), json.dumps(saved, indent=2))
-        reason = ex.config_difference(config, os.path.join(folder, "config.json"))
-        if reason or seeds != run.seeds:
-            raise ValueError(f"--eval-json {eval_json!r} evaluated a run that is not {name}: "
-                             f"{reason or f'seeds={seeds}, the run has {run.seeds}'}.")
+        with warnings.catch_warnings():  # a resume's notice of a changed num_timesteps: refused below instead
+            warnings.simplefilter("ignore")
+            reason = ex.config_difference(config, os.path.join(folder, "config.json"))
+        if not reason and seeds != run.seeds:
+            reason = f"seeds={seeds}, the run has {run.seeds}"
+        if not reason and saved.get("num_timesteps") != run.budget():  # its schedules spanned another length
+            reason = f"num_timesteps={saved.get('num_timesteps')}, the run has {run.budget()}"
+        if reason:
+            raise ValueError(f"--eval-json {eval_json!r} evaluated a run that is not {name}: {reason}.")
         evaluated = driver_eval(evaluation_json, config, eval_json)
         with open(metrics) as f:
             text = checked_metrics(f.read(), config, metrics, timing)
