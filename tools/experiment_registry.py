@@ -290,7 +290,11 @@ register(Experiment(
      Run("panda-static", "panda-reach-avoid-ppo-moving3",
          {"env.obstacle_motion": "static", "env.observation": _MOVING3_STATIC_OBS}, seeds=3),
      Run("panda-static-vel", "panda-reach-avoid-ppo-moving3", {"env.obstacle_motion": "static"}, seeds=3,
-         label="panda-static, velocity observed (always 0)")),
+         label="panda-static, velocity observed (always 0)"),
+     Run("ur5e-moving-plus", "ur5e-reach-avoid-ppo-moving3",
+         {"env.observation": _PLUS_OBS + tuple(p for p in MOVING_OBSTACLES_3["observation"] if p not in _PLUS_OBS),
+          "env.w_joint_limit": 0.0}, seeds=3,
+         label="ur5e-moving, plus observation, no joint-limit penalty")),
     metrics=_AVOID_METRICS, curves=_AVOID_CURVES,
     cross=tuple(Cross(f"{robot}-{trained}", f"{robot}-{trained}-on-{other}", {"obstacle_motion": motion},
                       label=f"{robot}, trained {trained}, evaluated {other}")
@@ -302,4 +306,6 @@ register(Experiment(
          "(`agents/presets.py`, MOVING_OBSTACLES_3); static: the same obstacles held still and their velocity not "
          "observed, so each agent can be evaluated on the other motion (the cross rows). panda-static-vel observed "
          "the velocity (0 in every episode): its normaliser then scales any motion to the clip, so it is not "
-         "cross-evaluated (agents.evaluation.unseen_constants; results/experiments/README.md)."))
+         "cross-evaluated (agents.evaluation.unseen_constants; results/experiments/README.md). ur5e-moving-plus: the "
+         "UR5e row with the settings of ur5e-reach-avoid-ppo-plus (joint sin/cos and self-collision distances "
+         "observed, no joint-limit penalty), the first thing to try after ur5e-moving learned little."))

@@ -5,7 +5,7 @@
 #  on this machine): --whole-parts, first three-seed parts, then one-seed parts in the time left.
 #  GPU 0: obstacles-moving3's static rows (issue 29; their cross-evaluations on moving obstacles run where
 #  the checkpoints are), then joint-penalties; GPU 1: reach-observation; GPU 2: network-size then relative-step;
-#  GPU 3: reward's absolute rows then reach-avoid-reward/dense.
+#  GPU 3: obstacles-moving3/ur5e-moving-plus (issue 29), then reward's absolute rows, then reach-avoid-reward/dense.
 CALL=$1; LIMIT=$2; LAST=$3; start=$(date +%s)
 L=/tmp/calllogs; rm -rf $L; mkdir -p $L/w_g0 $L/w_g1 $L/w_g2 $L/w_g3
 tl() { echo $(( LIMIT - ($(date +%s) - start) - 45 )); }  # the drivers' limit: 45 s kept for packing the logs
@@ -13,7 +13,7 @@ nvidia-smi --query-gpu=index,name --format=csv,noheader > $L/gpus.txt
 ROWS0=${ROWS0:-"obstacles-moving3/ur5e-static obstacles-moving3/panda-static joint-penalties"}
 ROWS1=${ROWS1:-"reach-observation"}
 ROWS2=${ROWS2:-"network-size relative-step"}
-ROWS3=${ROWS3:-"reward reach-avoid-reward"}
+ROWS3=${ROWS3:-"obstacles-moving3/ur5e-moving-plus reward reach-avoid-reward"}
 ppo() {  # ppo GPU NAME ROWS...: PPO rows on one GPU until the limit
   local gpu=$1 name=$2; shift 2
   if [ "$LAST" = last ]; then
