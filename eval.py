@@ -103,7 +103,8 @@ class EvalConfig(Generic[EnvConfigT]):
     """Sample a checkpoint's actions from its policy's distribution instead of taking the mode."""
     allow_env_mismatch: bool = False
     """Evaluate a checkpoint with another observation layout (the same parts reordered) or action
-    mode than it was trained with, warning instead of refusing (its network reads and acts as trained)."""
+    mode than it was trained with, or where an observed part it saw at one value in training changes
+    (agents.evaluation.unseen_constants), warning instead of refusing (its network reads and acts as trained)."""
     compute_dtype: Annotated[str | None, tyro.conf.arg(metavar="DTYPE")] = None
     """Hidden layers of a SAC checkpoint's policy in float32 or bfloat16 for this evaluation (None: as trained)."""
     last_steps: int = 10
