@@ -58,11 +58,8 @@ def driver_eval(evaluation_json: dict, config, source: str) -> dict:
         raise ValueError(f"--eval-json {source!r} evaluated seeds {seeds}: allowed is every seed of the run, "
                          f"{list(range(config.seed, config.seed + config.seeds))}.")
     units = sorted(e["units"], key=lambda u: int(u["policy_seed"]))
-    per_seed = {key: [float(u["metrics"][name]) for u in units] for name, key in ex.table_metrics().items()
-                if all(name in u["metrics"] for u in units)}
     return {"env_steps": int(e["policy"]["env_steps"]), "eval_envs": config.eval_envs,
-            "device": evaluation_json.get("device", ""), "per_seed": per_seed,
-            "mean": {k: sum(v) / len(v) for k, v in per_seed.items()},
+            "device": evaluation_json.get("device", ""), **ex.driver_metrics(units),
             "source": {"eval_json": source, "command": evaluation_json.get("command", ""),
                        "code": evaluation_json.get("code", "")}}
 

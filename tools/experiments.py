@@ -74,6 +74,14 @@ TIMING_COLUMNS = {"wall_clock": "training wall-clock (s)", "steps_per_second": "
 """Table columns read from metrics.csv instead of eval.json."""
 
 
+def driver_metrics(units: list[dict]) -> dict:
+    """{"per_seed": {eval.json key: [value per unit]}, "mean": {key: mean}} of evaluation units (`agents.evaluation`'s,
+    in seed order) for the metrics a table may show: the driver's eval.json format."""
+    per_seed = {key: [float(u["metrics"][name]) for u in units] for name, key in table_metrics().items()
+                if all(name in u["metrics"] for u in units)}
+    return {"per_seed": per_seed, "mean": {k: sum(v) / len(v) for k, v in per_seed.items()}}
+
+
 def table_metrics() -> dict[str, str]:
     """Metric name -> eval.json key, for the metrics a table may show (besides `TIMING_COLUMNS`): the paper's and
     those of agents.evaluation.EXTRA_COLUMNS."""
@@ -432,13 +440,10 @@ def cross_evaluate(run: Run, part: PartState, cross: Cross) -> str:
     config = run.config(part.logdir, first_seed=part.first, seeds=part.count)
     result = evaluation.run(evaluation.checkpoint_policy(part.logdir), config.env_name, cross_env(run, cross),
                             num_envs=config.eval_envs, eval_seeds=(config.eval_seed,), stochastic=cross.stochastic)
-    per_seed = {key: [u["metrics"][name] for u in result.units] for name, key in table_metrics().items()
-                if all(name in u["metrics"] for u in result.units)}
     path = os.path.join(part.logdir, f"cross-{cross.name}.json")
     write_atomic(path, json.dumps({"env_steps": part.steps, "eval_envs": config.eval_envs, "env": cross.env,
                                    "actions": "stochastic" if cross.stochastic else "deterministic",
-                                   "per_seed": per_seed, "mean": {k: sum(v) / len(v) for k, v in per_seed.items()}},
-                                  indent=2))
+                                   **driver_metrics(result.units)}, indent=2))
     return path
 
 
