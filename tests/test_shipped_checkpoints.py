@@ -74,14 +74,13 @@ SHIPPED = sorted(os.listdir(os.path.join(ROOT, "results", "checkpoints")))
 
 def test_every_row_of_the_results_table_ships():
     assert SHIPPED == ["panda-reach-avoid-ppo", "panda-reach-avoid-ppo-moving3", "panda-reach-ppo", "panda-reach-ppo-plus",
-                       "ur5e-reach-avoid-ppo", "ur5e-reach-avoid-ppo-moving3", "ur5e-reach-avoid-ppo-plus",
+                       "ur5e-reach-avoid-ppo", "ur5e-reach-avoid-ppo-plus",
                        "ur5e-reach-ppo", "ur5e-reach-ppo-plus", "ur5e-reach-sac", "ur5e-reach-sac-plus"]
 
 
 # Exports evaluated by the experiment driver (tools.experiments) rather than eval.py: export name -> the run whose
 # parts' eval.json files (4,096 episodes per seed at the end of training) hold the shipped seed.
-EVALUATED_IN_RUN = {"panda-reach-avoid-ppo-moving3": "obstacles-moving3/runs/panda-moving",
-                    "ur5e-reach-avoid-ppo-moving3": "obstacles-moving3/runs/ur5e-moving"}
+EVALUATED_IN_RUN = {"panda-reach-avoid-ppo-moving3": "obstacles-moving3/runs/panda-moving"}
 
 
 def _run_parts(run: str) -> dict[str, list[int]]:

@@ -8,7 +8,7 @@ Budgets: the presets' (the paper states none per experiment), except where a run
 (its table names it beside the overrides).
 """
 
-from agents.presets import MOVING_OBSTACLES_3
+from agents.presets import MOVING_OBSTACLES_3, PRESETS
 from tools.experiment_spec import Cross, Experiment, Run, register
 
 _REACH_OBS = ("joint_pos", "ee_pos", "target_pos", "ee_to_target")
@@ -279,33 +279,40 @@ register(Experiment(
     note="Tests whether the preset's misses, many of which end stopped near the edge of the penalty's margin "
          "(results/failures/README.md), turn into reaches when the margin leaves the arm more room."))
 
+_MOVING3 = PRESETS["ur5e-reach-avoid-ppo-moving3"].env["observation"]
 _MOVING3_STATIC_OBS = tuple(p for p in MOVING_OBSTACLES_3["observation"] if p != "obstacle_vel")
+_STATIC = {"env.obstacle_motion": "static"}
+# The UR5e preset's options before it took ur5e-reach-avoid-ppo-plus's (joint-limit penalty 1.0, the paper's parts).
+_UR5E_PAPER_OBS = {"env.observation": MOVING_OBSTACLES_3["observation"], "env.w_joint_limit": 1.0}
 register(Experiment(
     "obstacles-moving3", "Reach-avoid with 3 obstacles of random radius (0.05-0.1 m), moving or static, UR5e and Panda",
     "not in the paper (issue 29; the future work of its Discussion)",
-    (Run("ur5e-moving", "ur5e-reach-avoid-ppo-moving3"),
+    (Run("ur5e-moving-plus", "ur5e-reach-avoid-ppo-moving3",
+         label="ur5e-moving (the preset: plus observation, no joint-limit penalty)"),
+     Run("ur5e-static-plus", "ur5e-reach-avoid-ppo-moving3",
+         {**_STATIC, "env.observation": tuple(p for p in _MOVING3 if p != "obstacle_vel")}, seeds=3,
+         label="ur5e-static (plus observation, no joint-limit penalty)"),
      Run("panda-moving", "panda-reach-avoid-ppo-moving3"),
+     Run("panda-static", "panda-reach-avoid-ppo-moving3", {**_STATIC, "env.observation": _MOVING3_STATIC_OBS}, seeds=3),
+     Run("ur5e-moving", "ur5e-reach-avoid-ppo-moving3", _UR5E_PAPER_OBS,
+         label="ur5e-moving, Panda's observation, joint-limit penalty 1.0"),
      Run("ur5e-static", "ur5e-reach-avoid-ppo-moving3",
-         {"env.obstacle_motion": "static", "env.observation": _MOVING3_STATIC_OBS}, seeds=3),
-     Run("panda-static", "panda-reach-avoid-ppo-moving3",
-         {"env.obstacle_motion": "static", "env.observation": _MOVING3_STATIC_OBS}, seeds=3),
-     Run("panda-static-vel", "panda-reach-avoid-ppo-moving3", {"env.obstacle_motion": "static"}, seeds=3,
-         label="panda-static, velocity observed (always 0)"),
-     Run("ur5e-moving-plus", "ur5e-reach-avoid-ppo-moving3",
-         {"env.observation": _PLUS_OBS + tuple(p for p in MOVING_OBSTACLES_3["observation"] if p not in _PLUS_OBS),
-          "env.w_joint_limit": 0.0}, seeds=3,
-         label="ur5e-moving, plus observation, no joint-limit penalty")),
+         {**_UR5E_PAPER_OBS, **_STATIC, "env.observation": _MOVING3_STATIC_OBS}, seeds=3,
+         label="ur5e-static, Panda's observation, joint-limit penalty 1.0"),
+     Run("panda-static-vel", "panda-reach-avoid-ppo-moving3", _STATIC, seeds=3,
+         label="panda-static, velocity observed (always 0)")),
     metrics=_AVOID_METRICS, curves=_AVOID_CURVES,
-    cross=tuple(Cross(f"{robot}-{trained}", f"{robot}-{trained}-on-{other}", {"obstacle_motion": motion},
-                      label=f"{robot}, trained {trained}, evaluated {other}")
-                for robot in ("ur5e", "panda")
+    cross=tuple(Cross(f"{robot}-{trained}{plus}", f"{robot}-{trained}{plus}-on-{other}", {"obstacle_motion": motion},
+                      label=f"{robot}{' (plus)' if plus else ''}, trained {trained}, evaluated {other}")
+                for robot, plus in (("ur5e", "-plus"), ("panda", ""), ("ur5e", ""))
                 for trained, other, motion in (("static", "moving", "linear"), ("moving", "static", "static"))),
     paper="Not in the paper; its one static 0.1 m obstacle: UR5e 86.8 % reached (4.8 % obstacle collisions), "
           "Panda 95.2 % (2.5 %).",
     note="Moving: linear paths at 0.05-0.2 m/s bouncing in the sampling cube, radii and velocities observed "
          "(`agents/presets.py`, MOVING_OBSTACLES_3); static: the same obstacles held still and their velocity not "
-         "observed, so each agent can be evaluated on the other motion (the cross rows). panda-static-vel observed "
-         "the velocity (0 in every episode): its normaliser then scales any motion to the clip, so it is not "
-         "cross-evaluated (agents.evaluation.unseen_constants; results/experiments/README.md). ur5e-moving-plus: the "
-         "UR5e row with the settings of ur5e-reach-avoid-ppo-plus (joint sin/cos and self-collision distances "
-         "observed, no joint-limit penalty), the first thing to try after ur5e-moving learned little."))
+         "observed, so each agent can be evaluated on the other motion (the cross rows). The UR5e preset has "
+         "ur5e-reach-avoid-ppo-plus's options (joint sin/cos and self-collision distances observed, no joint-limit "
+         "penalty); ur5e-moving and ur5e-static have the Panda's observation parts and ur5e-reach-avoid-ppo's "
+         "joint-limit penalty, the options the preset had first. panda-static-vel observed the velocity (0 in "
+         "every episode): its normaliser then scales any motion to the clip, so it is not cross-evaluated "
+         "(agents.evaluation.unseen_constants; results/experiments/README.md)."))
