@@ -525,13 +525,18 @@ def test_time_limit_plan():
     run = ex.Run("r", "point-mass-ppo", seeds=3, num_timesteps=100_000)
     sibling = lambda first, count, rate: ex.PartState(f"p{first}", first, count, "done", 100_000, 100_000, rate, 7.0)
     state = ex.RunState("e", run, "", "partial", 0, 100_000, [sibling(0, 2, 300.0), sibling(2, 1, 900.0)])
-    assert ex.speed_guess(state, fresh) == (300.0, 7.0)  # the slower per seed of the parts with >= 1 seed
+    assert ex.speed_guess(state, fresh) == (900.0, 7.0)  # a part of as many seeds (one) before the 2-seed one
+    two = ex.PartState("y", 0, 2, "missing", 0, 100_000)
+    assert ex.speed_guess(state, two) == (300.0, 7.0)
     assert ex.speed_guess(state, ex.PartState("x", 0, 3, "missing", 0, 100_000)) == (None, None)
     peer = ex.PartState("q", 0, 3, "done", 100_000, 100_000, 250.0, 9.0)  # a comparable run's 3-seed part
     assert ex.speed_guess(state, ex.PartState("x", 0, 3, "missing", 0, 100_000), [peer]) == (250.0, 9.0)
-    assert ex.speed_guess(state, fresh, [peer]) == (250.0, 9.0)  # slower per seed than the run's own parts
-    outdated = dataclasses.replace(peer, rate=50.0, status="changed")  # trained under another config: no measure
-    assert ex.speed_guess(state, fresh, [peer, outdated]) == (250.0, 9.0)
+    assert ex.speed_guess(state, two, [peer]) == (300.0, 7.0)  # same count first, though the peer is slower
+    lone = ex.PartState("q1", 0, 1, "done", 100_000, 100_000, 800.0, 8.0)  # a comparable run's 1-seed part
+    assert ex.speed_guess(state, fresh, [peer, lone]) == (800.0, 8.0)  # the slowest of the one-seed parts
+    assert ex.speed_guess(dataclasses.replace(state, parts=[sibling(0, 2, 300.0)]), fresh, [peer]) == (250.0, 9.0)
+    outdated = dataclasses.replace(lone, rate=50.0, status="changed")  # trained under another config: no measure
+    assert ex.speed_guess(state, fresh, [peer, lone, outdated]) == (800.0, 8.0)
     # A start-up measured as 0 s (a cached compilation) is a measurement, not a missing one.
     cached = ex.PartState("", 0, 1, "partial", steps=0, budget=100_000, rate=1000.0, startup=0.0)
     assert ex.seconds_to_finish(cached, compiled=False) == 100.0 and ex.may_start(cached, 100.0, compiled=False)
