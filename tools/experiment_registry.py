@@ -170,9 +170,9 @@ register(Experiment(
                              (0.3, (0.803, 0.047, 0.033)))),
     paper="Success falls as the obstacle grows (88.0 % at 0.025 m to 78.1 % at 0.3 m); obstacle collisions stay near 4 %; "
           "agents trained on small obstacles collide more with a 0.1 m one, those trained on large ones less.",
-    note="The table's rows of a reach agent on the reach-avoid env (another env) come from "
-         "`python -m tools.paper_tables --tables obstacle --obstacle 0.1=runs/experiments/obstacle-size-ur5e/r0.1 "
-         "reach=<a ur5e-reach run>`; results/obstacle_size has the whole table for the Panda."))
+    note="The table's rows of a reach agent on the reach-avoid env (another env) are measured with eval.py for the "
+         "shipped UR5e reach policy in results/obstacle_size/README.md (last section), which also has the whole "
+         "table for the Panda."))
 
 _SAC_ROWS = {"panda": dict(target_reached=0.879, self_collision=0.027),
              "ur5e-limited": dict(target_reached=0.848, self_collision=0.035)}
