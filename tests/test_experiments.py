@@ -46,7 +46,7 @@ def test_registered_runs_are_valid_and_their_commands_parse_back(name):
 SEEDS = {"action-space": {5}, "reward": {3}, "joint-penalties": {3}, "reach-observation": {3}, "network-size": {3},
          "sac-workspaces": {3}, "reach-avoid-reward": {5}, "reach-avoid-observation": {3}, "reach-avoid-front": {5},
          "obstacle-size-ur5e": {5}, "sac-reach": {5}, "sac-fast": {1, 2, 3, 5}, "obstacles-moving3": {3, 5},
-         "relative-step": {3}, "reach-avoid-joint-margin": {3}}
+         "relative-step": {3}, "reach-avoid-joint-margin": {3}, "action-latency": {3}}
 """5 seeds where the paper states numbers to compare (tables, results text) and for the rows of our own studies
 (issues 25 and 29), 3 for curve-only comparisons, the static side of the moving-obstacle cross-evaluation and the
 relative-step and joint-margin studies; for `sac-fast`, 5 for the rows of issue 25's protocol (the four tasks' and

@@ -322,3 +322,21 @@ register(Experiment(
          "joint-limit penalty, the options the preset had first. panda-static-vel observed the velocity (0 in "
          "every episode): its normaliser then scales any motion to the clip, so it is not cross-evaluated "
          "(agents.evaluation.unseen_constants; results/experiments/README.md)."))
+
+_LATENCY_METRICS = _AVOID_METRICS + ("steps_in_target", "times_left_target")
+register(Experiment(
+    "action-latency", "Reach-avoid trained with a one-step action delay, UR5e and Panda",
+    "not in the paper (issue 29; the realism its Discussion names as future work)",
+    (Run("ur5e-none", "ur5e-reach-avoid-ppo", seeds=3, label="ur5e, no delay (the preset)"),
+     Run("ur5e", "ur5e-reach-avoid-ppo", {"env.action_latency": 1}, seeds=3, label="ur5e, one-step delay"),
+     Run("panda-none", "panda-reach-avoid-ppo", seeds=3, label="panda, no delay (the preset)"),
+     Run("panda", "panda-reach-avoid-ppo", {"env.action_latency": 1}, seeds=3, label="panda, one-step delay")),
+    metrics=_LATENCY_METRICS, curves=_AVOID_CURVES + ("episode/steps_in_target",),
+    cross=tuple(Cross(robot, f"{robot}-without-delay", {"action_latency": 0},
+                      label=f"{robot}, trained with the delay, evaluated without") for robot in ("ur5e", "panda")),
+    paper="Not in the paper. The presets' policies, trained without a delay and evaluated with one (CPU, "
+          "results/obstacles/README.md): UR5e 84.9 % reached but 5.4 exits from the target an episode (0.03 "
+          "without); Panda 55.5 % (96.2 % without), 2.4 of 125 steps in the target.",
+    note="Tests whether training with the delay (`env.action_latency=1`: each step applies the previous step's "
+         "action, as a real arm's control loop does) restores the precision that the delay takes from the "
+         "presets' policies."))
