@@ -7,7 +7,7 @@
 #  then one-seed parts in the time left.
 #  GPU 0: obstacles-moving3's UR5e preset rows (issue 29: seeds 3-4 of ur5e-moving-plus, exported below, and
 #  ur5e-static-plus with its cross-evaluation), then reach-avoid-observation; GPU 1: relative-step, then
-#  reach-avoid-front, then reach-avoid-reward; GPU 2: joint-penalties, reward; GPU 3: reach-observation,
+#  reach-avoid-front, then reach-avoid-reward; GPU 2: action-latency, joint-penalties, reward; GPU 3: reach-observation,
 #  network-size. With two GPUs, GPU 2's rows follow GPU 0's and GPU 3's follow GPU 1's.
 CALL=$1; LIMIT=$2; LAST=$3; start=$(date +%s)
 L=/tmp/calllogs; rm -rf $L; mkdir -p $L/w_g0 $L/w_g1 $L/w_g2 $L/w_g3
@@ -16,7 +16,7 @@ nvidia-smi --query-gpu=index,name --format=csv,noheader > $L/gpus.txt
 NG=$(wc -l < $L/gpus.txt)
 ROWS0=${ROWS0:-"obstacles-moving3/ur5e-moving-plus obstacles-moving3/ur5e-static-plus reach-avoid-observation"}
 ROWS1=${ROWS1:-"relative-step reach-avoid-front reach-avoid-reward"}
-ROWS2=${ROWS2:-"joint-penalties reward"}
+ROWS2=${ROWS2:-"action-latency joint-penalties reward"}
 ROWS3=${ROWS3:-"reach-observation network-size"}
 if [ "$NG" -lt 4 ]; then ROWS0="$ROWS0 $ROWS2"; ROWS1="$ROWS1 $ROWS3"; fi
 if [ "$CALL" = 1 ]; then
