@@ -68,6 +68,8 @@ def test_the_registry_spells_the_plus_observations_as_the_presets_do():
         assert make_config(f"{env}-sac-fast").env.observation == reg._PLUS_OBS
     for env in ("ur5e-reach-avoid", "panda-reach-avoid"):
         assert make_config(f"{env}-sac-fast").env.observation == reg._PLUS_AVOID_OBS
+    assert make_config("panda-reach-avoid-ppo-moving3").env.observation == reg._MOVING3_OBS
+    assert make_config("ur5e-reach-avoid-ppo-moving3").env.observation == reg._MOVING3_PLUS_OBS
 
 
 def test_every_recorded_part_still_reads_as_its_registry_run():

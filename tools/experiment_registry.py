@@ -8,7 +8,6 @@ Budgets: the presets' (the paper states none per experiment), except where a run
 (its table names it beside the overrides).
 """
 
-from agents.presets import MOVING_OBSTACLES_3, PRESETS
 from tools.experiment_spec import Cross, Experiment, Run, register
 
 _REACH_OBS = ("joint_pos", "ee_pos", "target_pos", "ee_to_target")
@@ -285,18 +284,21 @@ register(Experiment(
     note="Tests whether the preset's misses, many of which end stopped near the edge of the penalty's margin "
          "(results/failures/README.md), turn into reaches when the margin leaves the arm more room."))
 
-_MOVING3 = PRESETS["ur5e-reach-avoid-ppo-moving3"].env["observation"]
-_MOVING3_STATIC_OBS = tuple(p for p in MOVING_OBSTACLES_3["observation"] if p != "obstacle_vel")
+# The observations of the -moving3 presets (agents/presets.py: MOVING_OBSTACLES_3, the UR5e one with the plus
+# parts), spelled here as the plus ones are; a test holds them equal.
+_MOVING3_OBS = _REACH_OBS + ("obstacle_pos", "obstacle_radius", "obstacle_vel", "link_obstacle_dist")
+_MOVING3_PLUS_OBS = _PLUS_OBS + tuple(p for p in _MOVING3_OBS if p not in _PLUS_OBS)
+_MOVING3_STATIC_OBS = tuple(p for p in _MOVING3_OBS if p != "obstacle_vel")
 _STATIC = {"env.obstacle_motion": "static"}
 # The UR5e preset's options before it took ur5e-reach-avoid-ppo-plus's (joint-limit penalty 1.0, the paper's parts).
-_UR5E_PAPER_OBS = {"env.observation": MOVING_OBSTACLES_3["observation"], "env.w_joint_limit": 1.0}
+_UR5E_PAPER_OBS = {"env.observation": _MOVING3_OBS, "env.w_joint_limit": 1.0}
 register(Experiment(
     "obstacles-moving3", "Reach-avoid with 3 obstacles of random radius (0.05-0.1 m), moving or static, UR5e and Panda",
     "not in the paper (issue 29; the future work of its Discussion)",
     (Run("ur5e-moving-plus", "ur5e-reach-avoid-ppo-moving3",
          label="ur5e-moving (the preset: plus observation, no joint-limit penalty)"),
      Run("ur5e-static-plus", "ur5e-reach-avoid-ppo-moving3",
-         {**_STATIC, "env.observation": tuple(p for p in _MOVING3 if p != "obstacle_vel")}, seeds=3,
+         {**_STATIC, "env.observation": tuple(p for p in _MOVING3_PLUS_OBS if p != "obstacle_vel")}, seeds=3,
          label="ur5e-static (plus observation, no joint-limit penalty)"),
      Run("panda-moving", "panda-reach-avoid-ppo-moving3"),
      Run("panda-static", "panda-reach-avoid-ppo-moving3", {**_STATIC, "env.observation": _MOVING3_STATIC_OBS}, seeds=3),
