@@ -56,17 +56,26 @@ def test_shipped_ur5e_reach_checkpoint_far_above_the_baselines():
     assert result["steps_in_target"]["mean"] > 20
 
 
-def test_shipped_panda_moving_obstacle_policy_reaches_between_moving_obstacles():
-    """The Panda policy trained among 3 moving obstacles of random radius (GPU, this seed: 64.2 % reached, 11.7 %
-    obstacle collisions over 4,096 episodes) on 16 CPU episodes of its own env: it reaches where standing still
-    never does."""
-    policy = evaluation.checkpoint_policy(os.path.join(ROOT, "results", "checkpoints", "panda-reach-avoid-ppo-moving3"))
+# The moving-obstacle exports (3 obstacles of random radius): robot -> (the seed's GPU figures over 4,096 episodes;
+# the least share of 16 CPU episodes it must reach: at a rate of 0.63 a 16-episode mean has a std of 0.12, so 0.3
+# is ~2.7 std below it; these 16 episodes gave 0.75 for the Panda and 0.69 for the UR5e here).
+MOVING_OBSTACLE_EXPORTS = {"panda": ("seed 1: 64.2 % reached, 11.7 % obstacle collisions", 0.3),
+                           "ur5e": ("seed 3: 62.8 % reached, 10.3 % obstacle collisions", 0.3)}
+
+
+@pytest.mark.parametrize("robot", sorted(MOVING_OBSTACLE_EXPORTS))
+def test_shipped_moving_obstacle_policy_reaches_between_moving_obstacles(robot):
+    """The policy trained among 3 moving obstacles of random radius, on 16 CPU episodes of its own env: it reaches
+    where standing still never does, and ends nearer the target."""
+    _, least = MOVING_OBSTACLE_EXPORTS[robot]
+    policy = evaluation.checkpoint_policy(os.path.join(ROOT, "results", "checkpoints", f"{robot}-reach-avoid-ppo-moving3"))
     config = policy.train_env_config
     assert (config.num_obstacles, config.obstacle_motion, config.obstacle_radius_range) == (3, "linear", (0.05, 0.1))
-    result = evaluation.run(policy, "panda-reach-avoid", config, num_envs=16).summary()
-    still = evaluation.run(evaluation.baseline_policy("standstill"), "panda-reach-avoid", config, num_envs=16).summary()
+    env_name = f"{robot}-reach-avoid"
+    result = evaluation.run(policy, env_name, config, num_envs=16).summary()
+    still = evaluation.run(evaluation.baseline_policy("standstill"), env_name, config, num_envs=16).summary()
     assert still["target_reached"]["mean"] == 0.0
-    assert result["target_reached"]["mean"] >= 0.5 and result["distance"]["mean"] < still["distance"]["mean"] - 0.2
+    assert result["target_reached"]["mean"] >= least and result["distance"]["mean"] < still["distance"]["mean"] - 0.2
 
 
 SHIPPED = sorted(os.listdir(os.path.join(ROOT, "results", "checkpoints")))
@@ -74,13 +83,14 @@ SHIPPED = sorted(os.listdir(os.path.join(ROOT, "results", "checkpoints")))
 
 def test_every_row_of_the_results_table_ships():
     assert SHIPPED == ["panda-reach-avoid-ppo", "panda-reach-avoid-ppo-moving3", "panda-reach-ppo", "panda-reach-ppo-plus",
-                       "ur5e-reach-avoid-ppo", "ur5e-reach-avoid-ppo-plus",
+                       "ur5e-reach-avoid-ppo", "ur5e-reach-avoid-ppo-moving3", "ur5e-reach-avoid-ppo-plus",
                        "ur5e-reach-ppo", "ur5e-reach-ppo-plus", "ur5e-reach-sac", "ur5e-reach-sac-plus"]
 
 
 # Exports evaluated by the experiment driver (tools.experiments) rather than eval.py: export name -> the run whose
 # parts' eval.json files (4,096 episodes per seed at the end of training) hold the shipped seed.
-EVALUATED_IN_RUN = {"panda-reach-avoid-ppo-moving3": "obstacles-moving3/runs/panda-moving"}
+EVALUATED_IN_RUN = {"panda-reach-avoid-ppo-moving3": "obstacles-moving3/runs/panda-moving",
+                    "ur5e-reach-avoid-ppo-moving3": "obstacles-moving3/runs/ur5e-moving-plus"}
 
 
 def _run_parts(run: str) -> dict[str, list[int]]:
