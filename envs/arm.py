@@ -306,10 +306,15 @@ class ArmEnv(Env):
                 "ee_to_target": 3, "prev_action": n, "joint_sin_cos": 2 * n, "self_dist": len(self.robot.self_pairs)}
 
     def perceived(self, data, info, key):
-        """(data, info) as the sensors report them: joint angles with `joint_noise_std` noise."""
+        """(data, info) as the sensors report them: joint angles with `joint_noise_std` noise; with
+        `joint_noise_model="encoders"` the body and geom poses too, from the kinematics of the noisy angles."""
         std = self.config.joint_noise_std
         if std > 0:
             data = data.replace(qpos=data.qpos + std * jax.random.normal(jax.random.fold_in(key, 0), data.qpos.shape))
+            if self.config.joint_noise_model == "encoders":
+                kin = self.robot.kinematics(data.qpos)
+                data = data.replace(xpos=kin.xpos, geom_xpos=kin.geom_xpos, geom_xmat=kin.geom_xmat,
+                                    site_xpos=kin.site_xpos)
         return data, info
 
     def observation_parts(self, data, xpos, ee, info) -> dict:
@@ -330,5 +335,7 @@ class ArmEnv(Env):
     def observation(self, data, xpos, ee, info) -> jax.Array:
         if self.noisy:  # fresh noise every step of the episode, from its reset key
             data, info = self.perceived(data, info, jax.random.fold_in(info["noise_key"], info["num_steps"]))
+            if self.config.joint_noise_model == "encoders":  # the end effector as the noisy encoders place it
+                xpos, ee = data.xpos, data.site_xpos[self.robot.ee_site]
         parts = self.observation_parts(data, xpos, ee, info)
         return jnp.concatenate([jnp.ravel(parts[p]()) for p in self.config.observation]).astype(jnp.float32)

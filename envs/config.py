@@ -25,6 +25,9 @@ REACH_OBSERVATIONS = (
     "joint_sin_cos", "self_dist",
 )
 BACKENDS = ("auto", "mjx", "mujoco")
+JOINT_NOISE_MODELS = ("angles", "encoders")
+# Observation parts computed from the joint angles: with joint_noise_model="encoders" they come from the noisy ones.
+KINEMATIC_OBSERVATIONS = ("ee_pos", "ee_to_target", "self_dist", "link_obstacle_dist")
 OBSTACLE_OBSERVATIONS = ("obstacle_pos", "obstacle_size", "link_obstacle_dist", "obstacle_radius", "obstacle_vel")
 
 
@@ -110,6 +113,11 @@ class ReachConfig:
     the physics, reward and other parts see the true ones); 0 = off. Not in the paper, whose Discussion
     names realistic noise models as future work. Drawn from the episode's reset key and the step count, so
     the same key gives the same noise."""
+    joint_noise_model: Literal["angles", "encoders"] = "angles"
+    """Which observation parts the joint noise reaches: `angles`, only joint_pos and joint_sin_cos; `encoders`,
+    also every part a real arm computes from its encoder readings (ee_pos, ee_to_target, self_dist and, with
+    obstacles, link_obstacle_dist: the forward kinematics of the noisy angles). ee_vel is refused with
+    `encoders` (it would need the previous step's noisy pose). Physics, reward and collisions stay exact."""
     action_latency: int = 0
     """0: a step applies its own action; 1: it applies the action of the step before (prev_action, so
     that observation part shows the action the next step applies; the first step of an episode holds
@@ -153,7 +161,16 @@ class ReachConfig:
         if not isinstance(self.gravity_compensation, bool):
             raise ValueError(f"gravity_compensation={self.gravity_compensation!r} is invalid: allowed are True, False.")
         positive("joint_noise_std", self.joint_noise_std, strict=False)
-        _observed_if_set("joint_noise_std", self.joint_noise_std, self.observation, ("joint_pos", "joint_sin_cos"))
+        choice("joint_noise_model", self.joint_noise_model, JOINT_NOISE_MODELS)
+        if self.joint_noise_model == "encoders":
+            if self.joint_noise_std == 0:
+                raise ValueError("joint_noise_model='encoders' is invalid: allowed is 'angles' unless "
+                                 "joint_noise_std > 0 (there is no noise to pass through the kinematics).")
+            if "ee_vel" in self.observation:
+                raise ValueError("joint_noise_model='encoders' is invalid: allowed is 'angles' while ee_vel is "
+                                 "observed (a noisy velocity would need the previous step's noisy pose).")
+        noisy = ("joint_pos", "joint_sin_cos") + (KINEMATIC_OBSERVATIONS if self.joint_noise_model == "encoders" else ())
+        _observed_if_set("joint_noise_std", self.joint_noise_std, self.observation, noisy)
         integer("action_latency", self.action_latency, 0, maximum=1)
 
     def validate_for_robot(self, robot: str, reach: float, joint_range_width: float) -> None:

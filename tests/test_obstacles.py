@@ -10,12 +10,13 @@ import typing
 
 import jax
 import jax.numpy as jnp
+import mujoco
 import numpy as np
 import pytest
 
 import envs
 from envs import obstacles
-from mujoco_reference import obstacle_contacts, obstacles_model
+from mujoco_reference import ee_position, geom_poses, obstacle_contacts, obstacles_model
 
 N = 8
 MOVING = dict(num_obstacles=3, obstacle_motion="linear", obstacle_radius_range=(0.05, 0.15), substeps=2,
@@ -92,6 +93,10 @@ def test_defaults_are_the_paper_and_motion_names_match_the_registry():
     (dict(joint_noise_std=0.01, observation=("ee_pos", "target_pos")), "joint_noise_std", "joint_pos, joint_sin_cos"),
     (dict(obstacle_noise_std=0.01, observation=("joint_pos", "obstacle_vel")), "obstacle_noise_std",
      "obstacle_pos, link_obstacle_dist"),
+    (dict(joint_noise_model="kalman"), "joint_noise_model", "'angles', 'encoders'"),
+    (dict(joint_noise_model="encoders"), "joint_noise_model", "'angles' unless joint_noise_std > 0"),
+    (dict(joint_noise_model="encoders", joint_noise_std=0.01, observation=("joint_pos", "ee_vel")), "joint_noise_model",
+     "'angles' while ee_vel is observed"),
     (dict(action_latency=2), "action_latency", r"integer in \[0, 1\]"),
     (dict(action_latency=-1), "action_latency", r"integer in \[0, 1\]"),
     (dict(action_latency=True), "action_latency", r"integer in \[0, 1\]"),
@@ -378,6 +383,44 @@ def test_noise_is_seeded_fresh_each_step_and_only_in_the_observation(sensing):
     step_joint, step_obstacle = noise(after)
     assert 0.007 < step_joint.std() < 0.013
     assert not np.allclose(step_joint, joint) and not np.allclose(step_obstacle, obstacle)  # fresh every step
+
+
+ENCODER_PARTS = ("joint_pos", "ee_pos", "target_pos", "ee_to_target", "self_dist", "obstacle_pos", "link_obstacle_dist")
+
+
+def test_encoder_noise_reaches_every_part_computed_from_the_joints():
+    """joint_noise_model="encoders": ee_pos, ee_to_target, self_dist and link_obstacle_dist are those of the noisy
+    angles that joint_pos reports, by CPU MuJoCo's kinematics at those angles; the state keeps the true pose. With
+    "angles" (the default) the same key gives the same noisy angles and the true end effector. Reset only: it
+    compiles no physics."""
+    options = dict(joint_noise_std=0.05, observation=ENCODER_PARTS, substeps=2)
+    keys = jax.random.split(jax.random.PRNGKey(11), N)
+    encoders = envs.make("ur5e-reach-avoid", joint_noise_model="encoders", **options)
+    angles = envs.make("ur5e-reach-avoid", **options)
+    state = jax.jit(jax.vmap(encoders.reset))(keys)
+    plain = jax.jit(jax.vmap(angles.reset))(keys)
+    robot, model = encoders.robot, encoders.robot.mj_model
+    parts, plain_parts = split_obs(encoders, state.obs), split_obs(angles, plain.obs)
+    np.testing.assert_array_equal(parts["joint_pos"], plain_parts["joint_pos"])  # the same noise
+    true_q = np.asarray(state.pipeline_state.qpos)
+    assert 0.03 < (parts["joint_pos"] - true_q).std() < 0.07
+    radius = encoders.config.obstacle_radius
+    for i in range(N):
+        q = parts["joint_pos"][i].astype(np.float64)
+        ee = ee_position(model, q)
+        np.testing.assert_allclose(parts["ee_pos"][i], ee, atol=2e-5)
+        np.testing.assert_allclose(parts["ee_to_target"][i], np.asarray(state.info["target_pos"][i]) - ee, atol=2e-5)
+        np.testing.assert_allclose(plain_parts["ee_pos"][i], ee_position(model, true_q[i].astype(np.float64)),
+                                   atol=2e-5)
+        assert np.linalg.norm(parts["ee_pos"][i] - plain_parts["ee_pos"][i]) > 1e-3  # 0.05 rad moves it mm to cm
+        geom_xpos, geom_xmat = geom_poses(model, q)
+        np.testing.assert_allclose(parts["self_dist"][i], robot.self_distances(geom_xpos, geom_xmat), atol=1e-4)
+        data = mujoco.MjData(model)
+        data.qpos[:] = q
+        mujoco.mj_kinematics(model, data)
+        links = data.xpos[robot.link_bodies]
+        d = np.linalg.norm(links - parts["obstacle_pos"][i], axis=-1) - radius  # the paper's d_i, from link origins
+        np.testing.assert_allclose(parts["link_obstacle_dist"][i], d, atol=2e-5)
 
 
 def test_action_latency_applies_the_previous_action(sensing):
