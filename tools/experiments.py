@@ -625,6 +625,12 @@ ASSUMED_STARTUP = 60.0
 compilation and, for an off-policy learner, the replay buffer's first fill (about a minute for fast SAC:
 results/experiments/README.md)."""
 
+PROCESS_START = 15.0
+"""Seconds a part spends before its first chunk's clock starts (the process's imports, building the env and the
+learner), which metrics.csv's wall clock and so every measured start-up leave out: ~15 s on an H200
+(results/experiments/sac-fast/calls/2026-11-27c_calls.md). `--whole-parts` adds it for every part that starts up,
+so that a part predicted to finish does (one predicted at 211 s stopped 3 s short of its budget)."""
+
 
 def may_start(part: PartState, seconds: float | None, compiled: bool, startup_guess: float | None = None,
               rate_guess: float | None = None) -> bool:
@@ -774,6 +780,8 @@ def start_verdict(st: RunState, part: PartState, seconds: float | None, compiled
             rate, startup = guess_speed(st, part, runs_dir, record, registry, rough=True)
             need = seconds_to_finish(part, compiled, longest(startup, startup_seen), rate)
             rough = " (a rough guess from other runs of its preset)" if need is not None else ""
+        if need is not None and not compiled:
+            need += PROCESS_START
         if need is None or need > seconds:
             return "later", (f"left for a later call: it needs "
                              f"{'an unknown time (no speed measured)' if need is None else f'~{need:.0f} s'}{rough} "
