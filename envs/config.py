@@ -109,10 +109,10 @@ class ReachConfig:
     workspaces and obstacles over 0.15 m use more (see `ArmEnv.candidates`, `ReachAvoid.candidates`).
     A reset that finds none valid is counted in the `reset_fallback` metric (expected rate about 1e-6)."""
     joint_noise_std: float = 0.0
-    """Standard deviation (rad) of Gaussian noise on the observed joint angles (joint_pos and joint_sin_cos;
-    the physics, reward and other parts see the true ones); 0 = off. Not in the paper, whose Discussion
-    names realistic noise models as future work. Drawn from the episode's reset key and the step count, so
-    the same key gives the same noise."""
+    """Standard deviation (rad) of Gaussian noise on the observed joint angles (joint_pos and joint_sin_cos, and
+    with joint_noise_model="encoders" the parts computed from them; the physics and reward see the true ones);
+    0 = off. Not in the paper, whose Discussion names realistic noise models as future work. Drawn from the
+    episode's reset key and the step count, so the same key gives the same noise."""
     joint_noise_model: Literal["angles", "encoders"] = "angles"
     """Which observation parts the joint noise reaches: `angles`, only joint_pos and joint_sin_cos; `encoders`,
     also every part a real arm computes from its encoder readings (ee_pos, ee_to_target, self_dist and, with
