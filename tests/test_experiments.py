@@ -699,14 +699,14 @@ def test_a_part_with_one_logged_chunk_takes_its_speed_from_a_comparable_run(tmp_
 
     monkeypatch.setattr(driver, "train", fake_train)
     selection = ex.select(["toy2/long"], registry)
-    # 17,920 steps left at 100/s after at most 40 s of start-up, and the process's own start: 234.2 s. 225 s after
-    # the reserve (enough without the process start): left.
-    assert ex.PROCESS_START == 15.0
-    assert not ex.train_pending(selection, runs_dir, deadline=time.monotonic() + 255.0, reserve=30.0, log=log.append,
-                                registry=registry, whole_parts=True)
-    assert calls == [] and any("left for a later call: it needs ~234 s" in line for line in log), log
-    assert not ex.train_pending(selection, runs_dir, deadline=time.monotonic() + 270.0, reserve=30.0, log=log.append,
-                                registry=registry, whole_parts=True)
+    # 17,920 steps left at 100/s after at most 40 s of start-up, and the part's start outside the clock: 219.2 s +
+    # PROCESS_START. 5 s less after the reserve (enough without PROCESS_START): left.
+    need = 219.2 + ex.PROCESS_START
+    assert not ex.train_pending(selection, runs_dir, deadline=time.monotonic() + 30.0 + need - 5.0, reserve=30.0,
+                                log=log.append, registry=registry, whole_parts=True)
+    assert calls == [] and any(f"left for a later call: it needs ~{need:.0f} s" in line for line in log), log
+    assert not ex.train_pending(selection, runs_dir, deadline=time.monotonic() + 30.0 + need + 15.0, reserve=30.0,
+                                log=log.append, registry=registry, whole_parts=True)
     assert calls == [os.path.join(runs_dir, "toy2", "long", "seeds-0-0")], log
 
 
@@ -733,16 +733,17 @@ def test_whole_parts_guesses_from_the_preset_where_no_comparable_run_was_timed(t
 
     monkeypatch.setattr(driver, "train", fake_train)
     selection = ex.select(["toy3/fresh"], registry)
-    # 10 s of start-up + 20,480 steps at 1,000/s + the process's start: 45.48 s; 40 s after the reserve: left, the
-    # guess named.
-    assert not ex.train_pending(selection, runs_dir, deadline=time.monotonic() + 70.0, reserve=30.0, log=log.append,
-                                registry=registry, whole_parts=True)
-    assert calls == [] and any("it needs ~45 s (a rough guess from other runs of its preset)" in line
+    # 10 s of start-up + 20,480 steps at 1,000/s + PROCESS_START; 5 s less after the reserve: left, the guess named.
+    need = 30.48 + ex.PROCESS_START
+    assert not ex.train_pending(selection, runs_dir, deadline=time.monotonic() + 30.0 + need - 5.0, reserve=30.0,
+                                log=log.append, registry=registry, whole_parts=True)
+    assert calls == [] and any(f"it needs ~{need:.0f} s (a rough guess from other runs of its preset)" in line
                                for line in log), log
-    # 55 s after the reserve: started, though the time limit's own rule (which takes no rough guess) would ask for
-    # more than twice the assumed start-up: 55 s < 2 x ex.ASSUMED_STARTUP.
-    ex.train_pending(selection, runs_dir, deadline=time.monotonic() + 85.0, reserve=30.0, log=log.append,
-                     registry=registry, whole_parts=True)
+    # 10 s more than it needs after the reserve: started, though the time limit's own rule (which takes no rough
+    # guess) would ask for more than twice the assumed start-up.
+    assert need + 10.0 < 2 * ex.ASSUMED_STARTUP
+    ex.train_pending(selection, runs_dir, deadline=time.monotonic() + 30.0 + need + 10.0, reserve=30.0,
+                     log=log.append, registry=registry, whole_parts=True)
     assert calls == [os.path.join(runs_dir, "toy3", "fresh", "seeds-0-0")], log
 
 

@@ -391,8 +391,8 @@ ENCODER_PARTS = ("joint_pos", "ee_pos", "target_pos", "ee_to_target", "self_dist
 def test_encoder_noise_reaches_every_part_computed_from_the_joints():
     """joint_noise_model="encoders": ee_pos, ee_to_target, self_dist and link_obstacle_dist are those of the noisy
     angles that joint_pos reports, by CPU MuJoCo's kinematics at those angles; the state keeps the true pose. With
-    "angles" (the default) the same key gives the same noisy angles and the true end effector. The MJX backend's
-    data gives the same observation. Reset only: it compiles no physics."""
+    "angles" (the default) the same key gives the same noisy angles and the true end effector. Reset only: it
+    compiles no physics."""
     options = dict(joint_noise_std=0.05, observation=ENCODER_PARTS, substeps=2)
     keys = jax.random.split(jax.random.PRNGKey(11), N)
     encoders = envs.make("ur5e-reach-avoid", joint_noise_model="encoders", **options)
@@ -402,8 +402,6 @@ def test_encoder_noise_reaches_every_part_computed_from_the_joints():
     robot, model = encoders.robot, encoders.robot.mj_model
     parts, plain_parts = split_obs(encoders, state.obs), split_obs(angles, plain.obs)
     np.testing.assert_array_equal(parts["joint_pos"], plain_parts["joint_pos"])  # the same noise
-    on_mjx = envs.make("ur5e-reach-avoid", joint_noise_model="encoders", backend="mjx", **options)
-    np.testing.assert_allclose(jax.jit(jax.vmap(on_mjx.reset))(keys).obs, state.obs, atol=1e-5)  # GPU training's data
     true_q = np.asarray(state.pipeline_state.qpos)
     assert 0.03 < (parts["joint_pos"] - true_q).std() < 0.07
     radius = encoders.config.obstacle_radius
@@ -412,8 +410,9 @@ def test_encoder_noise_reaches_every_part_computed_from_the_joints():
         ee = ee_position(model, q)
         np.testing.assert_allclose(parts["ee_pos"][i], ee, atol=2e-5)
         np.testing.assert_allclose(parts["ee_to_target"][i], np.asarray(state.info["target_pos"][i]) - ee, atol=2e-5)
-        np.testing.assert_allclose(plain_parts["ee_pos"][i], ee_position(model, true_q[i].astype(np.float64)),
-                                   atol=2e-5)
+        true_ee = ee_position(model, true_q[i].astype(np.float64))
+        np.testing.assert_allclose(plain_parts["ee_pos"][i], true_ee, atol=2e-5)
+        np.testing.assert_allclose(state.pipeline_state.site_xpos[i, robot.ee_site], true_ee, atol=2e-5)  # state: true
         assert np.linalg.norm(parts["ee_pos"][i] - plain_parts["ee_pos"][i]) > 1e-3  # 0.05 rad moves it mm to cm
         geom_xpos, geom_xmat = geom_poses(model, q)
         np.testing.assert_allclose(parts["self_dist"][i], robot.self_distances(geom_xpos, geom_xmat), atol=1e-4)

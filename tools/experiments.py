@@ -625,11 +625,11 @@ ASSUMED_STARTUP = 60.0
 compilation and, for an off-policy learner, the replay buffer's first fill (about a minute for fast SAC:
 results/experiments/README.md)."""
 
-PROCESS_START = 15.0
-"""Seconds a part spends before its first chunk's clock starts (the process's imports, building the env and the
-learner), which metrics.csv's wall clock and so every measured start-up leave out: ~15 s on an H200
-(results/experiments/sac-fast/calls/2026-11-27c_calls.md). `--whole-parts` adds it for every part that starts up,
-so that a part predicted to finish does (one predicted at 211 s stopped 3 s short of its budget)."""
+PROCESS_START = 10.0
+"""Seconds a part spends outside metrics.csv's clock, which every measured start-up leaves out: the process's
+imports, building the env and the learner, restoring a checkpoint (~9 s for a one-seed UR5e reach part on an
+H200: its worker's own clock against its chunks' wall-clock sum). Added to `--whole-parts`' prediction for every
+part that starts up, a margin for a part that must finish; `time_left`, a planning figure, leaves it out."""
 
 
 def may_start(part: PartState, seconds: float | None, compiled: bool, startup_guess: float | None = None,
