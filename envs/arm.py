@@ -335,7 +335,6 @@ class ArmEnv(Env):
     def observation(self, data, xpos, ee, info) -> jax.Array:
         if self.noisy:  # fresh noise every step of the episode, from its reset key
             data, info = self.perceived(data, info, jax.random.fold_in(info["noise_key"], info["num_steps"]))
-            if self.config.joint_noise_model == "encoders":  # the end effector as the noisy encoders place it
-                xpos, ee = data.xpos, data.site_xpos[self.robot.ee_site]
+            xpos, ee = data.xpos, data.site_xpos[self.robot.ee_site]  # the poses as perceived (`perceived`)
         parts = self.observation_parts(data, xpos, ee, info)
         return jnp.concatenate([jnp.ravel(parts[p]()) for p in self.config.observation]).astype(jnp.float32)
