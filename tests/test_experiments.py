@@ -10,6 +10,8 @@ import os
 import re
 import signal
 import shutil
+import subprocess
+import sys
 import time
 import types
 
@@ -1139,3 +1141,33 @@ def test_toy_experiment_trains_resumes_and_builds(tmp_path):
     assert "| paper: target reached | target reached |" in text and "| 50.0 % |" in text
     assert ex.listing(selection, runs_dir, out).splitlines()[1] == "  2 done; table built"
     assert ex.commands(selection, runs_dir) == []
+
+
+@pytest.mark.parametrize("gpus, plan", [
+    (4, ["GPU 0: a b", "GPU 1: c", "GPU 2: d", "GPU 3: e f"]),
+    (2, ["GPU 0: a b d", "GPU 1: c e f"]),
+    (1, ["GPU 0: a b c d e f"]),
+])
+def test_gpu_rows_script_gives_each_gpu_its_rows(tmp_path, gpus, plan):
+    """tools/gpu_rows.sh (a device call's drivers, one per GPU): row group i goes to GPU i mod the GPUs listed by
+    nvidia-smi (a stand-in here). Each GPU's driver runs and leaves its log (here it stops at once: the rows are
+    names no registry has, and the limit is inside the script's 45 s margin); the call still packs its logs."""
+    bin_dir = tmp_path / "bin"
+    bin_dir.mkdir()
+    smi = bin_dir / "nvidia-smi"
+    smi.write_text("#!/bin/bash\n" + "".join(f"echo '{i}, STAND-IN'\n" for i in range(gpus)))
+    smi.chmod(0o755)
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    env = dict(os.environ, PATH=f"{bin_dir}:{os.path.dirname(sys.executable)}:{os.environ['PATH']}",
+               OUT=str(tmp_path / "out"), CALL_LOGS=str(tmp_path / "logs"), ROWS0="a b", ROWS1="c", ROWS2="d",
+               ROWS3="e f")
+    (tmp_path / "out").mkdir()
+    done = subprocess.run(["bash", os.path.join(root, "tools", "gpu_rows.sh"), "1", "40"], cwd=tmp_path, env=env,
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert (tmp_path / "logs" / "plan.txt").read_text().splitlines() == plan
+    assert sorted(p.name for p in (tmp_path / "logs").glob("driver_*.log")) == [f"driver_g{g}.log" for g in range(gpus)]
+    assert (tmp_path / "out" / "rec.tgz").is_file() and "call 1 done" in done.stdout
+    without_rows = subprocess.run(["bash", os.path.join(root, "tools", "gpu_rows.sh"), "1", "40"], cwd=tmp_path,
+                                  env={k: v for k, v in env.items() if k != "ROWS0"}, capture_output=True, text=True)
+    assert without_rows.returncode == 2 and "usage" in without_rows.stderr

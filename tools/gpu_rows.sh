@@ -1,0 +1,44 @@
+#!/bin/bash
+# One device call of PPO experiment rows, one `tools.experiments` driver per local GPU, from the repository root:
+#   ROWS0="exp exp/run ..." ROWS1="..." [ROWS2=... ROWS3=...] bash tools/gpu_rows.sh CALL LIMIT [last]
+# GPU i trains ROWS<i>, three seeds a part, until LIMIT seconds after the start less 45 s (for the packing below);
+# with fewer GPUs than row groups, group i follows group i mod (number of GPUs). With `last` (the machine's last
+# call: it keeps no runs/ after it), --whole-parts: the three-seed parts predicted to finish, then one-seed parts in
+# the time left. Logs go to $CALL_LOGS (default /tmp/calllogs); $OUT/rec.tgz gets them and every part's config,
+# eval and metrics files (`python -m tools.experiments record` takes them after the lease).
+CALL=$1; LIMIT=$2; LAST=$3; start=$(date +%s)
+if [ -z "$CALL" ] || [ -z "$LIMIT" ] || [ -z "$ROWS0" ] || [ -z "$OUT" ]; then
+  echo "usage: ROWS0=... [ROWS1=... ROWS2=... ROWS3=...] OUT=dir bash tools/gpu_rows.sh CALL LIMIT [last]" >&2
+  exit 2
+fi
+L=${CALL_LOGS:-/tmp/calllogs}; rm -rf $L; mkdir -p $L
+tl() { echo $(( LIMIT - ($(date +%s) - start) - 45 )); }  # the drivers' limit: 45 s kept for packing
+nvidia-smi --query-gpu=index,name --format=csv,noheader > $L/gpus.txt
+NG=$(wc -l < $L/gpus.txt)
+GROUPS_=("$ROWS0" "$ROWS1" "$ROWS2" "$ROWS3")
+ROWS=()
+for i in 0 1 2 3; do ROWS[$(( i % NG ))]="${ROWS[$(( i % NG ))]} ${GROUPS_[$i]}"; done
+for (( g = 0; g < NG && g < 4; g++ )); do echo "GPU $g:"${ROWS[$g]}; done > $L/plan.txt
+ppo() {  # ppo GPU NAME ROWS...: PPO rows on one GPU until the limit
+  local gpu=$1 name=$2; shift 2
+  mkdir -p $L/w_$name
+  if [ "$LAST" = last ]; then
+    CUDA_VISIBLE_DEVICES=$gpu python -m tools.experiments run "$@" --parallel --max-seeds 3 --whole-parts \
+      --time-limit $(tl) --no-build --worker-logs $L/w_$name > $L/driver_$name.log 2>&1
+    [ $(tl) -gt 150 ] || return 0
+    CUDA_VISIBLE_DEVICES=$gpu python -m tools.experiments run "$@" --parallel --max-seeds 1 --whole-parts \
+      --time-limit $(tl) --no-build --worker-logs $L/w_$name > $L/driver_${name}_1.log 2>&1
+  else
+    CUDA_VISIBLE_DEVICES=$gpu python -m tools.experiments run "$@" --parallel --max-seeds 3 \
+      --time-limit $(tl) --no-build --worker-logs $L/w_$name > $L/driver_$name.log 2>&1
+  fi
+}
+for (( g = 0; g < NG && g < 4; g++ )); do
+  [ -n "${ROWS[$g]// /}" ] && ppo $g g$g ${ROWS[$g]} &
+done
+wait
+tar czf $OUT/rec.tgz $L $(find runs/experiments \( -name config.json -o -name eval.json -o -name 'cross-*.json' -o -name metrics.csv \) -not -path '*/checkpoints/*' 2>/dev/null)
+cat $L/gpus.txt $L/plan.txt; for d in $L/driver*.log; do echo "== $d"; tail -5 $d; done
+for f in $L/w_*/*; do echo "== $f"; grep "steps/s" $f | tail -1; tail -2 $f; done
+ls -la $OUT
+echo "call $CALL done $(date) elapsed $(( $(date +%s) - start ))"
