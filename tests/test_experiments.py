@@ -541,6 +541,9 @@ def test_time_limit_plan():
     assert ex.speed_guess(dataclasses.replace(state, parts=[sibling(0, 2, 300.0)]), fresh, [peer]) == (250.0, 9.0)
     outdated = dataclasses.replace(lone, rate=50.0, status="changed")  # trained under another config: no measure
     assert ex.speed_guess(state, fresh, [peer, lone, outdated]) == (800.0, 8.0)
+    # The slowest speed with the longest start-up of the same parts, which need not be one part's pair.
+    quick_start = dataclasses.replace(lone, logdir="q2", rate=850.0, startup=30.0)
+    assert ex.speed_guess(state, fresh, [lone, quick_start]) == (800.0, 30.0)
     # A start-up measured as 0 s (a cached compilation) is a measurement, not a missing one.
     cached = ex.PartState("", 0, 1, "partial", steps=0, budget=100_000, rate=1000.0, startup=0.0)
     assert ex.seconds_to_finish(cached, compiled=False) == 100.0 and ex.may_start(cached, 100.0, compiled=False)
@@ -747,6 +750,27 @@ def test_whole_parts_guesses_from_the_preset_where_no_comparable_run_was_timed(t
     ex.train_pending(selection, runs_dir, deadline=time.monotonic() + 30.0 + need + 10.0, reserve=30.0,
                      log=log.append, registry=registry, whole_parts=True)
     assert calls == [os.path.join(runs_dir, "toy3", "fresh", "seeds-0-0")], log
+
+
+def test_rough_guess_from_parts_of_fewer_seeds_shares_their_throughput(tmp_path):
+    """With no part of as many seeds measured, a rough guess shares the slowest throughput in all of the
+    preset's parts of fewer seeds among the part's seeds, and plans on the longest start-up among them."""
+    runs_dir = str(tmp_path / "runs")
+    quick = ex.Run("quick", "point-mass-ppo", {**TOY_RUN, "env.dt": 0.2}, seeds=1, num_timesteps=10_240)
+    slow = ex.Run("slow", "point-mass-ppo", {**TOY_RUN, "env.dt": 0.25}, seeds=1, num_timesteps=10_240)
+    pair = ex.Run("pair", "point-mass-ppo", {**TOY_RUN, "env.dt": 0.3}, seeds=2, num_timesteps=20_480)
+    exp = ex.Experiment("toy4", "point mass: seeds", "not in the paper", (quick, slow, pair))
+    registry = {"toy4": exp}
+    # quick: 1,000 env steps/s after 40 s of start-up; slow: 800/s after 10 s (5,120 / 800 = 6.4 s).
+    _part(quick, runs_dir, "toy4", "quick", 0, 1, steps=[10240], evaluated=10240,
+          metrics=([5120, 10240], 1, 1000.0, [45.12, 5.12]))
+    _part(slow, runs_dir, "toy4", "slow", 0, 1, steps=[10240], evaluated=10240,
+          metrics=([5120, 10240], 1, 800.0, [16.4, 6.4]))
+    st = ex.run_state(exp, pair, runs_dir, registry=registry)
+    part = ex.pending_parts(st)[0]
+    assert part.count == 2
+    rate, startup = ex.guess_speed(st, part, runs_dir, registry=registry, rough=True)
+    assert rate == pytest.approx(400.0) and startup == pytest.approx(40.0)
 
 
 def test_whole_parts_leaves_a_part_that_cannot_finish(tmp_path):

@@ -675,16 +675,18 @@ def _speed(part: PartState, compiled: bool, startup_guess: float | None,
 
 def speed_guess(state: RunState, part: PartState, peers=()) -> tuple[float | None, float | None]:
     """(env steps/s per seed, startup s) measured on another part of the run (or among `peers`, parts of
-    comparable runs: `comparable_parts`; parts trained under a changed config left out): the slowest part with
-    as many seeds, else the slowest with more (seeds trained together run no faster per seed than fewer, and
-    much slower than alone: one UR5e reach seed ~880k env steps/s, each of three ~440k), or (None, None)."""
+    comparable runs: `comparable_parts`; parts trained under a changed config left out): the slowest speed of the
+    parts with as many seeds, else of those with more (seeds trained together run no faster per seed than fewer,
+    and much slower than alone: one UR5e reach seed ~880k env steps/s, each of three ~440k), and the longest
+    start-up among the same parts (a compilation cache or GPU model shortens one part's start-up and not
+    another's: a part that must finish is planned on the worst of both), or (None, None)."""
     measured = [p for p in [*state.parts, *peers] if p.rate is not None and p.count >= part.count
                 and p.logdir != part.logdir and p.status != "changed"]
     if not measured:
         return None, None
-    same = [p for p in measured if p.count == part.count]
-    slowest = min(same or measured, key=lambda p: p.rate)
-    return slowest.rate, slowest.startup
+    chosen = [p for p in measured if p.count == part.count] or measured
+    startups = [p.startup for p in chosen if p.startup is not None]
+    return min(p.rate for p in chosen), max(startups) if startups else None
 
 
 def speed_key(run: Run) -> str:
@@ -739,7 +741,8 @@ def guess_speed(st: RunState, part: PartState, runs_dir: str, record: str | None
     if not fewer:
         return None, None
     slowest = min(fewer, key=lambda p: p.rate * p.count)
-    return slowest.rate * slowest.count / part.count, slowest.startup
+    startups = [p.startup for p in fewer if p.startup is not None]
+    return slowest.rate * slowest.count / part.count, max(startups) if startups else None
 
 
 def time_left(st: RunState, runs_dir: str, record: str | None = None, registry: dict | None = None,
