@@ -1192,6 +1192,11 @@ def test_gpu_rows_script_gives_each_gpu_its_rows(tmp_path, gpus, plan):
     assert (tmp_path / "logs" / "plan.txt").read_text().splitlines() == plan
     assert sorted(p.name for p in (tmp_path / "logs").glob("driver_*.log")) == [f"driver_g{g}.log" for g in range(gpus)]
     assert (tmp_path / "out" / "rec.tgz").is_file() and "call 1 done" in done.stdout
+    # The drivers' flags parse: each got as far as its rows (an argparse error would come first).
+    assert "experiment 'a' is unknown" in (tmp_path / "logs" / "driver_g0.log").read_text()
+    last = subprocess.run(["bash", os.path.join(root, "tools", "gpu_rows.sh"), "1", "40", "last"], cwd=tmp_path,
+                          env=env, capture_output=True, text=True, timeout=120)
+    assert last.returncode == 0 and "experiment 'a' is unknown" in (tmp_path / "logs" / "driver_g0.log").read_text()
     without_rows = subprocess.run(["bash", os.path.join(root, "tools", "gpu_rows.sh"), "1", "40"], cwd=tmp_path,
                                   env={k: v for k, v in env.items() if k != "ROWS0"}, capture_output=True, text=True)
     assert without_rows.returncode == 2 and "usage" in without_rows.stderr

@@ -4,8 +4,11 @@
 # GPU i trains ROWS<i>, three seeds a part, until LIMIT seconds after the start less 45 s (for the packing below);
 # with fewer GPUs than row groups, group i follows group i mod (number of GPUs). With `last` (the machine's last
 # call: it keeps no runs/ after it), --whole-parts: the three-seed parts predicted to finish, then one-seed parts in
-# the time left. Logs go to $CALL_LOGS (default /tmp/calllogs); $OUT/rec.tgz gets them and every part's config,
-# eval and metrics files (`python -m tools.experiments record` takes them after the lease).
+# the time left. Without `last`, the parts that do not finish stay on the machine for the next call, so the drivers
+# keep 20 s (not the default 10 % of the limit) for the last checkpoint and exit: a part that finishes late, with its
+# ~35 s evaluation, still ends inside the 45 s kept for packing. Logs go to $CALL_LOGS (default /tmp/calllogs);
+# $OUT/rec.tgz gets them and every part's config, eval and metrics files (`python -m tools.experiments record`
+# takes them after the lease).
 CALL=$1; LIMIT=$2; LAST=$3; start=$(date +%s)
 if [ -z "$CALL" ] || [ -z "$LIMIT" ] || [ -z "$ROWS0" ] || [ -z "$OUT" ]; then
   echo "usage: ROWS0=... [ROWS1=... ROWS2=... ROWS3=...] OUT=dir bash tools/gpu_rows.sh CALL LIMIT [last]" >&2
@@ -29,7 +32,7 @@ ppo() {  # ppo GPU NAME ROWS...: PPO rows on one GPU until the limit
     CUDA_VISIBLE_DEVICES=$gpu python -m tools.experiments run "$@" --parallel --max-seeds 1 --whole-parts \
       --time-limit $(tl) --no-build --worker-logs $L/w_$name > $L/driver_${name}_1.log 2>&1
   else
-    CUDA_VISIBLE_DEVICES=$gpu python -m tools.experiments run "$@" --parallel --max-seeds 3 \
+    CUDA_VISIBLE_DEVICES=$gpu python -m tools.experiments run "$@" --parallel --max-seeds 3 --reserve 20 \
       --time-limit $(tl) --no-build --worker-logs $L/w_$name > $L/driver_$name.log 2>&1
   fi
 }
