@@ -625,6 +625,12 @@ ASSUMED_STARTUP = 60.0
 compilation and, for an off-policy learner, the replay buffer's first fill (about a minute for fast SAC:
 results/experiments/README.md)."""
 
+ASSUMED_CROSS = 45.0
+"""Seconds assumed for a call's first cross-evaluation, before one is timed: like the evaluation at the end of
+training, it compiles the policy's rollout and runs `eval_envs` episodes per seed (the evaluations' times in the
+workers' logs: results/experiments/sac-fast/calls/2026-11-27d_calls.md). One started with less time left is
+cut off by the `--parallel` driver's SIGINT past the deadline and lost."""
+
 PROCESS_START = 10.0
 """Seconds a part spends outside metrics.csv's clock, which every measured start-up leaves out: the process's
 imports, building the env and the learner, restoring a checkpoint (~9 s for a one-seed UR5e reach part on an
@@ -678,8 +684,8 @@ def speed_guess(state: RunState, part: PartState, peers=()) -> tuple[float | Non
     comparable runs: `comparable_parts`; parts trained under a changed config left out): the slowest speed of the
     parts with as many seeds, else of those with more (seeds trained together run no faster per seed than fewer,
     and much slower than alone: one UR5e reach seed ~880k env steps/s, each of three ~440k), and the longest
-    start-up among the same parts (a compilation cache or GPU model shortens one part's start-up and not
-    another's: a part that must finish is planned on the worst of both), or (None, None)."""
+    start-up among the same parts (start-ups differ between parts of one config, a compilation cache hit or not:
+    a part that must finish is planned on the worst of both), or (None, None)."""
     measured = [p for p in [*state.parts, *peers] if p.rate is not None and p.count >= part.count
                 and p.logdir != part.logdir and p.status != "changed"]
     if not measured:
@@ -861,7 +867,8 @@ def train_pending(selection, runs_dir: str, deadline: float | None = None, reser
                 for run_x, st_x, part, cross in folder_crosses(exp, st, runs_dir, record, registry):
                     if only_part is not None and part.name != only_part:
                         continue  # another worker's part
-                    if deadline is not None and deadline - time.monotonic() < max(cross_seconds, reserve / 2):
+                    if deadline is not None and deadline - time.monotonic() < max(cross_seconds or ASSUMED_CROSS,
+                                                                                  reserve / 2):
                         log(f"[{st_x.key} {part.name}] time limit: cross-evaluation {cross.name!r} left for the next call")
                         return False
                     log(f"[{st_x.key} {part.name}] cross-evaluation {cross.name!r}: {cross.setting}")
