@@ -5,8 +5,8 @@
 # with fewer GPUs than row groups, group i follows group i mod (number of GPUs). With `last` (the machine's last
 # call: it keeps no runs/ after it), --whole-parts: the three-seed parts predicted to finish, then one-seed parts in
 # the time left. Without `last`, the parts that do not finish stay on the machine for the next call, so the drivers
-# keep 20 s (not the default 10 % of the limit) for the last checkpoint and exit: a part that finishes late, with its
-# ~35 s evaluation, still ends inside the 45 s kept for packing. Logs go to $CALL_LOGS (default /tmp/calllogs);
+# keep a 20 s reserve for the last checkpoint and exit: a part that finishes late ends its evaluation inside the
+# 45 s kept for packing. Logs go to $CALL_LOGS (default /tmp/calllogs);
 # $OUT/rec.tgz gets them and every part's config, eval and metrics files (`python -m tools.experiments record`
 # takes them after the lease).
 CALL=$1; LIMIT=$2; LAST=$3; start=$(date +%s)
