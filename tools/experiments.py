@@ -679,6 +679,11 @@ def _speed(part: PartState, compiled: bool, startup_guess: float | None,
     return rate, known[0] if known else ASSUMED_STARTUP
 
 
+def longest(*startups: float | None) -> float | None:
+    """The longest of the start-ups known (None: not measured), None if none is."""
+    return max((x for x in startups if x is not None), default=None)
+
+
 def speed_guess(state: RunState, part: PartState, peers=()) -> tuple[float | None, float | None]:
     """(env steps/s per seed, startup s) measured on another part of the run (or among `peers`, parts of
     comparable runs: `comparable_parts`; parts trained under a changed config left out): the slowest speed of the
@@ -691,8 +696,7 @@ def speed_guess(state: RunState, part: PartState, peers=()) -> tuple[float | Non
     if not measured:
         return None, None
     chosen = [p for p in measured if p.count == part.count] or measured
-    startups = [p.startup for p in chosen if p.startup is not None]
-    return min(p.rate for p in chosen), max(startups) if startups else None
+    return min(p.rate for p in chosen), longest(*(p.startup for p in chosen))
 
 
 def speed_key(run: Run) -> str:
@@ -747,8 +751,7 @@ def guess_speed(st: RunState, part: PartState, runs_dir: str, record: str | None
     if not fewer:
         return None, None
     slowest = min(fewer, key=lambda p: p.rate * p.count)
-    startups = [p.startup for p in fewer if p.startup is not None]
-    return slowest.rate * slowest.count / part.count, max(startups) if startups else None
+    return slowest.rate * slowest.count / part.count, longest(*(p.startup for p in fewer))
 
 
 def time_left(st: RunState, runs_dir: str, record: str | None = None, registry: dict | None = None,
@@ -778,9 +781,6 @@ def start_verdict(st: RunState, part: PartState, seconds: float | None, compiled
     idle, and starts the part where the prediction fits; `may_start` never uses a rough guess. Used by a training
     process before each part and by the `--parallel` driver before it starts a worker (a worker that would stop
     at once still costs its process start, 10-20 s past the parts' stop)."""
-    def longest(*startups):
-        return max((x for x in startups if x is not None), default=None)
-
     rate_guess, startup_guess = guess_speed(st, part, runs_dir, record, registry)
     startup_guess = longest(startup_seen, startup_guess)
     if whole_parts and seconds is not None:

@@ -24,16 +24,19 @@ for i in 0 1 2 3; do ROWS[$(( i % NG ))]="${ROWS[$(( i % NG ))]} ${GROUPS_[$i]}"
 for (( g = 0; g < NG && g < 4; g++ )); do echo "GPU $g:"${ROWS[$g]}; done > $L/plan.txt
 ppo() {  # ppo GPU NAME ROWS...: PPO rows on one GPU until the limit
   local gpu=$1 name=$2; shift 2
+  local rows="$*"
   mkdir -p $L/w_$name
+  drive() {  # drive LOG FLAGS...: one driver over the rows with FLAGS, its output to $L/LOG
+    local log=$1; shift
+    CUDA_VISIBLE_DEVICES=$gpu python -m tools.experiments run $rows --parallel "$@" --time-limit $(tl) --no-build \
+      --worker-logs $L/w_$name > $L/$log 2>&1
+  }
   if [ "$LAST" = last ]; then
-    CUDA_VISIBLE_DEVICES=$gpu python -m tools.experiments run "$@" --parallel --max-seeds 3 --whole-parts \
-      --time-limit $(tl) --no-build --worker-logs $L/w_$name > $L/driver_$name.log 2>&1
+    drive driver_$name.log --max-seeds 3 --whole-parts
     [ $(tl) -gt 150 ] || return 0
-    CUDA_VISIBLE_DEVICES=$gpu python -m tools.experiments run "$@" --parallel --max-seeds 1 --whole-parts \
-      --time-limit $(tl) --no-build --worker-logs $L/w_$name > $L/driver_${name}_1.log 2>&1
+    drive driver_${name}_1.log --max-seeds 1 --whole-parts
   else
-    CUDA_VISIBLE_DEVICES=$gpu python -m tools.experiments run "$@" --parallel --max-seeds 3 --reserve 20 \
-      --time-limit $(tl) --no-build --worker-logs $L/w_$name > $L/driver_$name.log 2>&1
+    drive driver_$name.log --max-seeds 3 --reserve 20
   fi
 }
 for (( g = 0; g < NG && g < 4; g++ )); do
