@@ -777,6 +777,35 @@ def test_rough_guess_from_parts_of_fewer_seeds_shares_their_throughput(tmp_path)
     assert rate == pytest.approx(400.0) and startup == pytest.approx(40.0)
 
 
+def test_rough_guess_prefers_runs_of_the_same_learner_config(tmp_path):
+    """A rough guess takes the preset's runs with the part's learner config (other env overrides) before those of
+    another network, which train slower: the planner then leaves no GPU idle for a part that would fit."""
+    runs_dir = str(tmp_path / "runs")
+    env_only = ex.Run("env-only", "point-mass-ppo", {**TOY_RUN, "env.dt": 0.2}, seeds=1, num_timesteps=10_240)
+    wider = ex.Run("wider", "point-mass-ppo", {**TOY_RUN, "algo.policy_hidden_sizes": (64, 64, 64)}, seeds=1,
+                   num_timesteps=10_240)
+    fresh = ex.Run("fresh", "point-mass-ppo", {**TOY_RUN, "env.dt": 0.3}, seeds=1, num_timesteps=10_240)
+    registry = {"toy5": ex.Experiment("toy5", "point mass: learners", "not in the paper", (env_only, wider, fresh))}
+    assert ex.learner_key(env_only) == ex.learner_key(fresh) != ex.learner_key(wider)
+    # env-only: 1,000 env steps/s after 10 s of start-up; wider: 500/s after 30 s.
+    _part(env_only, runs_dir, "toy5", "env-only", 0, 1, steps=[10240], evaluated=10240,
+          metrics=([5120, 10240], 1, 1000.0, [15.12, 5.12]))
+    _part(wider, runs_dir, "toy5", "wider", 0, 1, steps=[10240], evaluated=10240,
+          metrics=([5120, 10240], 1, 500.0, [40.24, 10.24]))
+    st = ex.run_state(registry["toy5"], fresh, runs_dir, registry=registry)
+    part = ex.pending_parts(st)[0]
+    assert ex.guess_speed(st, part, runs_dir, registry=registry) == (None, None)
+    rate, startup = ex.guess_speed(st, part, runs_dir, registry=registry, rough=True)
+    assert rate == pytest.approx(1000.0) and startup == pytest.approx(10.0)
+    # Without a run of its learner config, the whole preset's slowest: wider's.
+    lone = ex.Run("lone", "point-mass-ppo", {**TOY_RUN, "algo.value_hidden_sizes": (8,)}, seeds=1,
+                  num_timesteps=10_240)
+    registry["toy5"] = dataclasses.replace(registry["toy5"], runs=registry["toy5"].runs + (lone,))
+    st = ex.run_state(registry["toy5"], lone, runs_dir, registry=registry)
+    rate, startup = ex.guess_speed(st, ex.pending_parts(st)[0], runs_dir, registry=registry, rough=True)
+    assert rate == pytest.approx(500.0) and startup == pytest.approx(30.0)
+
+
 def test_whole_parts_leaves_a_part_that_cannot_finish(tmp_path):
     runs_dir = str(tmp_path / "runs")
     b = TOY.runs[1]

@@ -720,6 +720,22 @@ def comparable_parts(run: Run, runs_dir: str, record: str | None = None, registr
     return parts_of_runs_like(run, lambda other: speed_key(other) == key, runs_dir, record, registry)
 
 
+def learner_key(run: Run) -> str:
+    """The run's preset and learner config (network sizes, epochs, envs, ...) without its env config: runs with
+    equal keys differ only in what the env computes (observation, reward terms), which moves their speed little
+    next to the network's size (3x512 against 3x256: 1.2-1.5x the time, results/experiments/network-size)."""
+    fields = json.loads(recipe(run))
+    return json.dumps([run.preset, fields["algo_name"], fields["algo"]], sort_keys=True)
+
+
+def same_learner_parts(run: Run, runs_dir: str, record: str | None = None, registry: dict | None = None) -> list:
+    """The parts of the other registered runs of `run`'s preset and learner config (`learner_key`), whatever their
+    env overrides: `guess_speed(rough=True)`'s first stand-in, before the whole preset's."""
+    key = learner_key(run)
+    return parts_of_runs_like(run, lambda other: other.preset == run.preset and learner_key(other) == key,
+                              runs_dir, record, registry)
+
+
 def same_preset_parts(run: Run, runs_dir: str, record: str | None = None, registry: dict | None = None) -> list:
     """The parts of the other registered runs of `run`'s preset, whatever their overrides: a rough stand-in speed
     for estimates (`time_left`) and for `--whole-parts`' prediction of a config never timed, never for
@@ -731,7 +747,8 @@ def guess_speed(st: RunState, part: PartState, runs_dir: str, record: str | None
                 registry: dict | None = None, rough: bool = False) -> tuple[float | None, float | None]:
     """(env steps/s per seed, startup s) for `part` when it has none of its own: another part's of its run, else
     of a run training the same config (`comparable_parts`), each with at least as many seeds (`speed_guess`);
-    with `rough`, then of a run of the same preset (`same_preset_parts`), and last a part of any of these with
+    with `rough`, then of a run of the same preset and learner config (`same_learner_parts`: the env's overrides
+    move the speed little), then of any run of the preset (`same_preset_parts`), and last a part of any of these with
     fewer seeds, its throughput in all shared among `part`'s seeds (vmapping more seeds has never lowered the
     throughput in all: results/sac/brax_reference, results/experiments; for the same config a time from it is an
     upper bound, for another config of the preset a rough one); (None, None) where none was measured."""
@@ -742,10 +759,12 @@ def guess_speed(st: RunState, part: PartState, runs_dir: str, record: str | None
     rate, startup = speed_guess(st, part, comparable)
     if not rough or rate is not None:
         return rate, startup
+    learner = same_learner_parts(st.run, runs_dir, record, registry)
     preset = same_preset_parts(st.run, runs_dir, record, registry)
-    rate, startup = speed_guess(st, part, preset)
-    if rate is not None:
-        return rate, startup
+    for peers in (learner, preset):
+        rate, startup = speed_guess(st, part, peers)
+        if rate is not None:
+            return rate, startup
     fewer = [p for p in [*st.parts, *comparable, *preset]
              if p.rate is not None and p.status != "changed" and p.logdir != part.logdir]
     if not fewer:
