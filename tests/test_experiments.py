@@ -787,6 +787,10 @@ def test_rough_guess_prefers_runs_of_the_same_learner_config(tmp_path):
     fresh = ex.Run("fresh", "point-mass-ppo", {**TOY_RUN, "env.dt": 0.3}, seeds=1, num_timesteps=10_240)
     registry = {"toy5": ex.Experiment("toy5", "point mass: learners", "not in the paper", (env_only, wider, fresh))}
     assert ex.learner_key(env_only) == ex.learner_key(fresh) != ex.learner_key(wider)
+    # On an arm, the observation leaves the key alone; the physics' substeps and the backend change it.
+    arm = [ex.learner_key(ex.Run("arm", "ur5e-reach-ppo", overrides)) for overrides in (
+        {}, {"env.observation": ("joint_pos", "ee_pos", "target_pos")}, {"env.substeps": 3}, {"env.backend": "mujoco"})]
+    assert arm[0] == arm[1] and len({arm[0], arm[2], arm[3]}) == 3
     # env-only: 1,000 env steps/s after 10 s of start-up; wider: 500/s after 30 s.
     _part(env_only, runs_dir, "toy5", "env-only", 0, 1, steps=[10240], evaluated=10240,
           metrics=([5120, 10240], 1, 1000.0, [15.12, 5.12]))

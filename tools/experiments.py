@@ -721,11 +721,13 @@ def comparable_parts(run: Run, runs_dir: str, record: str | None = None, registr
 
 
 def learner_key(run: Run) -> str:
-    """The run's preset and learner config (network sizes, epochs, envs, ...) without its env config: runs with
-    equal keys differ only in what the env computes (observation, reward terms), which moves their speed little
-    next to the network's size (3x512 against 3x256: 1.2-1.5x the time, results/experiments/network-size)."""
+    """The run's preset, learner config (network sizes, epochs, envs, ...) and physics cost (the env's substeps
+    and backend), without the rest of its env config: runs with equal keys differ in what the env observes and
+    rewards, which moves their speed little next to the network's size (3x512 against 3x256: 1.2-1.5x the time,
+    results/experiments/network-size)."""
     fields = json.loads(recipe(run))
-    return json.dumps([run.preset, fields["algo_name"], fields["algo"]], sort_keys=True)
+    physics = {name: fields["env"].get(name) for name in ("substeps", "backend")}
+    return json.dumps([run.preset, fields["algo_name"], fields["algo"], physics], sort_keys=True)
 
 
 def same_learner_parts(run: Run, runs_dir: str, record: str | None = None, registry: dict | None = None) -> list:
