@@ -128,8 +128,8 @@ register(Experiment(
     note=_AVOID_DEPARTS + " dense-penalty tests why our dense row collides more than semi-sparse: its penalty on "
                           "the colliding step is what a collision forfeits under semi-sparse beyond dense, in the "
                           "discounted returns of the two rows (results/experiments/README.md, fifteenth session). "
-                          "At 55 the policy learns to keep away before it ever finds the target (eq. (2) pays ~0 "
-                          "beyond 0.2 m), so it tests nothing; dense-penalty-10 asks whether a smaller penalty "
+                          "At 55 the policy learns to keep away before it ever finds the target (eq. (2) pays under "
+                          "2 % of its maximum beyond 0.2 m), so it tests nothing; dense-penalty-10 asks whether a smaller penalty "
                           "lowers the collisions and still reaches (the sixteenth session)."))
 
 register(Experiment(

@@ -722,9 +722,10 @@ def comparable_parts(run: Run, runs_dir: str, record: str | None = None, registr
 
 def learner_key(run: Run) -> str:
     """The run's preset, learner config (network sizes, epochs, envs, ...) and physics cost (the env's substeps
-    and backend), without the rest of its env config: runs with equal keys differ in what the env observes and
-    rewards, which moves their speed little next to the network's size (3x512 against 3x256: 1.2-1.5x the time,
-    results/experiments/network-size)."""
+    and backend), without the rest of its env config (observation, reward terms, workspace, obstacles, episode
+    length) and the top-level fields (evaluation, precision): these move the speed less than the network's size
+    does (3x512 against 3x256: 1.2-1.5x the time, results/experiments/network-size), and a rough guess takes the
+    slowest part."""
     fields = json.loads(recipe(run))
     physics = {name: fields["env"].get(name) for name in ("substeps", "backend")}
     return json.dumps([run.preset, fields["algo_name"], fields["algo"], physics], sort_keys=True)
@@ -750,10 +751,11 @@ def guess_speed(st: RunState, part: PartState, runs_dir: str, record: str | None
     """(env steps/s per seed, startup s) for `part` when it has none of its own: another part's of its run, else
     of a run training the same config (`comparable_parts`), each with at least as many seeds (`speed_guess`);
     with `rough`, then of a run of the same preset and learner config (`same_learner_parts`: the env's overrides
-    move the speed little), then of any run of the preset (`same_preset_parts`), and last a part of any of these with
-    fewer seeds, its throughput in all shared among `part`'s seeds (vmapping more seeds has never lowered the
-    throughput in all: results/sac/brax_reference, results/experiments; for the same config a time from it is an
-    upper bound, for another config of the preset a rough one); (None, None) where none was measured."""
+    move the speed little), then of any run of the preset (`same_preset_parts`; with as many seeds, it comes
+    before a same-learner part of fewer), and last a part of any of these with fewer seeds, its throughput in all
+    shared among `part`'s seeds (vmapping more seeds has never lowered the throughput in all:
+    results/sac/brax_reference, results/experiments; for the same config a time from it is an upper bound, for
+    another config of the preset a rough one); (None, None) where none was measured."""
     rate, startup = speed_guess(st, part)
     if part.rate is not None or rate is not None:
         return rate, startup
