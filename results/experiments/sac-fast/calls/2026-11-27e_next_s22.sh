@@ -5,8 +5,8 @@
 # keeps runs/). GPU 0: the last reach rows (reach-observation/prev-action; joint-penalties' acc-1e-3 seed 2,
 # vel-1e-3, vel-1e-2 seeds 1-2: ~1,450 s at this session's H200 speeds), then obstacle-size-ur5e r0.3. GPU 1:
 # reach-avoid-observation/link-dist-size, then obstacle-size-ur5e r0.3. GPUs 2 and 3: obstacle-size-ur5e r0.025 and
-# r0.05, then r0.2. A three-seed reach-avoid part takes ~610 s with its evaluation, a two-seed one ~485 s: the
-# last call's --whole-parts fits the seeds-3-4 parts. Our own studies (reach-avoid-reward/dense-penalty-10,
+# r0.05, then r0.2. The planner guesses ~610 s for a three-seed reach-avoid part with its evaluation and ~485 s for
+# a two-seed one (H200 speeds give ~530 and ~440 s): the last call's --whole-parts fits the seeds-3-4 parts. Our own studies (reach-avoid-reward/dense-penalty-10,
 # reach-avoid-joint-margin) and sac-workspaces wait for the paper's rows. With two GPUs, GPU 2's rows follow
 # GPU 0's and GPU 3's follow GPU 1's (tools/gpu_rows.sh).
 export ROWS0="reach-observation/prev-action joint-penalties obstacle-size-ur5e/r0.3"
