@@ -125,12 +125,10 @@ register(Experiment(
          label="dense, collision penalty 10 (not in the paper)")),
     metrics=_AVOID_METRICS, curves=_AVOID_CURVES,
     paper="Semi-sparse learned slightly slower but ended safer: 1.5 % fewer self and 1 % fewer obstacle collisions than dense.",
-    note=_AVOID_DEPARTS + " dense-penalty tests why our dense row collides more than semi-sparse: its penalty on "
-                          "the colliding step is what a collision forfeits under semi-sparse beyond dense, in the "
-                          "discounted returns of the two rows (results/experiments/README.md, fifteenth session). "
-                          "At 55 the policy learns to keep away before it ever finds the target (eq. (2) pays under "
-                          "2 % of its maximum beyond 0.2 m), so it tests nothing; dense-penalty-10 asks whether a smaller penalty "
-                          "lowers the collisions and still reaches (the sixteenth session)."))
+    note=_AVOID_DEPARTS + " dense-penalty and dense-penalty-10 test why our dense row collides more than "
+                          "semi-sparse: a penalty on the colliding step, 55 (what a collision forfeits under "
+                          "semi-sparse beyond dense, in the two rows' discounted returns) and 10 "
+                          "(results/experiments/README.md says why each)."))
 
 register(Experiment(
     "reach-avoid-observation", "UR5e reach-avoid: link-to-obstacle distances and the obstacle size observed or not",

@@ -735,8 +735,7 @@ def same_learner_parts(run: Run, runs_dir: str, record: str | None = None, regis
     """The parts of the other registered runs of `run`'s preset and learner config (`learner_key`), whatever their
     env overrides: `guess_speed(rough=True)`'s first stand-in, before the whole preset's."""
     key = learner_key(run)
-    return parts_of_runs_like(run, lambda other: other.preset == run.preset and learner_key(other) == key,
-                              runs_dir, record, registry)
+    return parts_of_runs_like(run, lambda other: learner_key(other) == key, runs_dir, record, registry)
 
 
 def same_preset_parts(run: Run, runs_dir: str, record: str | None = None, registry: dict | None = None) -> list:
@@ -763,12 +762,13 @@ def guess_speed(st: RunState, part: PartState, runs_dir: str, record: str | None
     rate, startup = speed_guess(st, part, comparable)
     if not rough or rate is not None:
         return rate, startup
-    learner = same_learner_parts(st.run, runs_dir, record, registry)
+    rate, startup = speed_guess(st, part, same_learner_parts(st.run, runs_dir, record, registry))
+    if rate is not None:
+        return rate, startup
     preset = same_preset_parts(st.run, runs_dir, record, registry)
-    for peers in (learner, preset):
-        rate, startup = speed_guess(st, part, peers)
-        if rate is not None:
-            return rate, startup
+    rate, startup = speed_guess(st, part, preset)
+    if rate is not None:
+        return rate, startup
     fewer = [p for p in [*st.parts, *comparable, *preset]
              if p.rate is not None and p.status != "changed" and p.logdir != part.logdir]
     if not fewer:
