@@ -672,6 +672,52 @@ def test_a_cross_evaluation_waits_for_a_call_with_time_for_it(tmp_path, monkeypa
     assert done == ["seeds-0-1"]
 
 
+def test_a_cross_evaluation_another_process_holds_is_left_to_it(tmp_path, monkeypatch):
+    """Two drivers given one row: a done part's cross-evaluation runs under the part's lock. While another process
+    holds it, this one leaves the cross alone (the run unfinished); one that finds the cross written once it has
+    the lock (the other finished it meanwhile) does not evaluate it again."""
+    import contextlib
+    import subprocess
+    import sys
+
+    runs_dir = str(tmp_path / "runs")
+    b = TOY.runs[1]
+    exp = dataclasses.replace(TOY, runs=(b,), cross=(ex.Cross("b", "sampled", {}, stochastic=True),))
+    _part(b, runs_dir, "toy", "b", 0, 2, steps=[10240], evaluated=10240)
+    logdir = os.path.join(runs_dir, "toy", "b", "seeds-0-1")
+    lock = ex.lock_path(logdir)
+    done = []
+    monkeypatch.setattr(ex, "cross_evaluate", lambda run, part, cross: done.append(part.name))
+    child = ("import fcntl, os, sys, time\n"
+             "f = open(sys.argv[1], 'a+'); fcntl.flock(f, fcntl.LOCK_EX)\n"
+             "f.write(f'pid {os.getpid()}'); f.flush(); print('held', flush=True)\n"
+             "time.sleep(120)")
+    holder = subprocess.Popen([sys.executable, "-c", child, lock], stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "held"
+        log = []
+        assert not ex.train_pending([(exp, [b])], runs_dir, log=log.append)
+        assert done == [] and log == [f"[toy/b seeds-0-1] cross-evaluation 'sampled' left alone: another process "
+                                      f"(pid {holder.pid}) holds its lock {lock}"], log
+    finally:
+        holder.kill()
+        holder.wait()
+    # The other process wrote the cross just before this one took the lock: nothing is evaluated twice.
+    taker = ex.part_lock
+
+    @contextlib.contextmanager
+    def late_lock(path):
+        with open(os.path.join(path, "cross-sampled.json"), "w") as f:
+            f.write("{}")
+        with taker(path) as taken:
+            yield taken
+
+    monkeypatch.setattr(ex, "part_lock", late_lock)
+    log = []
+    assert ex.train_pending([(exp, [b])], runs_dir, log=log.append)
+    assert done == [] and log == [], log
+
+
 def test_whole_parts_prediction():
     part = ex.PartState("", 0, 2, "partial", steps=20_000, budget=100_000, rate=400.0, startup=30.0)
     assert ex.seconds_to_finish(part, compiled=False) == 30.0 + 80_000 / 400.0

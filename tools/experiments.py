@@ -894,10 +894,18 @@ def train_pending(selection, runs_dir: str, deadline: float | None = None, reser
                                                                                   reserve / 2):
                         log(f"[{st_x.key} {part.name}] time limit: cross-evaluation {cross.name!r} left for the next call")
                         return False
-                    log(f"[{st_x.key} {part.name}] cross-evaluation {cross.name!r}: {cross.setting}")
-                    t0 = time.monotonic()
-                    cross_evaluate(run_x, part, cross)
-                    cross_seconds = max(cross_seconds, time.monotonic() - t0)
+                    with part_lock(part.logdir) as taken:
+                        # Under the part's lock, and looked for again: two drivers given one row would otherwise
+                        # both evaluate a part that one of them trained.
+                        if taken is None and cross_path(part, cross) is None:
+                            log(f"[{st_x.key} {part.name}] cross-evaluation {cross.name!r}: {cross.setting}")
+                            t0 = time.monotonic()
+                            cross_evaluate(run_x, part, cross)
+                            cross_seconds = max(cross_seconds, time.monotonic() - t0)
+                    if taken is not None:
+                        log(f"[{st_x.key} {part.name}] cross-evaluation {cross.name!r} left alone: {taken}")
+                        finished = False
+                        continue
                     record_part(st_x, part.name)
                 if st.status == "done":
                     break
