@@ -1250,6 +1250,12 @@ def test_toy_experiment_trains_resumes_and_builds(tmp_path):
     assert ex.commands(selection, runs_dir) == []
 
 
+def ex_pack_seconds(root: str) -> int:
+    """gpu_rows.sh's PACK_SECONDS, read from the script."""
+    with open(os.path.join(root, "tools", "gpu_rows.sh")) as f:
+        return int(re.search(r"^PACK_SECONDS=(\d+)", f.read(), re.M).group(1))
+
+
 @pytest.mark.parametrize("gpus, plan", [
     (4, ["GPU 0: a b", "GPU 1: c", "GPU 2: d", "GPU 3: e f"]),
     (2, ["GPU 0: a b d", "GPU 1: c e f"]),
@@ -1287,8 +1293,27 @@ def test_gpu_rows_script_gives_each_gpu_its_rows(tmp_path, gpus, plan):
     last = subprocess.run(["bash", os.path.join(root, "tools", "gpu_rows.sh"), "1", "40", "last"], cwd=tmp_path,
                           env=env, capture_output=True, text=True, timeout=120)
     assert last.returncode == 0 and "experiment 'a' is unknown" in (tmp_path / "logs" / "driver_g0.log").read_text()
-    drivers = args_log.read_text().splitlines()
+    drivers = [a for a in args_log.read_text().splitlines() if a.startswith("-m tools.experiments run ")]
     assert drivers and all("--reserve" not in a and "--whole-parts" in a for a in drivers), drivers
+    # A last call with time left after the whole-part passes (here every driver stops at once): each GPU then
+    # trains a one-seed part to the limit less the packing time, and the call packs the rows' unfinished parts
+    # for the next machine; a .carry folder in the tree is unpacked first.
+    args_log.unlink()
+    (tmp_path / ".carry").mkdir()
+    long = subprocess.run(["bash", os.path.join(root, "tools", "gpu_rows.sh"), "1", "400", "last"], cwd=tmp_path,
+                          env=env, capture_output=True, text=True, timeout=300)
+    assert long.returncode == 0, long.stderr
+    calls = args_log.read_text().splitlines()
+    assert calls[0] == "-m tools.carry_parts unpack --from .carry --runs-dir runs/experiments", calls
+    assert calls[-1] == (f"-m tools.carry_parts pack --runs-dir runs/experiments --to {tmp_path / 'out' / 'carry'} --max-total-mb 8 "
+                         "a b c d e f")
+    for g in range(gpus):
+        mine = [a for a in calls[1:-1] if a.split()[3:4] == [plan[g].split()[2]]]  # the driver's first row
+        assert [("--whole-parts" in a, "--max-seeds 3" in a, "--reserve 20" in a) for a in mine] == [
+            (True, True, False), (True, False, False), (False, False, True)], mine
+        limits = [int(a.split("--time-limit ")[1].split()[0]) for a in mine]
+        assert 400 - 45 - 10 <= limits[0] <= 400 - 45 and limits[2] <= limits[1] - ex_pack_seconds(root), limits
+    assert "unknown" in (tmp_path / "logs" / "pack.log").read_text()
     without_rows = subprocess.run(["bash", os.path.join(root, "tools", "gpu_rows.sh"), "1", "40"], cwd=tmp_path,
                                   env={k: v for k, v in env.items() if k != "ROWS0"}, capture_output=True, text=True)
     assert without_rows.returncode == 2 and "usage" in without_rows.stderr

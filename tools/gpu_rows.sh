@@ -2,11 +2,15 @@
 # One device call of PPO experiment rows, one `tools.experiments` driver per local GPU, from the repository root:
 #   ROWS0="exp exp/run ..." ROWS1="..." [ROWS2=... ROWS3=...] bash tools/gpu_rows.sh CALL LIMIT [last]
 # GPU i trains ROWS<i>, three seeds a part, until LIMIT seconds after the start less 45 s (for the packing below);
-# with fewer GPUs than row groups, group i follows group i mod (number of GPUs). With `last` (the machine's last
-# call: it keeps no runs/ after it), --whole-parts: the three-seed parts predicted to finish, then one-seed parts in
-# the time left. Without `last`, the parts that do not finish stay on the machine for the next call, so the drivers
-# keep a 20 s reserve for the last checkpoint and exit: a part that finishes late ends its evaluation inside the
-# 45 s kept for packing. Logs go to $CALL_LOGS (default /tmp/calllogs);
+# with fewer GPUs than row groups, group i follows group i mod (number of GPUs). Without `last`, the parts that do
+# not finish stay on the machine for the next call, so the drivers keep a 20 s reserve for the last checkpoint and
+# exit: a part that finishes late ends its evaluation inside the 45 s kept for packing. With `last` (the machine's
+# last call: it keeps no runs/ after it), --whole-parts: the three-seed parts predicted to finish, then one-seed
+# parts; then, with time still left, the next one-seed part trains to the limit less PACK_SECONDS, and every
+# unfinished part of the rows is packed learner-only into $OUT/carry (`tools.carry_parts pack`, its limits: what a
+# call brings back) for the next machine, so a GPU whose parts are all predicted too long still trains. A folder
+# .carry in the repository (carried into the call: a bundle that pack wrote) is unpacked into runs/ first.
+# Logs go to $CALL_LOGS (default /tmp/calllogs);
 # $OUT/rec.tgz gets them and every part's config, eval and metrics files (`python -m tools.experiments record`
 # takes them after the lease).
 CALL=$1; LIMIT=$2; LAST=$3; start=$(date +%s)
@@ -16,6 +20,10 @@ if [ -z "$CALL" ] || [ -z "$LIMIT" ] || [ -z "$ROWS0" ] || [ -z "$OUT" ]; then
 fi
 L=${CALL_LOGS:-/tmp/calllogs}; rm -rf $L; mkdir -p $L
 tl() { echo $(( LIMIT - ($(date +%s) - start) - 45 )); }  # the drivers' limit: 45 s kept for packing
+PACK_SECONDS=90  # the last call's learner-only saves of up to four unfinished parts (`run --carry-out` keeps 30 + 15 each)
+if [ -d .carry ]; then
+  JAX_PLATFORMS=cpu python -m tools.carry_parts unpack --from .carry --runs-dir runs/experiments > $L/unpack.log 2>&1
+fi
 nvidia-smi --query-gpu=index,name --format=csv,noheader > $L/gpus.txt
 NG=$(wc -l < $L/gpus.txt)
 GROUPS_=("$ROWS0" "$ROWS1" "$ROWS2" "$ROWS3")
@@ -26,25 +34,32 @@ ppo() {  # ppo GPU NAME ROWS...: PPO rows on one GPU until the limit
   local gpu=$1 name=$2; shift 2
   local rows="$*"
   mkdir -p $L/w_$name
-  drive() {  # drive LOG FLAGS...: one driver over the rows with FLAGS, its output to $L/LOG
-    local log=$1; shift
-    CUDA_VISIBLE_DEVICES=$gpu python -m tools.experiments run $rows --parallel "$@" --time-limit $(tl) --no-build \
-      --worker-logs $L/w_$name > $L/$log 2>&1
+  drive() {  # drive LOG KEEP FLAGS...: one driver over the rows with FLAGS until KEEP s before tl, output to $L/LOG
+    local log=$1 keep=$2; shift 2
+    CUDA_VISIBLE_DEVICES=$gpu python -m tools.experiments run $rows --parallel "$@" --time-limit $(( $(tl) - keep )) \
+      --no-build --worker-logs $L/w_$name > $L/$log 2>&1
   }
   if [ "$LAST" = last ]; then
-    drive driver_$name.log --max-seeds 3 --whole-parts
+    drive driver_$name.log 0 --max-seeds 3 --whole-parts
     [ $(tl) -gt 150 ] || return 0
-    drive driver_${name}_1.log --max-seeds 1 --whole-parts
+    drive driver_${name}_1.log 0 --max-seeds 1 --whole-parts
+    [ $(( $(tl) - PACK_SECONDS )) -gt 120 ] || return 0
+    drive driver_${name}_2.log $PACK_SECONDS --max-seeds 1 --reserve 20
   else
-    drive driver_$name.log --max-seeds 3 --reserve 20
+    drive driver_$name.log 0 --max-seeds 3 --reserve 20
   fi
 }
 for (( g = 0; g < NG && g < 4; g++ )); do
   [ -n "${ROWS[$g]// /}" ] && ppo $g g$g ${ROWS[$g]} &
 done
 wait
+if [ "$LAST" = last ]; then  # every unfinished part of the rows, for the next machine (rec.tgz is the 8th file back);
+  # the first bundle at most 8 MiB, to travel with the wheels (~24 MiB) and the repository (~32 MiB) in a first call
+  JAX_PLATFORMS=cpu python -m tools.carry_parts pack --runs-dir runs/experiments --to $OUT/carry --max-total-mb 8 \
+    $ROWS0 $ROWS1 $ROWS2 $ROWS3 > $L/pack.log 2>&1
+fi
 tar czf $OUT/rec.tgz $L $(find runs/experiments \( -name config.json -o -name eval.json -o -name 'cross-*.json' -o -name metrics.csv \) -not -path '*/checkpoints/*' 2>/dev/null)
-cat $L/gpus.txt $L/plan.txt; for d in $L/driver*.log; do echo "== $d"; tail -5 $d; done
+cat $L/gpus.txt $L/plan.txt; for d in $L/unpack.log $L/pack.log $L/driver*.log; do [ -f $d ] || continue; echo "== $d"; tail -5 $d; done
 for f in $L/w_*/*; do echo "== $f"; grep "steps/s" $f | tail -1; tail -2 $f; done
 ls -la $OUT
 echo "call $CALL done $(date) elapsed $(( $(date +%s) - start ))"
