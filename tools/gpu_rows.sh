@@ -53,9 +53,8 @@ for (( g = 0; g < NG && g < 4; g++ )); do
   [ -n "${ROWS[$g]// /}" ] && ppo $g g$g ${ROWS[$g]} &
 done
 wait
-if [ "$LAST" = last ]; then  # every unfinished part of the rows, for the next machine (rec.tgz is the 8th file back);
-  # the first bundle at most 8 MiB, to travel with the wheels (~24 MiB) and the repository (~32 MiB) in a first call
-  JAX_PLATFORMS=cpu python -m tools.carry_parts pack --runs-dir runs/experiments --to $OUT/carry --max-total-mb 8 \
+if [ "$LAST" = last ]; then  # every unfinished part of the rows, for the next machine (rec.tgz is the 8th file back)
+  JAX_PLATFORMS=cpu python -m tools.carry_parts pack --runs-dir runs/experiments --to $OUT/carry \
     $ROWS0 $ROWS1 $ROWS2 $ROWS3 > $L/pack.log 2>&1
 fi
 tar czf $OUT/rec.tgz $L $(find runs/experiments \( -name config.json -o -name eval.json -o -name 'cross-*.json' -o -name metrics.csv \) -not -path '*/checkpoints/*' 2>/dev/null)
