@@ -12,6 +12,7 @@ import signal
 import shutil
 import subprocess
 import sys
+import tarfile
 import time
 import types
 
@@ -1296,8 +1297,8 @@ def test_gpu_rows_script_gives_each_gpu_its_rows(tmp_path, gpus, plan):
     drivers = [a for a in args_log.read_text().splitlines() if a.startswith("-m tools.experiments run ")]
     assert drivers and all("--reserve" not in a and "--whole-parts" in a for a in drivers), drivers
     # A last call with time left after the whole-part passes (here every driver stops at once): each GPU then
-    # trains a one-seed part to the limit less the packing time, and the call packs the rows' unfinished parts
-    # for the next machine; a .carry folder in the tree is unpacked first.
+    # trains a one-seed part, every pass ending the packing time before the limit, and the call packs the rows'
+    # unfinished parts for the next machine, after rec.tgz; a .carry folder in the tree is unpacked first.
     args_log.unlink()
     (tmp_path / ".carry").mkdir()
     long = subprocess.run(["bash", os.path.join(root, "tools", "gpu_rows.sh"), "1", "400", "last"], cwd=tmp_path,
@@ -1305,14 +1306,19 @@ def test_gpu_rows_script_gives_each_gpu_its_rows(tmp_path, gpus, plan):
     assert long.returncode == 0, long.stderr
     calls = args_log.read_text().splitlines()
     assert calls[0] == "-m tools.carry_parts unpack --from .carry --runs-dir runs/experiments", calls
-    assert calls[-1] == f"-m tools.carry_parts pack --runs-dir runs/experiments --to {tmp_path / 'out' / 'carry'} a b c d e f"
+    assert calls[-1] == (f"-m tools.carry_parts pack --runs-dir runs/experiments --to {tmp_path / 'out' / 'carry'} "
+                         "--max-total-mb 24 a b c d e f")
     for g in range(gpus):
         mine = [a for a in calls[1:-1] if a.split()[3:4] == [plan[g].split()[2]]]  # the driver's first row
         assert [("--whole-parts" in a, "--max-seeds 3" in a, "--reserve 20" in a) for a in mine] == [
             (True, True, False), (True, False, False), (False, False, True)], mine
-        limits = [int(a.split("--time-limit ")[1].split()[0]) for a in mine]
-        assert 400 - 45 - 10 <= limits[0] <= 400 - 45 and limits[2] <= limits[1] - ex_pack_seconds(root), limits
+        limits = [int(a.split("--time-limit ")[1].split()[0]) for a in mine]  # every pass leaves the packing time
+        pack = ex_pack_seconds(root)
+        assert 400 - 45 - pack - 10 <= limits[0] and all(t <= 400 - 45 - pack for t in limits), limits
     assert "unknown" in (tmp_path / "logs" / "pack.log").read_text()
+    with tarfile.open(tmp_path / "out" / "rec.tgz") as tar:  # written before the pack began
+        names = tar.getnames()
+    assert any(n.endswith("logs/driver_g0_2.log") for n in names) and not any(n.endswith("/pack.log") for n in names)
     without_rows = subprocess.run(["bash", os.path.join(root, "tools", "gpu_rows.sh"), "1", "40"], cwd=tmp_path,
                                   env={k: v for k, v in env.items() if k != "ROWS0"}, capture_output=True, text=True)
     assert without_rows.returncode == 2 and "usage" in without_rows.stderr

@@ -13,7 +13,7 @@ buffer; per seed about 3-5 MB for the PPO presets, 16 MB for the fast SAC ones) 
 `metrics.csv`, and writes each part as its own gzipped tar, `<experiment>__<run>__<part>.tgz.NNN`, split into pieces
 of at most `--max-mb`, in bundles of at most `--max-total-mb` (default 18: a device call brings back files of at
 most 16 MiB, and the next call's working tree, which carries one bundle in a git-ignored folder beside the
-repository and its wheels, is limited to 64 MiB): the first bundle in `--to`, the parts that do not fit beside it in
+repository, and beside the wheels only where it is small, is limited to 64 MiB): the first bundle in `--to`, the parts that do not fit beside it in
 `--to`/more-1, more-2, ... (first fit), each for another call of the next machine (`--to` at most one folder below
 the call's $OUT: a call brings back files at most two folders down, 8 of them, 64 MiB in all, which `pack` keeps
 to). A part that cannot be saved, is larger than a bundle or passes those limits is left out and named. Until its
@@ -44,8 +44,8 @@ PIECE_MB = 15.0
 """The largest piece `pack` writes, in MiB: a device call brings back files of at most 16 MiB."""
 TOTAL_MB = 18.0
 """A bundle's size in MiB, what one device call carries: its working tree holds the bundle beside the repository
-(~22 MiB) and its wheels (~20 MiB), within 64 MiB; 18 holds one fast-SAC part (~15.2 MiB) and leaves the
-repository room to grow."""
+(~30 MiB) within 64 MiB, and beside the wheels (~24 MiB) too only where the bundle is small; 18 holds one
+fast-SAC part (~15.2 MiB)."""
 RETURN_FILES = 7
 """The most pieces `pack` writes in all its bundles: a device call brings back at most 8 files, one kept for the
 call's logs."""

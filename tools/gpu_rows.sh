@@ -5,11 +5,12 @@
 # with fewer GPUs than row groups, group i follows group i mod (number of GPUs). Without `last`, the parts that do
 # not finish stay on the machine for the next call, so the drivers keep a 20 s reserve for the last checkpoint and
 # exit: a part that finishes late ends its evaluation inside the 45 s kept for packing. With `last` (the machine's
-# last call: it keeps no runs/ after it), --whole-parts: the three-seed parts predicted to finish, then one-seed
-# parts; then, with time still left, the next one-seed part trains to the limit less PACK_SECONDS, and every
-# unfinished part of the rows is packed learner-only into $OUT/carry (`tools.carry_parts pack`, its limits: what a
-# call brings back) for the next machine, so a GPU whose parts are all predicted too long still trains. A folder
-# .carry in the repository (carried into the call: a bundle that pack wrote) is unpacked into runs/ first.
+# last call: it keeps no runs/ after it), every pass ends PACK_SECONDS earlier: --whole-parts, the three-seed parts
+# predicted to finish, then one-seed parts; then, with time still left, the next one-seed part trains to the limit,
+# and after rec.tgz is written every unfinished part of the rows is packed learner-only into $OUT/carry
+# (`tools.carry_parts pack`, its limits: what a call brings back; cut off 10 s before LIMIT) for the next machine,
+# so a GPU whose parts are all predicted too long still trains. A folder .carry in the repository (carried into
+# the call: a bundle that pack wrote) is unpacked into runs/ first.
 # Logs go to $CALL_LOGS (default /tmp/calllogs);
 # $OUT/rec.tgz gets them and every part's config, eval and metrics files (`python -m tools.experiments record`
 # takes them after the lease).
@@ -21,6 +22,7 @@ fi
 L=${CALL_LOGS:-/tmp/calllogs}; rm -rf $L; mkdir -p $L
 tl() { echo $(( LIMIT - ($(date +%s) - start) - 45 )); }  # the drivers' limit: 45 s kept for packing
 PACK_SECONDS=90  # the last call's learner-only saves of up to four unfinished parts (`run --carry-out` keeps 30 + 15 each)
+KEEP=0; [ "$LAST" = last ] && KEEP=$PACK_SECONDS
 if [ -d .carry ]; then
   JAX_PLATFORMS=cpu python -m tools.carry_parts unpack --from .carry --runs-dir runs/experiments > $L/unpack.log 2>&1
 fi
@@ -40,11 +42,11 @@ ppo() {  # ppo GPU NAME ROWS...: PPO rows on one GPU until the limit
       --no-build --worker-logs $L/w_$name > $L/$log 2>&1
   }
   if [ "$LAST" = last ]; then
-    drive driver_$name.log 0 --max-seeds 3 --whole-parts
-    [ $(tl) -gt 150 ] || return 0
-    drive driver_${name}_1.log 0 --max-seeds 1 --whole-parts
-    [ $(( $(tl) - PACK_SECONDS )) -gt 120 ] || return 0
-    drive driver_${name}_2.log $PACK_SECONDS --max-seeds 1 --reserve 20
+    drive driver_$name.log $KEEP --max-seeds 3 --whole-parts
+    [ $(( $(tl) - KEEP )) -gt 150 ] || return 0
+    drive driver_${name}_1.log $KEEP --max-seeds 1 --whole-parts
+    [ $(( $(tl) - KEEP )) -gt 120 ] || return 0
+    drive driver_${name}_2.log $KEEP --max-seeds 1 --reserve 20
   else
     drive driver_$name.log 0 --max-seeds 3 --reserve 20
   fi
@@ -53,11 +55,15 @@ for (( g = 0; g < NG && g < 4; g++ )); do
   [ -n "${ROWS[$g]// /}" ] && ppo $g g$g ${ROWS[$g]} &
 done
 wait
-if [ "$LAST" = last ]; then  # every unfinished part of the rows, for the next machine (rec.tgz is the 8th file back)
-  JAX_PLATFORMS=cpu python -m tools.carry_parts pack --runs-dir runs/experiments --to $OUT/carry \
-    $ROWS0 $ROWS1 $ROWS2 $ROWS3 > $L/pack.log 2>&1
-fi
 tar czf $OUT/rec.tgz $L $(find runs/experiments \( -name config.json -o -name eval.json -o -name 'cross-*.json' -o -name metrics.csv \) -not -path '*/checkpoints/*' 2>/dev/null)
+left=$(( LIMIT - ($(date +%s) - start) - 10 ))
+if [ "$LAST" = last ] && [ $left -gt 0 ]; then  # after rec.tgz: a pack cut off cannot cost the results
+  # Every unfinished part of the rows for the next machine: pieces of at most 15 MiB in bundles of at most 24 MiB
+  # (a three-seed paper-setting SAC part is ~18 MiB; a call without the wheels carries the ~30 MiB repository and
+  # one bundle), 7 pieces at most (rec.tgz is the 8th file back).
+  timeout $left env JAX_PLATFORMS=cpu python -m tools.carry_parts pack --runs-dir runs/experiments --to $OUT/carry \
+    --max-total-mb 24 $ROWS0 $ROWS1 $ROWS2 $ROWS3 > $L/pack.log 2>&1
+fi
 cat $L/gpus.txt $L/plan.txt; for d in $L/unpack.log $L/pack.log $L/driver*.log; do [ -f $d ] || continue; echo "== $d"; tail -5 $d; done
 for f in $L/w_*/*; do echo "== $f"; grep "steps/s" $f | tail -1; tail -2 $f; done
 ls -la $OUT
