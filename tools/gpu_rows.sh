@@ -1,5 +1,5 @@
 #!/bin/bash
-# One device call of PPO experiment rows, one `tools.experiments` driver per local GPU, from the repository root:
+# One device call of experiment rows, one `tools.experiments` driver per local GPU, from the repository root:
 #   ROWS0="exp exp/run ..." ROWS1="..." [ROWS2=... ROWS3=...] bash tools/gpu_rows.sh CALL LIMIT [last]
 # GPU i trains ROWS<i>, three seeds a part, until LIMIT seconds after the start less 45 s (for the packing below);
 # with fewer GPUs than row groups, group i follows group i mod (number of GPUs). Without `last`, the parts that do
@@ -32,7 +32,7 @@ GROUPS_=("$ROWS0" "$ROWS1" "$ROWS2" "$ROWS3")
 ROWS=()
 for i in 0 1 2 3; do ROWS[$(( i % NG ))]="${ROWS[$(( i % NG ))]} ${GROUPS_[$i]}"; done
 for (( g = 0; g < NG && g < 4; g++ )); do echo "GPU $g:"${ROWS[$g]}; done > $L/plan.txt
-ppo() {  # ppo GPU NAME ROWS...: PPO rows on one GPU until the limit
+rows_on() {  # rows_on GPU NAME ROWS...: the rows on one GPU until the limit
   local gpu=$1 name=$2; shift 2
   local rows="$*"
   mkdir -p $L/w_$name
@@ -52,7 +52,7 @@ ppo() {  # ppo GPU NAME ROWS...: PPO rows on one GPU until the limit
   fi
 }
 for (( g = 0; g < NG && g < 4; g++ )); do
-  [ -n "${ROWS[$g]// /}" ] && ppo $g g$g ${ROWS[$g]} &
+  [ -n "${ROWS[$g]// /}" ] && rows_on $g g$g ${ROWS[$g]} &
 done
 wait
 tar czf $OUT/rec.tgz $L $(find runs/experiments \( -name config.json -o -name eval.json -o -name 'cross-*.json' -o -name metrics.csv \) -not -path '*/checkpoints/*' 2>/dev/null)
