@@ -3,6 +3,7 @@ train.py command parses back to it), the state listing and command list on a han
 time-limit plan, and a two-run toy experiment on the point mass that trains, resumes after an interruption and
 builds its table."""
 
+import contextlib
 import dataclasses
 import importlib.util
 import json
@@ -574,13 +575,27 @@ def test_a_time_limited_call_trains_one_part_until_the_clock_stops_it(tmp_path, 
                      log[0]), log  # 100 s less what the call took so far (a loaded CPU: a second or more)
 
 
+@contextlib.contextmanager
+def _lock_held_elsewhere(lock: str):
+    """A child process holding an exclusive flock on `lock` (writing its pid into it, as `part_lock` does) until
+    the block ends, when it is killed (the kernel then drops its lock); yields its pid."""
+    child = ("import fcntl, os, sys, time\n"
+             "f = open(sys.argv[1], 'a+'); fcntl.flock(f, fcntl.LOCK_EX)\n"
+             "f.write(f'pid {os.getpid()}'); f.flush(); print('held', flush=True)\n"
+             "time.sleep(120)")
+    holder = subprocess.Popen([sys.executable, "-c", child, lock], stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "held"
+        yield holder.pid
+    finally:
+        holder.kill()
+        holder.wait()
+
+
 def test_a_part_another_process_holds_is_left_alone_until_that_process_ends(tmp_path, monkeypatch):
     """Two commands sharing a runs folder: a part whose lock another process holds (here a child process) is
     not trained and the run is left unfinished; once that process is killed the lock is free (the kernel drops a
     dead process's flock; the file it leaves holds nothing), and the part trains under this process's lock."""
-    import subprocess
-    import sys
-
     runs_dir = str(tmp_path / "runs")
     b = TOY.runs[1]
     _part(b, runs_dir, "toy", "b", 0, 2, steps=[5120], metrics=([2560, 5120], 2, 10.0, [286.0, 256.0]))
@@ -596,20 +611,11 @@ def test_a_part_another_process_holds_is_left_alone_until_that_process_ends(tmp_
 
     monkeypatch.setattr(driver, "train", fake_train)
     selection = ex.select(["toy/b"], {"toy": TOY})
-    child = ("import fcntl, os, sys, time\n"
-             "f = open(sys.argv[1], 'a+'); fcntl.flock(f, fcntl.LOCK_EX)\n"
-             "f.write(f'pid {os.getpid()}'); f.flush(); print('held', flush=True)\n"
-             "time.sleep(120)")
-    holder = subprocess.Popen([sys.executable, "-c", child, lock], stdout=subprocess.PIPE, text=True)
-    try:
-        assert holder.stdout.readline().strip() == "held"
+    with _lock_held_elsewhere(lock) as holder:
         log = []
         assert not ex.train_pending(selection, runs_dir, log=log.append)
-        assert calls == [] and log == [f"[toy/b seeds-0-1] left alone: another process (pid {holder.pid}) holds its "
+        assert calls == [] and log == [f"[toy/b seeds-0-1] left alone: another process (pid {holder}) holds its "
                                        f"lock {lock}"], log
-    finally:
-        holder.kill()
-        holder.wait()
     assert os.path.isfile(lock)  # left behind by the killed process, holding nothing
     log = []
     assert not ex.train_pending(selection, runs_dir, log=log.append)  # stopped without progress, as above
@@ -677,10 +683,6 @@ def test_a_cross_evaluation_another_process_holds_is_left_to_it(tmp_path, monkey
     """Two drivers given one row: a done part's cross-evaluation runs under the part's lock. While another process
     holds it, this one leaves the cross alone (the run unfinished); one that finds the cross written once it has
     the lock (the other finished it meanwhile) does not evaluate it again."""
-    import contextlib
-    import subprocess
-    import sys
-
     runs_dir = str(tmp_path / "runs")
     b = TOY.runs[1]
     exp = dataclasses.replace(TOY, runs=(b,), cross=(ex.Cross("b", "sampled", {}, stochastic=True),))
@@ -689,20 +691,11 @@ def test_a_cross_evaluation_another_process_holds_is_left_to_it(tmp_path, monkey
     lock = ex.lock_path(logdir)
     done = []
     monkeypatch.setattr(ex, "cross_evaluate", lambda run, part, cross: done.append(part.name))
-    child = ("import fcntl, os, sys, time\n"
-             "f = open(sys.argv[1], 'a+'); fcntl.flock(f, fcntl.LOCK_EX)\n"
-             "f.write(f'pid {os.getpid()}'); f.flush(); print('held', flush=True)\n"
-             "time.sleep(120)")
-    holder = subprocess.Popen([sys.executable, "-c", child, lock], stdout=subprocess.PIPE, text=True)
-    try:
-        assert holder.stdout.readline().strip() == "held"
+    with _lock_held_elsewhere(lock) as holder:
         log = []
         assert not ex.train_pending([(exp, [b])], runs_dir, log=log.append)
         assert done == [] and log == [f"[toy/b seeds-0-1] cross-evaluation 'sampled' left alone: another process "
-                                      f"(pid {holder.pid}) holds its lock {lock}"], log
-    finally:
-        holder.kill()
-        holder.wait()
+                                      f"(pid {holder}) holds its lock {lock}"], log
     # The other process wrote the cross just before this one took the lock: nothing is evaluated twice.
     taker = ex.part_lock
 

@@ -20,9 +20,9 @@ if [ -z "$CALL" ] || [ -z "$LIMIT" ] || [ -z "$ROWS0" ] || [ -z "$OUT" ]; then
   exit 2
 fi
 L=${CALL_LOGS:-/tmp/calllogs}; rm -rf $L; mkdir -p $L
-tl() { echo $(( LIMIT - ($(date +%s) - start) - 45 )); }  # the drivers' limit: 45 s kept for packing
 PACK_SECONDS=90  # the last call's learner-only saves of up to four unfinished parts (`run --carry-out` keeps 30 + 15 each)
 KEEP=0; [ "$LAST" = last ] && KEEP=$PACK_SECONDS
+tl() { echo $(( LIMIT - ($(date +%s) - start) - 45 - KEEP )); }  # the drivers' limit: 45 s kept for rec.tgz, KEEP for the pack
 if [ -d .carry ]; then
   JAX_PLATFORMS=cpu python -m tools.carry_parts unpack --from .carry --runs-dir runs/experiments > $L/unpack.log 2>&1
 fi
@@ -36,19 +36,19 @@ rows_on() {  # rows_on GPU NAME ROWS...: the rows on one GPU until the limit
   local gpu=$1 name=$2; shift 2
   local rows="$*"
   mkdir -p $L/w_$name
-  drive() {  # drive LOG KEEP FLAGS...: one driver over the rows with FLAGS until KEEP s before tl, output to $L/LOG
-    local log=$1 keep=$2; shift 2
-    CUDA_VISIBLE_DEVICES=$gpu python -m tools.experiments run $rows --parallel "$@" --time-limit $(( $(tl) - keep )) \
-      --no-build --worker-logs $L/w_$name > $L/$log 2>&1
+  drive() {  # drive LOG FLAGS...: one driver over the rows with FLAGS, its output to $L/LOG
+    local log=$1; shift
+    CUDA_VISIBLE_DEVICES=$gpu python -m tools.experiments run $rows --parallel "$@" --time-limit $(tl) --no-build \
+      --worker-logs $L/w_$name > $L/$log 2>&1
   }
   if [ "$LAST" = last ]; then
-    drive driver_$name.log $KEEP --max-seeds 3 --whole-parts
-    [ $(( $(tl) - KEEP )) -gt 150 ] || return 0
-    drive driver_${name}_1.log $KEEP --max-seeds 1 --whole-parts
-    [ $(( $(tl) - KEEP )) -gt 120 ] || return 0
-    drive driver_${name}_2.log $KEEP --max-seeds 1 --reserve 20
+    drive driver_$name.log --max-seeds 3 --whole-parts
+    [ $(tl) -gt 150 ] || return 0
+    drive driver_${name}_1.log --max-seeds 1 --whole-parts
+    [ $(tl) -gt 120 ] || return 0
+    drive driver_${name}_2.log --max-seeds 1 --reserve 20
   else
-    drive driver_$name.log 0 --max-seeds 3 --reserve 20
+    drive driver_$name.log --max-seeds 3 --reserve 20
   fi
 }
 for (( g = 0; g < NG && g < 4; g++ )); do
