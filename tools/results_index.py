@@ -667,7 +667,9 @@ def index_table(ctx: Context) -> list[list[str]]:
          "`python -m tools.plots env --out results/figures`"),
         ("Figure: UR5e PPO training curves by workspace", "figures/curves_ur5e_workspaces.png",
          "`python -m tools.plots curves RUN ... --out FILE`"),
-        ("Figure: reach-avoid training curves by obstacle size (ours: Panda)", "figures/curves_panda_obstacle_sizes.png",
+        ("Figure: reach-avoid training curves by obstacle size (UR5e)", "experiments/obstacle-size-ur5e/curves.png",
+         "`python -m tools.experiments run obstacle-size-ur5e`"),
+        ("Figure: reach-avoid training curves by obstacle size (Panda)", "figures/curves_panda_obstacle_sizes.png",
          "`python -m tools.plots curves RUN ... --out FILE`"),
     )
     for label, file, command in figures:
