@@ -942,7 +942,7 @@ def test_run_carries_unfinished_parts_in_and_out_within_its_time_limit(monkeypat
     everything = ex.run_folders(ex.select(["sac-fast"]))
     assert "sac-fast/panda-reach-plus-200m" in everything and "action-space/relative" in everything  # its PPO row's
     assert events[0][1:] == (carry_in, runs_dir) and events[2][1:] == (
-        runs_dir, carry_out, {"max_total_mb": 18.0, "runs": everything})
+        runs_dir, carry_out, {"max_total_mb": carry_parts.TOTAL_MB, "runs": everything})
     assert events[1][1] == ["0", "1"] and 438.0 < events[1][2] <= 440.0  # 500 s less 30 + 2 x 15
     events.clear()
     os.remove(os.path.join(carry_in, "toy__a__seeds-0-0.tgz.000"))  # nothing to unpack; no limit, no reserve
@@ -1300,7 +1300,7 @@ def test_gpu_rows_script_gives_each_gpu_its_rows(tmp_path, gpus, plan):
     calls = args_log.read_text().splitlines()
     assert calls[0] == "-m tools.carry_parts unpack --from .carry --runs-dir runs/experiments", calls
     assert calls[-1] == (f"-m tools.carry_parts pack --runs-dir runs/experiments --to {tmp_path / 'out' / 'carry'} "
-                         "--max-total-mb 24 a b c d e f")
+                         "a b c d e f")
     for g in range(gpus):
         mine = [a for a in calls[1:-1] if a.split()[3:4] == [plan[g].split()[2]]]  # the driver's first row
         assert [("--whole-parts" in a, "--max-seeds 3" in a, "--reserve 20" in a) for a in mine] == [

@@ -11,15 +11,16 @@ holds the lock of (`tools.experiments.part_lock`: it is training there), the one
 saves its newest intact checkpoint learner-only (`agents.driver.learner_only_checkpoint`: no env states, no replay
 buffer; per seed about 3-5 MB for the PPO presets, 16 MB for the fast SAC ones) beside its `config.json` and
 `metrics.csv`, and writes each part as its own gzipped tar, `<experiment>__<run>__<part>.tgz.NNN`, split into pieces
-of at most `--max-mb`, in bundles of at most `--max-total-mb` (default 18: a device call brings back files of at
+of at most `--max-mb`, in bundles of at most `--max-total-mb` (default 24: a device call brings back files of at
 most 16 MiB, and the next call's working tree, which carries one bundle in a git-ignored folder beside the
-repository, and beside the wheels only where it is small, is limited to 64 MiB): the first bundle in `--to`, the parts that do not fit beside it in
-`--to`/more-1, more-2, ... (first fit), each for another call of the next machine (`--to` at most one folder below
-the call's $OUT: a call brings back files at most two folders down, 8 of them, 64 MiB in all, which `pack` keeps
-to). A part that cannot be saved, is larger than a bundle or passes those limits is left out and named. Until its
-bundle is unpacked there, a part in a later bundle looks new to the next machine: leave its run out of the calls
-before that one, or it starts afresh. A resume from the copy starts fresh episodes and, for SAC, refills the replay
-buffer: not bit-for-bit the run that would have gone on, the same as any learner-only resume.
+repository, and beside the wheels only where it is small, is limited to 64 MiB): the first bundle in `--to`, the
+parts that do not fit beside it in `--to`/more-1, more-2, ... (first fit), each for another call of the next
+machine (`--to` at most one folder below the call's $OUT: a call brings back files at most two folders down, 8 of
+them, 64 MiB in all, which `pack` keeps to). A part that cannot be saved, is larger than a bundle or passes those
+limits is left out and named. Until its bundle is unpacked there, a part in a later bundle looks new to the next
+machine: leave its run out of the calls before that one, or it starts afresh. A resume from the copy starts fresh
+episodes and, for SAC, refills the replay buffer: not bit-for-bit the run that would have gone on, the same as any
+learner-only resume.
 
 `unpack` puts each complete archive's part into the runs folder, except where the folder there is done
 (`eval.json`), has a checkpoint at that step or later, or holds another config; an archive with a piece missing or
@@ -42,10 +43,10 @@ from tools.experiments import checkpoint_steps, parse_part, part_lock, run_folde
 PIECE = re.compile(r"(?P<archive>.+\.tgz)\.(?P<index>\d{3})")
 PIECE_MB = 15.0
 """The largest piece `pack` writes, in MiB: a device call brings back files of at most 16 MiB."""
-TOTAL_MB = 18.0
+TOTAL_MB = 24.0
 """A bundle's size in MiB, what one device call carries: its working tree holds the bundle beside the repository
-(~30 MiB) within 64 MiB, and beside the wheels (~24 MiB) too only where the bundle is small; 18 holds one
-fast-SAC part (~15.2 MiB)."""
+(~30 MiB) within 64 MiB, and beside the wheels (~24 MiB) too only where the bundle is small; 24 holds one
+three-seed paper-setting SAC part (~18 MiB) or one fast-SAC part (~15.2 MiB)."""
 RETURN_FILES = 7
 """The most pieces `pack` writes in all its bundles: a device call brings back at most 8 files, one kept for the
 call's logs."""

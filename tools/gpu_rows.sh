@@ -58,11 +58,10 @@ wait
 tar czf $OUT/rec.tgz $L $(find runs/experiments \( -name config.json -o -name eval.json -o -name 'cross-*.json' -o -name metrics.csv \) -not -path '*/checkpoints/*' 2>/dev/null)
 left=$(( LIMIT - ($(date +%s) - start) - 10 ))
 if [ "$LAST" = last ] && [ $left -gt 0 ]; then  # after rec.tgz: a pack cut off cannot cost the results
-  # Every unfinished part of the rows for the next machine: pieces of at most 15 MiB in bundles of at most 24 MiB
-  # (a three-seed paper-setting SAC part is ~18 MiB; a call without the wheels carries the ~30 MiB repository and
-  # one bundle), 7 pieces at most (rec.tgz is the 8th file back).
+  # Every unfinished part of the rows for the next machine, within `tools.carry_parts`' limits (bundles a call
+  # without the wheels can carry, 7 pieces at most: rec.tgz is the 8th file back).
   timeout $left env JAX_PLATFORMS=cpu python -m tools.carry_parts pack --runs-dir runs/experiments --to $OUT/carry \
-    --max-total-mb 24 $ROWS0 $ROWS1 $ROWS2 $ROWS3 > $L/pack.log 2>&1
+    $ROWS0 $ROWS1 $ROWS2 $ROWS3 > $L/pack.log 2>&1
 fi
 cat $L/gpus.txt $L/plan.txt; for d in $L/unpack.log $L/pack.log $L/driver*.log; do [ -f $d ] || continue; echo "== $d"; tail -5 $d; done
 for f in $L/w_*/*; do echo "== $f"; grep "steps/s" $f | tail -1; tail -2 $f; done
