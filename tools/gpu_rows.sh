@@ -20,7 +20,7 @@ if [ -z "$CALL" ] || [ -z "$LIMIT" ] || [ -z "$ROWS0" ] || [ -z "$OUT" ]; then
   exit 2
 fi
 L=${CALL_LOGS:-/tmp/calllogs}; rm -rf $L; mkdir -p $L
-PACK_SECONDS=90  # the last call's learner-only saves of up to four unfinished parts (`run --carry-out` keeps 30 + 15 each)
+PACK_SECONDS=60  # the last call's learner-only saves of up to four unfinished parts (timed in results/experiments/sac-fast/calls)
 KEEP=0; [ "$LAST" = last ] && KEEP=$PACK_SECONDS
 tl() { echo $(( LIMIT - ($(date +%s) - start) - 45 - KEEP )); }  # the drivers' limit: 45 s kept for rec.tgz, KEEP for the pack
 if [ -d .carry ]; then
