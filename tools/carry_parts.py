@@ -45,7 +45,7 @@ PIECE_MB = 15.0
 """The largest piece `pack` writes, in MiB: a device call brings back files of at most 16 MiB."""
 TOTAL_MB = 24.0
 """A bundle's size in MiB, what one device call carries: its working tree holds the bundle beside the repository
-(~30 MiB) within 64 MiB, and beside the wheels (~24 MiB) too only where the bundle is small; 24 holds one
+(~31 MiB) within 64 MiB, and beside the wheels (~20 MiB) too only where the bundle is small; 24 holds one
 three-seed paper-setting SAC part (~18 MiB) or one fast-SAC part (~15.2 MiB)."""
 RETURN_FILES = 7
 """The most pieces `pack` writes in all its bundles: a device call brings back at most 8 files, one kept for the

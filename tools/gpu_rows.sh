@@ -1,15 +1,15 @@
 #!/bin/bash
 # One device call of experiment rows, one `tools.experiments` driver per local GPU, from the repository root:
 #   ROWS0="exp exp/run ..." ROWS1="..." [ROWS2=... ROWS3=...] bash tools/gpu_rows.sh CALL LIMIT [last]
-# GPU i trains ROWS<i>, three seeds a part, until LIMIT seconds after the start less 45 s (for the packing below);
-# with fewer GPUs than row groups, group i follows group i mod (number of GPUs). Without `last`, the parts that do
-# not finish stay on the machine for the next call, so the drivers keep a 20 s reserve for the last checkpoint and
-# exit: a part that finishes late ends its evaluation inside the 45 s kept for packing. With `last` (the machine's
-# last call: it keeps no runs/ after it), every pass ends PACK_SECONDS earlier: --whole-parts, the three-seed parts
-# predicted to finish, then one-seed parts; then, with time still left, the next one-seed part trains to the limit,
-# and after rec.tgz is written every unfinished part of the rows is packed learner-only into $OUT/carry
-# (`tools.carry_parts pack`, its limits: what a call brings back; cut off 10 s before LIMIT) for the next machine,
-# so a GPU whose parts are all predicted too long still trains. A folder .carry in the repository (carried into
+# GPU i trains ROWS<i>, three seeds a part, until LIMIT seconds after the start less REC_SECONDS (for the packing
+# below); with fewer GPUs than row groups, group i follows group i mod (number of GPUs). Without `last`, the parts
+# that do not finish stay on the machine for the next call, so the drivers keep a 20 s reserve for the last
+# checkpoint and exit: a part that finishes late ends its evaluation inside the REC_SECONDS kept for packing. With
+# `last` (the machine's last call: it keeps no runs/ after it), every pass ends PACK_SECONDS earlier: --whole-parts,
+# the three-seed parts predicted to finish, then one-seed parts; then, with time still left, the next one-seed part
+# trains to the limit, and after rec.tgz is written every unfinished part of the rows is packed learner-only into
+# $OUT/carry (`tools.carry_parts pack`, its limits: what a call brings back; cut off 10 s before LIMIT) for the next
+# machine, so a GPU whose parts are all predicted too long still trains. A folder .carry in the repository (carried into
 # the call: a bundle that pack wrote) is unpacked into runs/ first.
 # Logs go to $CALL_LOGS (default /tmp/calllogs);
 # $OUT/rec.tgz gets them and every part's config, eval and metrics files (`python -m tools.experiments record`
@@ -20,9 +20,11 @@ if [ -z "$CALL" ] || [ -z "$LIMIT" ] || [ -z "$ROWS0" ] || [ -z "$OUT" ]; then
   exit 2
 fi
 L=${CALL_LOGS:-/tmp/calllogs}; rm -rf $L; mkdir -p $L
-PACK_SECONDS=60  # the last call's learner-only saves of up to four unfinished parts (timed in results/experiments/sac-fast/calls)
+REC_SECONDS=45  # rec.tgz, and the slack for a part whose evaluation ends past the drivers' limit
+PACK_SECONDS=60  # the last call's learner-only saves of up to four unfinished parts
+# (timed in results/experiments/sac-fast/calls)
 KEEP=0; [ "$LAST" = last ] && KEEP=$PACK_SECONDS
-tl() { echo $(( LIMIT - ($(date +%s) - start) - 45 - KEEP )); }  # the drivers' limit: 45 s kept for rec.tgz, KEEP for the pack
+tl() { echo $(( LIMIT - ($(date +%s) - start) - REC_SECONDS - KEEP )); }  # the drivers' limit
 if [ -d .carry ]; then
   JAX_PLATFORMS=cpu python -m tools.carry_parts unpack --from .carry --runs-dir runs/experiments > $L/unpack.log 2>&1
 fi
