@@ -1250,6 +1250,27 @@ def _gpu_rows_seconds(root: str, name: str) -> int:
         return int(re.search(rf"^{name}=(\d+)", f.read(), re.M).group(1))
 
 
+def _gpu_rows_stand_ins(tmp_path, gpus: int, **rows):
+    """(repository root, environment, arguments log) for running tools/gpu_rows.sh in `tmp_path` with stand-ins: an
+    nvidia-smi listing `gpus` GPUs, and a python that notes each call's CUDA_VISIBLE_DEVICES (in args.txt.gpus)
+    and arguments (in args.txt), then runs the real one."""
+    bin_dir = tmp_path / "bin"
+    bin_dir.mkdir()
+    smi = bin_dir / "nvidia-smi"
+    smi.write_text("#!/bin/bash\n" + "".join(f"echo '{i}, STAND-IN'\n" for i in range(gpus)))
+    smi.chmod(0o755)
+    args_log = tmp_path / "args.txt"
+    (bin_dir / "python").write_text(f"#!/bin/bash\necho \"$*\" >> {args_log}\n"
+                                    f"echo \"$CUDA_VISIBLE_DEVICES $4\" >> {args_log}.gpus\n"
+                                    f"exec {sys.executable} \"$@\"\n")
+    (bin_dir / "python").chmod(0o755)
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    env = dict(os.environ, PATH=f"{bin_dir}:{os.path.dirname(sys.executable)}:{os.environ['PATH']}",
+               OUT=str(tmp_path / "out"), CALL_LOGS=str(tmp_path / "logs"), **rows)
+    (tmp_path / "out").mkdir()
+    return root, env, args_log
+
+
 @pytest.mark.parametrize("gpus, plan", [
     (4, ["GPU 0: a b", "GPU 1: c", "GPU 2: d", "GPU 3: e f"]),
     (2, ["GPU 0: a b d", "GPU 1: c e f"]),
@@ -1259,19 +1280,7 @@ def test_gpu_rows_script_gives_each_gpu_its_rows(tmp_path, gpus, plan):
     """tools/gpu_rows.sh (a device call's drivers, one per GPU): row group i goes to GPU i mod the GPUs listed by
     nvidia-smi (a stand-in here). Each GPU's driver runs and leaves its log (here it stops at once: the rows are
     names no registry has, and the limit is inside the script's REC_SECONDS margin); the call still packs its logs."""
-    bin_dir = tmp_path / "bin"
-    bin_dir.mkdir()
-    smi = bin_dir / "nvidia-smi"
-    smi.write_text("#!/bin/bash\n" + "".join(f"echo '{i}, STAND-IN'\n" for i in range(gpus)))
-    smi.chmod(0o755)
-    args_log = tmp_path / "args.txt"  # a stand-in python notes each driver's arguments, then runs the real one
-    (bin_dir / "python").write_text(f"#!/bin/bash\necho \"$*\" >> {args_log}\nexec {sys.executable} \"$@\"\n")
-    (bin_dir / "python").chmod(0o755)
-    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-    env = dict(os.environ, PATH=f"{bin_dir}:{os.path.dirname(sys.executable)}:{os.environ['PATH']}",
-               OUT=str(tmp_path / "out"), CALL_LOGS=str(tmp_path / "logs"), ROWS0="a b", ROWS1="c", ROWS2="d",
-               ROWS3="e f")
-    (tmp_path / "out").mkdir()
+    root, env, args_log = _gpu_rows_stand_ins(tmp_path, gpus, ROWS0="a b", ROWS1="c", ROWS2="d", ROWS3="e f")
     done = subprocess.run(["bash", os.path.join(root, "tools", "gpu_rows.sh"), "1", "40"], cwd=tmp_path, env=env,
                           capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
@@ -1315,3 +1324,23 @@ def test_gpu_rows_script_gives_each_gpu_its_rows(tmp_path, gpus, plan):
     without_rows = subprocess.run(["bash", os.path.join(root, "tools", "gpu_rows.sh"), "1", "40"], cwd=tmp_path,
                                   env={k: v for k, v in env.items() if k != "ROWS0"}, capture_output=True, text=True)
     assert without_rows.returncode == 2 and "usage" in without_rows.stderr
+
+
+@pytest.mark.parametrize("gpus, rows, plan, drivers", [
+    (4, dict(ROWS0="a", ROWS1="c", ROWS2="", ROWS3="e"), ["GPU 0,2: a", "GPU 1: c", "GPU 3: e"],
+     ["0,2 a", "1 c", "3 e"]),
+    (4, dict(ROWS0="a", ROWS1="c", ROWS2="", ROWS3=""), ["GPU 0,2: a", "GPU 1,3: c"], ["0,2 a", "1,3 c"]),
+    (3, dict(ROWS0="a", ROWS1="c", ROWS2=""), ["GPU 0,2: a", "GPU 1: c"], ["0,2 a", "1 c"]),
+    (2, dict(ROWS0="a", ROWS1="", ROWS2="d"), ["GPU 0: a d", "GPU 1:"], ["0 a"]),
+])
+def test_gpu_rows_script_lends_an_empty_groups_gpu(tmp_path, gpus, rows, plan, drivers):
+    """tools/gpu_rows.sh: the GPU of an empty row group i >= 2 joins group i - 2's driver (CUDA_VISIBLE_DEVICES
+    names both, so its `--parallel` trains a part on each); with two GPUs nothing is lent, and a GPU whose groups
+    are all empty runs no driver."""
+    root, env, args_log = _gpu_rows_stand_ins(tmp_path, gpus, **rows)
+    done = subprocess.run(["bash", os.path.join(root, "tools", "gpu_rows.sh"), "1", "40"], cwd=tmp_path, env=env,
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert (tmp_path / "logs" / "plan.txt").read_text().splitlines() == plan
+    seen = [a for a in (tmp_path / "args.txt.gpus").read_text().splitlines() if not a.startswith(" ")]
+    assert sorted(seen) == drivers

@@ -2,7 +2,9 @@
 # One device call of experiment rows, one `tools.experiments` driver per local GPU, from the repository root:
 #   ROWS0="exp exp/run ..." ROWS1="..." [ROWS2=... ROWS3=...] bash tools/gpu_rows.sh CALL LIMIT [last]
 # GPU i trains ROWS<i>, three seeds a part, until LIMIT seconds after the start less REC_SECONDS (for the packing
-# below); with fewer GPUs than row groups, group i follows group i mod (number of GPUs). Without `last`, the parts
+# below); with fewer GPUs than row groups, group i follows group i mod (number of GPUs); the GPU of an empty group
+# i >= 2 joins group i - 2's driver, which then trains that group's parts side by side (`--parallel`, a part per GPU:
+# a run's seeds in two parts use both). Without `last`, the parts
 # that do not finish stay on the machine for the next call, so the drivers keep a 20 s reserve for the last
 # checkpoint and exit: a part that finishes late ends its evaluation inside the REC_SECONDS kept for packing. With
 # `last` (the machine's last call: it keeps no runs/ after it), every pass ends PACK_SECONDS earlier: --whole-parts,
@@ -33,8 +35,13 @@ NG=$(wc -l < $L/gpus.txt)
 GROUPS_=("$ROWS0" "$ROWS1" "$ROWS2" "$ROWS3")
 ROWS=()
 for i in 0 1 2 3; do ROWS[$(( i % NG ))]="${ROWS[$(( i % NG ))]} ${GROUPS_[$i]}"; done
-for (( g = 0; g < NG && g < 4; g++ )); do echo "GPU $g:"${ROWS[$g]}; done > $L/plan.txt
-rows_on() {  # rows_on GPU NAME ROWS...: the rows on one GPU until the limit
+GPUS=()  # each driver's GPUs: its own, and that of the group two above it when that group has no rows
+for (( g = 0; g < NG && g < 4; g++ )); do GPUS[$g]=$g; done
+for (( g = NG - 1; g >= 2; g-- )); do
+  (( g < 4 )) && [ -z "${ROWS[$g]// /}" ] && GPUS[$(( g - 2 ))]="${GPUS[$(( g - 2 ))]},$g" && GPUS[$g]=""
+done
+for (( g = 0; g < NG && g < 4; g++ )); do [ -n "${GPUS[$g]}" ] && echo "GPU ${GPUS[$g]}:"${ROWS[$g]}; done > $L/plan.txt
+rows_on() {  # rows_on GPUS NAME ROWS...: the rows on these GPUs (a comma list: parts side by side) until the limit
   local gpu=$1 name=$2; shift 2
   local rows="$*"
   mkdir -p $L/w_$name
@@ -54,7 +61,7 @@ rows_on() {  # rows_on GPU NAME ROWS...: the rows on one GPU until the limit
   fi
 }
 for (( g = 0; g < NG && g < 4; g++ )); do
-  [ -n "${ROWS[$g]// /}" ] && rows_on $g g$g ${ROWS[$g]} &
+  [ -n "${ROWS[$g]// /}" ] && [ -n "${GPUS[$g]}" ] && rows_on ${GPUS[$g]} g$g ${ROWS[$g]} &
 done
 wait
 tar czf $OUT/rec.tgz $L $(find runs/experiments \( -name config.json -o -name eval.json -o -name 'cross-*.json' -o -name metrics.csv \) -not -path '*/checkpoints/*' 2>/dev/null)

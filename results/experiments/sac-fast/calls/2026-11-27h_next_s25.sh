@@ -9,7 +9,8 @@
 # Two GPUs (group i on GPU i mod 2): GPU 0 finishes upper seed 0 (~355 s at 32.9k env steps/s) and starts upper
 # seeds 1-2 in call 1; in calls 2-3 it finishes pandagym (~290 s at 26.4k a seed), then trains upper seeds 1-2.
 # GPU 1 trains front's three seeds (~1,650 s with a start-up and compilation per call: it comes back packed, with
-# upper seeds 1-2). Four GPUs: the same, with upper on GPU 2 from call 2 and full-range (not started yet) on GPU 3.
+# upper seeds 1-2). Four GPUs: the same, with full-range (not started yet) on GPU 3, and upper on GPUs 0 and 2 in
+# call 1 (group 2 is empty, so its GPU joins group 0: seed 0 and seeds 1-2 side by side), on GPU 2 from call 2.
 case "$1" in
   1) export ROWS0="sac-workspaces/upper" ROWS2="" ;;
   *) export ROWS0="sac-workspaces/pandagym" ROWS2="sac-workspaces/upper" ;;
