@@ -382,11 +382,27 @@ def test_the_figure_draws_each_group_of_runs_on_its_own_row_against_both_axes(tm
         logdir = _part(run, runs_dir, "toy", run.name, first, 1, steps=[10240], evaluated=10240)
         value = 0.2 if first == 0 else 0.6
         _write(os.path.join(logdir, "metrics.csv"), "env_steps,seed,steps_per_second,wall_seconds,episode/target_reached\n"
-               f"5120,{first},100,51.2,{value}\n10240,{first},100,51.2,{value + 0.1}\n")
+               f"5120,{first},100,51.2,{value}\n10240,{first},100,51.2,{value + 0.1}\n"
+               # c's part also logs a seed beyond c's one (as a part shared with a larger run): not drawn for c
+               + ("5120,1,100,51.2,0.9\n10240,1,100,51.2,0.9\n" if run is c else ""))
     states = [ex.run_state(exp, r, runs_dir) for r in exp.runs]
-    path = ex.training_figure(exp, states, os.path.join(out, "curves.png"))
-    assert path and os.path.isfile(path)
     from tools import plots
+
+    drawn = {}
+
+    def spy(groups, metrics, axes=("env_steps",), out=None, title=None, band=1.0, seeds=None):
+        fig = real_grid(groups, metrics, axes, out, title, band, seeds)
+        drawn.update({ax.get_title(): {l.get_label(): list(l.get_ydata()) for l in ax.get_lines()} for ax in fig.axes})
+        return fig
+
+    real_grid = plots.curve_grid
+    plots.curve_grid = spy
+    try:
+        path = ex.training_figure(exp, states, os.path.join(out, "curves.png"))
+    finally:
+        plots.curve_grid = real_grid
+    assert path and os.path.isfile(path)
+    assert drawn["first: " + plots.CURVE_METRICS["episode/target_reached"]]["c (1 seed)"] == pytest.approx([0.2, 0.3])
 
     groups = {"first": {"a": [p.logdir for p in states[0].done_parts], "c": [states[2].done_parts[0].logdir]},
               "second": {"b": [p.logdir for p in states[1].done_parts]}}
@@ -396,7 +412,9 @@ def test_the_figure_draws_each_group_of_runs_on_its_own_row_against_both_axes(tm
     assert [ax.get_xlabel() for ax in fig.axes] == [plots.X_AXES["env_steps"], plots.X_AXES["wall_clock"]] * 2
     line_a, line_c = fig.axes[0].get_lines()
     assert list(line_a.get_xdata()) == [5120, 10240] and list(line_a.get_ydata()) == pytest.approx([0.4, 0.5])
-    assert list(line_c.get_ydata()) == pytest.approx([0.2, 0.3]) and line_a.get_label() == "a (2 seeds)"
+    assert line_a.get_label() == "a (2 seeds)"
+    # Without `seeds`, curve_grid draws every seed its logs hold: c's shared part's seed 1 too.
+    assert list(line_c.get_ydata()) == pytest.approx([0.55, 0.6]) and line_c.get_label() == "c (2 seeds)"
     assert list(fig.axes[1].get_lines()[0].get_xdata()) == pytest.approx([51.2, 102.4])
     with pytest.raises(ValueError, match=r"holds 'minutes': allowed are env_steps, wall_clock"):
         plots.curve_grid(groups, ["episode/target_reached"], ("minutes",))

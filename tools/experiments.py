@@ -1354,7 +1354,9 @@ def training_figure(experiment: Experiment, states: list[RunState], path: str) -
                if all(m in plots.read_metrics(d) for runs in groups.values() for ds in runs.values() for d in ds)]
     if not present:
         return None
-    fig = plots.curve_grid(groups, present, experiment.curve_axes, path, experiment.title)
+    # A run's part may hold more seeds than the run (shared with a larger run): draw the table's seeds only.
+    fig = plots.curve_grid(groups, present, experiment.curve_axes, path, experiment.title,
+                           seeds={st.run.title: st.run.seeds for st in states})
     import matplotlib.pyplot as plt
 
     plt.close(fig)
