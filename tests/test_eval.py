@@ -653,7 +653,8 @@ def test_training_curves_against_wall_clock(tmp_path):
     np.testing.assert_allclose(mean, [0.2, 0.6, 0.9])
     assert seeds == 2
     # Only the first seed (a run sharing a larger run's part): seed 0's values and clock alone.
-    seconds, mean, std, seeds = plots.curve(str(tmp_path), "episode/target_reached", x="wall_clock", seeds=1)
+    seconds, mean, std, seeds = plots.curve(str(tmp_path), "episode/target_reached", x="wall_clock",
+                                            keep={str(tmp_path): 1})
     np.testing.assert_allclose(seconds, [2.0, 3.0, 6.0])
     np.testing.assert_allclose(mean, [0.1, 0.5, 0.9])
     assert seeds == 1 and not std.any()

@@ -390,8 +390,8 @@ def test_the_figure_draws_each_group_of_runs_on_its_own_row_against_both_axes(tm
 
     drawn = {}
 
-    def spy(groups, metrics, axes=("env_steps",), out=None, title=None, band=1.0, seeds=None):
-        fig = real_grid(groups, metrics, axes, out, title, band, seeds)
+    def spy(groups, metrics, axes=("env_steps",), out=None, title=None, band=1.0, keep=None):
+        fig = real_grid(groups, metrics, axes, out, title, band, keep)
         drawn.update({ax.get_title(): {l.get_label(): list(l.get_ydata()) for l in ax.get_lines()} for ax in fig.axes})
         return fig
 
@@ -413,7 +413,7 @@ def test_the_figure_draws_each_group_of_runs_on_its_own_row_against_both_axes(tm
     line_a, line_c = fig.axes[0].get_lines()
     assert list(line_a.get_xdata()) == [5120, 10240] and list(line_a.get_ydata()) == pytest.approx([0.4, 0.5])
     assert line_a.get_label() == "a (2 seeds)"
-    # Without `seeds`, curve_grid draws every seed its logs hold: c's shared part's seed 1 too.
+    # Without `keep`, curve_grid draws every seed its logs hold: c's shared part's seed 1 too.
     assert list(line_c.get_ydata()) == pytest.approx([0.55, 0.6]) and line_c.get_label() == "c (2 seeds)"
     assert list(fig.axes[1].get_lines()[0].get_xdata()) == pytest.approx([51.2, 102.4])
     with pytest.raises(ValueError, match=r"holds 'minutes': allowed are env_steps, wall_clock"):

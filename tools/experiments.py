@@ -1354,9 +1354,9 @@ def training_figure(experiment: Experiment, states: list[RunState], path: str) -
                if all(m in plots.read_metrics(d) for runs in groups.values() for ds in runs.values() for d in ds)]
     if not present:
         return None
-    # A run's part may hold more seeds than the run (shared with a larger run): draw the table's seeds only.
-    fig = plots.curve_grid(groups, present, experiment.curve_axes, path, experiment.title,
-                           seeds={st.run.title: st.run.seeds for st in states})
+    # A run's part may hold more seeds than the run (shared with a larger run): draw the seeds its table averages.
+    keep = {p.logdir: min(p.count, st.run.seeds - p.first) for st in states for p in st.done_parts}
+    fig = plots.curve_grid(groups, present, experiment.curve_axes, path, experiment.title, keep=keep)
     import matplotlib.pyplot as plt
 
     plt.close(fig)

@@ -69,14 +69,14 @@ Compare wall-clock curves only between runs made alone on one device of one kind
 
 
 def curve(logdirs, metric: str, x: str = "env_steps",
-          seeds: int | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+          keep: dict | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
     """(x values, mean, std, number of seeds) of `metric` over every seed of every logdir.
 
     Seeds of one run are the `seed` column; several runs (e.g. one per seed) are pooled. Steps
     logged by only some seeds are dropped, so every point averages the same seeds. With
     x="wall_clock" the x values are the seeds' mean running training time at those steps.
-    `seeds`: only seeds 0 .. seeds - 1 (a run whose part holds more, shared with a larger run:
-    the seeds its table averages); None: all."""
+    `keep`: logdir -> how many of its seeds to draw, its lowest seed numbers (a run whose part
+    holds more, shared with a larger run: the seeds its table averages); a logdir not in it: all."""
     if x not in X_AXES:
         raise ValueError(f"x={x!r} is not a curve axis: allowed are {', '.join(X_AXES)}.")
     logdirs = [logdirs] if isinstance(logdirs, str) else list(logdirs)
@@ -87,8 +87,9 @@ def curve(logdirs, metric: str, x: str = "env_steps",
             raise ValueError(f"metric {metric!r} is not in {logdir}/metrics.csv: allowed are "
                              f"{', '.join(k for k in m if k not in ('env_steps', 'seed'))}.")
         seconds = m.get("wall_seconds", np.full(len(m["env_steps"]), np.nan))
+        drawn = sorted(set(m["seed"].tolist()))[:(keep or {}).get(logdir)]
         for step, seed, value, chunk in zip(m["env_steps"], m["seed"], m[metric], seconds):
-            if seeds is not None and seed >= seeds:
+            if seed not in drawn:
                 continue
             # A resumed run logs the steps it redoes again: the last row of a step counts.
             series.setdefault((i, seed), {})[step] = value
@@ -114,11 +115,11 @@ def training_curves(runs: dict, metrics=None, out: str | None = None, title: str
 
 
 def curve_grid(groups: dict, metrics, axes=("env_steps",), out: str | None = None, title: str | None = None,
-               band: float = 1.0, seeds: dict | None = None):
+               band: float = 1.0, keep: dict | None = None):
     """One row of panels per group (row title -> {label: logdir or list of logdirs}), one panel per metric and
     horizontal axis (X_AXES) in each row: runs that belong together (fast SAC and PPO on one task) share their
-    panels, against env steps and against wall-clock side by side. `seeds`: label -> the seeds drawn for that
-    run (`curve`'s `seeds`); a label not in it draws every seed of its logs."""
+    panels, against env steps and against wall-clock side by side. `keep`: logdir -> how many of its seeds to
+    draw (`curve`'s)."""
     plt = _pyplot()
     from matplotlib.ticker import EngFormatter
 
@@ -130,7 +131,7 @@ def curve_grid(groups: dict, metrics, axes=("env_steps",), out: str | None = Non
     for row, (group, runs) in zip(grid, groups.items()):
         for ax, (metric, x) in zip(row, columns):
             for name, logdirs in runs.items():
-                steps, mean, std, n = curve(logdirs, metric, x, (seeds or {}).get(name))
+                steps, mean, std, n = curve(logdirs, metric, x, keep)
                 line, = ax.plot(steps, mean, label=f"{name} ({n} seed{'s' if n > 1 else ''})")
                 if n > 1 and band > 0:
                     ax.fill_between(steps, mean - band * std, mean + band * std, color=line.get_color(), alpha=0.2, lw=0)
