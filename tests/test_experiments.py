@@ -367,7 +367,7 @@ def test_a_partial_run_builds_a_row_of_its_done_seeds(tmp_path):
                         registry={"toy": exp}, log=lambda s: None)
 
 
-def test_the_figure_draws_each_group_of_runs_on_its_own_row_against_both_axes(tmp_path):
+def test_the_figure_draws_each_group_of_runs_on_its_own_row_against_both_axes(tmp_path, monkeypatch):
     """curve_groups: one row of panels per group (its runs drawn together), a panel per curve and axis; each line
     the mean over the run's seeds (hand-made logs: 0.2 and 0.6 at 5,120 steps) against env steps or against the
     running sum of the chunk times."""
@@ -396,11 +396,9 @@ def test_the_figure_draws_each_group_of_runs_on_its_own_row_against_both_axes(tm
         return fig
 
     real_grid = plots.curve_grid
-    plots.curve_grid = spy
-    try:
-        path = ex.training_figure(exp, states, os.path.join(out, "curves.png"))
-    finally:
-        plots.curve_grid = real_grid
+    monkeypatch.setattr(plots, "curve_grid", spy)
+    path = ex.training_figure(exp, states, os.path.join(out, "curves.png"))
+    monkeypatch.undo()
     assert path and os.path.isfile(path)
     assert drawn["first: " + plots.CURVE_METRICS["episode/target_reached"]]["c (1 seed)"] == pytest.approx([0.2, 0.3])
 

@@ -216,7 +216,7 @@ class RunState:
     @property
     def done_parts(self) -> list:
         """The done parts that hold some of the run's seeds (0 .. run.seeds - 1), without overlaps, by first
-        seed. A part of a shared folder may hold more seeds than this run has: `merged_evaluation` leaves them out."""
+        seed. A part of a shared folder may hold more seeds than this run has: `run_seeds` counts the run's."""
         chosen, covered = [], set()
         for part in sorted((p for p in self.parts if p.status == "done"), key=lambda p: (p.first, -p.count)):
             if part.first < self.run.seeds and not covered & set(part.seeds):
@@ -224,9 +224,14 @@ class RunState:
                 covered |= set(part.seeds)
         return chosen
 
+    def run_seeds(self, part) -> int:
+        """How many of `part`'s seeds are this run's (its first ones): fewer than the part holds where the part is
+        shared with a larger run. Its table row (`merged_evaluation`) and its figure line average these alone."""
+        return min(part.count, self.run.seeds - part.first)
+
     @property
     def seeds_done(self) -> int:
-        return sum(1 for p in self.done_parts for s in p.seeds if s < self.run.seeds)
+        return sum(self.run_seeds(p) for p in self.done_parts)
 
     @property
     def wall_seconds(self) -> float:
@@ -1198,7 +1203,7 @@ def merged_evaluation(state: RunState, files: dict[str, str] | None = None) -> d
         path = files[part.name] if files is not None else os.path.join(part.logdir, "eval.json")
         with open(path) as f:
             ev = json.load(f)
-        keep = min(part.count, state.run.seeds - part.first)  # a shared part's seeds beyond this run's are left out
+        keep = state.run_seeds(part)  # a shared part's seeds beyond this run's are left out
         merged["env_steps"] = min(merged.get("env_steps", ev["env_steps"]), ev["env_steps"])
         merged["eval_envs"] = ev["eval_envs"]
         merged["seeds"] += keep
@@ -1354,8 +1359,7 @@ def training_figure(experiment: Experiment, states: list[RunState], path: str) -
                if all(m in plots.read_metrics(d) for runs in groups.values() for ds in runs.values() for d in ds)]
     if not present:
         return None
-    # A run's part may hold more seeds than the run (shared with a larger run): draw the seeds its table averages.
-    keep = {p.logdir: min(p.count, st.run.seeds - p.first) for st in states for p in st.done_parts}
+    keep = {p.logdir: st.run_seeds(p) for st in states for p in st.done_parts}  # the seeds each table row averages
     fig = plots.curve_grid(groups, present, experiment.curve_axes, path, experiment.title, keep=keep)
     import matplotlib.pyplot as plt
 

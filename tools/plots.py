@@ -87,7 +87,7 @@ def curve(logdirs, metric: str, x: str = "env_steps",
             raise ValueError(f"metric {metric!r} is not in {logdir}/metrics.csv: allowed are "
                              f"{', '.join(k for k in m if k not in ('env_steps', 'seed'))}.")
         seconds = m.get("wall_seconds", np.full(len(m["env_steps"]), np.nan))
-        drawn = sorted(set(m["seed"].tolist()))[:(keep or {}).get(logdir)]
+        drawn = set(sorted(set(m["seed"].tolist()))[:(keep or {}).get(logdir)])
         for step, seed, value, chunk in zip(m["env_steps"], m["seed"], m[metric], seconds):
             if seed not in drawn:
                 continue
