@@ -3,16 +3,16 @@
 #   ROWS0="exp exp/run ..." ROWS1="..." [ROWS2=... ROWS3=...] bash tools/gpu_rows.sh CALL LIMIT [last]
 # GPU i trains ROWS<i>, three seeds a part, until LIMIT seconds after the start less REC_SECONDS (for the packing
 # below); with fewer GPUs than row groups, group i follows group i mod (number of GPUs); the GPU of an empty group
-# i >= 2 joins group i - 2's driver, which then trains that group's parts side by side (`--parallel`, a part per GPU:
-# a run's seeds in two parts use both). Without `last`, the parts
-# that do not finish stay on the machine for the next call, so the drivers keep a 20 s reserve for the last
-# checkpoint and exit: a part that finishes late ends its evaluation inside the REC_SECONDS kept for packing. With
-# `last` (the machine's last call: it keeps no runs/ after it), every pass ends PACK_SECONDS earlier: --whole-parts,
-# the three-seed parts predicted to finish, then one-seed parts; then, with time still left, the next one-seed part
-# trains to the limit, and after rec.tgz is written every unfinished part of the rows is packed learner-only into
-# $OUT/carry (`tools.carry_parts pack`, its limits: what a call brings back; cut off 10 s before LIMIT) for the next
-# machine, so a GPU whose parts are all predicted too long still trains. A folder .carry in the repository (carried into
-# the call: a bundle that pack wrote) is unpacked into runs/ first.
+# i >= 2 joins group i - 2's driver, which then trains that group's parts side by side (`--parallel`, a part per GPU: a
+# run's seeds in two parts use both). Without `last`, the parts that do not finish stay on the machine for the next
+# call, so the drivers keep a 20 s reserve for the last checkpoint and exit: a part that finishes late ends its
+# evaluation inside the REC_SECONDS kept for packing. With `last` (the machine's last call: it keeps no runs/ after
+# it), every pass ends PACK_SECONDS earlier: --whole-parts, the three-seed parts predicted to finish, then one-seed
+# parts; then, with time still left, the next one-seed part trains to the limit, and after rec.tgz is written every
+# unfinished part of the rows is packed learner-only into $OUT/carry (`tools.carry_parts pack`, its limits: what a
+# call brings back; cut off 10 s before LIMIT) for the next machine, so a GPU whose parts are all predicted too long
+# still trains. A folder .carry in the repository (carried into the call: a bundle that pack wrote) is unpacked into
+# runs/ first.
 # Logs go to $CALL_LOGS (default /tmp/calllogs);
 # $OUT/rec.tgz gets them and every part's config, eval and metrics files (`python -m tools.experiments record`
 # takes them after the lease).
