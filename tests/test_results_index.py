@@ -129,3 +129,24 @@ def test_experiment_rows_for_the_readme_only_when_every_seed_is_evaluated(tmp_pa
     # One run's rows (a paper row that is one run of an experiment): its own row and its cross rows.
     assert ri._experiment_ours(ctx, "x", run="done") == ("done: 96.5 ± 0.5 % reached; done, sampled: 100.0 % reached "
                                                          "(1 of 2 seeds) ([table.md](experiments/x/table.md))")
+
+
+def test_seeds_and_gpus_of_an_experiment_come_from_its_parts(tmp_path):
+    """The index's `seeds; GPU` cell: each row's evaluated seeds, and the GPU models its parts' eval.json name (their
+    `provenance`, else their `device`), the parts of a run trained in another experiment's folder included."""
+    rows = [{"run": "a", "label": "a", "seeds": 3, "seeds_evaluated": 3, "folder": "runs/experiments/x/a",
+             "per_seed": {"target_reached": [0.9, 0.9, 0.9]}},
+            {"run": "b", "label": "b", "seeds": 5, "seeds_evaluated": 5, "folder": "runs/experiments/y/b",
+             "per_seed": {"target_reached": [0.9] * 5}},
+            {"run": "b", "cross": "c", "label": "b on c", "seeds": 5}]
+    (tmp_path / "results" / "experiments" / "x").mkdir(parents=True)
+    (tmp_path / "results" / "experiments" / "x" / "table.json").write_text(json.dumps({"rows": rows}))
+    parts = {"x/runs/a/seeds-0-2": {"device": "GPU (NVIDIA H100 80GB HBM3)"},
+             "y/runs/b/seeds-0-4": {"provenance": {"device": "NVIDIA H200"}}}
+    for folder, ev in parts.items():
+        (tmp_path / "results" / "experiments" / folder).mkdir(parents=True)
+        (tmp_path / "results" / "experiments" / folder / "eval.json").write_text(json.dumps(ev))
+    ctx = ri.Context(str(tmp_path))
+    assert ri._experiment_seeds_gpu(ctx, "x") == "3/5; NVIDIA H100 80GB HBM3, NVIDIA H200"
+    assert ri._experiment_seeds_gpu(ctx, "x", run="b") == "5; NVIDIA H200"
+    assert ri._experiment_seeds_gpu(ctx, "not-built") == ""

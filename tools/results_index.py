@@ -23,6 +23,9 @@ import statistics
 import sys
 from typing import Callable
 
+from tools import experiment_registry  # noqa: F401  (registers the experiments in EXPERIMENTS)
+from tools.experiment_spec import EXPERIMENTS
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 # ------------------------------------------------------------------------------------------------
@@ -452,26 +455,45 @@ def headline_table(ctx: Context) -> list[list[str]]:
                      HEADLINE)(ctx)
 
 
+README_FROM_EXPERIMENTS = {
+    "headline/ur5e_reach_sac_eval.json": ("UR5e reach, SAC, the paper's settings, full initial range, the preset's budget",
+                                          "sac-workspaces", "full-range"),
+}
+"""Headline rows the README shows from a registered experiment's run of the same config trained further: {the
+headline file: (label, experiment, run)}; the headline file's row stands until every seed of that run is evaluated."""
+
+
+def _experiment_cell(row: dict, paper_key: str) -> str:
+    """'96.5 ± 0.3 % / 0.6 ± 0.1 % self at 5 seeds x 100.0M steps' from a table.json row (collisions as the
+    paper's row counts them)."""
+    seeds = row["per_seed"]
+    ours = [_seed_rate(seeds["target_reached"]), _seed_rate(seeds["self_collision"]) + " self"]
+    if PAPER_ROWS[paper_key][2] is not None:  # the paper's row counts obstacle collisions
+        ours[1] += ", " + _seed_rate(seeds["obstacle_collision"]) + " obstacle"
+    return f"{ours[0]} / {ours[1]} at {row['seeds_evaluated']} seeds x {millions(row['env_steps'])} steps"
+
+
 def readme_table(ctx: Context) -> list[list[str]]:
     """README.md's short table: the headline rows, the pseudo-IK baseline and the speeds."""
     rows = [["", "paper (RTX 3090 Ti)", "ours"], ["---", "---:", "---:"]]
     for run in HEADLINE:
+        paper = " / ".join([paper_pct(PAPER_ROWS[run.paper][0]), paper_collisions(run.paper)])
+        label, experiment, name = README_FROM_EXPERIMENTS.get(run.file, (run.label, "", ""))
+        row = _finished_experiment_row(ctx, experiment, name) if experiment else None
+        if row is not None:
+            rows.append([label + ": reached / collisions", paper, _experiment_cell(row, run.paper)])
+            continue
         ev = ctx.evaluation(run.file)
-        paper = PAPER_ROWS[run.paper]
-        rows.append([run.label + ": reached / collisions",
-                     " / ".join([paper_pct(paper[0]), paper_collisions(run.paper)]),
-                     f"{pct(ev['summary']['target_reached'])} / {collisions(ev)} at {millions(ev['policy']['env_steps'])} steps"])
+        rows.append([run.label + ": reached / collisions", paper,
+                     f"{pct(ev['summary']['target_reached'])} / {collisions(ev)} at "
+                     f"{ev['summary']['target_reached']['units']} seeds x {millions(ev['policy']['env_steps'])} steps"])
     for label, experiment, run, paper_key in EXPERIMENT_HEADLINE:
         row = _finished_experiment_row(ctx, experiment, run)
         if row is None:
             continue
-        seeds = row["per_seed"]
-        ours = [_seed_rate(seeds["target_reached"]), _seed_rate(seeds["self_collision"]) + " self"]
-        if PAPER_ROWS[paper_key][2] is not None:  # the paper's row counts obstacle collisions
-            ours[1] += ", " + _seed_rate(seeds["obstacle_collision"]) + " obstacle"
         rows.append([label + ": reached / collisions",
                      " / ".join([paper_pct(PAPER_ROWS[paper_key][0]), paper_collisions(paper_key)]),
-                     f"{ours[0]} / {ours[1]} at {millions(row['env_steps'])} steps"])
+                     _experiment_cell(row, paper_key)])
     b = _baseline_rows(ctx)
     ik = [b[("ur5e", "pseudo_ik", "absolute", r)]["summary"]["target_reached"] for r in (0.01, 0.02)]
     rows.append(["baseline: pseudo-IK, UR5e, absolute control: reached, 1 cm / 2 cm",
@@ -615,13 +637,50 @@ def failures_table(ctx: Context) -> list[list[str]]:
 # ------------------------------------------------------------------------------------------------
 # The index: every paper table, figure and headline row beside ours.
 
+def _gpu(device: str | None) -> str:
+    """'NVIDIA H200' from eval.py's 'GPU (NVIDIA H200)' (other spellings as they are; None: '')."""
+    m = re.fullmatch(r"GPU \((.*)\)", device or "")
+    return m.group(1) if m else (device or "")
+
+
+def _seeds_gpu(seeds, gpus) -> str:
+    """'5; NVIDIA H200' (seeds; GPU models), '3/5; NVIDIA H100 80GB HBM3, NVIDIA H200' for several."""
+    return "; ".join(["/".join(map(str, sorted(set(seeds)))), ", ".join(sorted(set(gpus)))])
+
+
+def _json_seeds_gpu(ctx: Context, file: str, summary: dict | None = None) -> str:
+    """Seeds and GPU of a JSON file: the units of its first evaluation's (or `summary`'s) target rate, its device."""
+    data = ctx.json(file)
+    summary = summary or data["evaluations"][0]["summary"]
+    return _seeds_gpu([summary["target_reached"]["units"]], [_gpu(data.get("device"))])
+
+
+def _experiment_seeds_gpu(ctx: Context, name: str, run: str | None = None) -> str:
+    """The seeds evaluated per row of an experiment's table.json (or of one run's rows) and the GPU models that
+    trained them, read from the parts' eval.json (their `provenance`, else their `device`)."""
+    file = f"experiments/{name}/table.json"
+    if not os.path.exists(os.path.join(ctx.results, file)):
+        return ""
+    rows = [r for r in ctx.json(file)["rows"] if run is None or r.get("run") == run]
+    seeds = [r["seeds_evaluated"] for r in rows if r.get("per_seed")]
+    gpus = []
+    for row in rows:
+        exp, _, folder = row.get("folder", "").removeprefix("runs/experiments/").partition("/")
+        for part in sorted(glob.glob(os.path.join(ctx.results, "experiments", exp, "runs", folder, "seeds-*", "eval.json"))):
+            with open(part, encoding="utf-8") as f:
+                ev = json.load(f)
+            gpus.append(_gpu(ev.get("provenance", {}).get("device") or ev.get("device")))
+    return _seeds_gpu(seeds, [g for g in gpus if g])
+
+
 def _eval_cell(ctx: Context, file: str) -> str:
     ev = ctx.evaluation(file)
     return f"{pct(ev['summary']['target_reached'])} / {collisions(ev)}"
 
 
 def index_table(ctx: Context) -> list[list[str]]:
-    rows = [["paper", "paper's number", "ours", "command", "file"], ["---", "---:", "---:", "---", "---"]]
+    rows = [["paper", "paper's number", "ours", "seeds; GPU", "command", "file"],
+            ["---", "---:", "---:", "---", "---", "---"]]
     for run in HEADLINE:
         ev = ctx.evaluation(run.file)
         command = f"python train.py {run.preset or _train_config(ev)['preset']} --seeds 5"
@@ -629,36 +688,40 @@ def index_table(ctx: Context) -> list[list[str]]:
             command += f" --stop-after-steps {ev['policy']['env_steps']}"
         paper = PAPER_ROWS[run.paper]
         rows.append([f"Results: {run.label}", f"{paper_pct(paper[0])} / {paper_collisions(run.paper)}",
-                     _eval_cell(ctx, run.file), f"`{command}`", ctx.link(run.file)])
+                     _eval_cell(ctx, run.file), _json_seeds_gpu(ctx, run.file), f"`{command}`", ctx.link(run.file)])
     for key, run, label in (("panda-reach-sac", "panda", "Results: Panda reach, SAC"),
                             ("ur5e-reach-sac-limited-init", "ur5e-limited", "Results: UR5e reach, SAC, 360° initial range")):
         paper = PAPER_ROWS[key]
         rows.append([label, f"{paper_pct(paper[0])} / {paper_collisions(key)}", _experiment_ours(ctx, "sac-reach", run=run),
-                     "`python -m tools.experiments run sac-reach`", ""])
+                     _experiment_seeds_gpu(ctx, "sac-reach", run), "`python -m tools.experiments run sac-reach`", ""])
     b = _baseline_rows(ctx)
     for radius in (0.01, 0.02):
         s = b[("ur5e", "pseudo_ik", "absolute", radius)]["summary"]
         rows.append([f"Table \"reaching baselines\": pseudo-IK, {radius * 100:g} cm target (UR5e, absolute control)",
                      f"{100 * PAPER_BASELINES[('pseudo_ik', radius)][0]:.1f} % reached", pct(s["target_reached"]) + " reached",
-                     "`python -m tools.paper_tables --tables baselines --num-envs 4096 --seeds 5`",
+                     _json_seeds_gpu(ctx, "baselines/baselines.json", s), "`python -m tools.paper_tables --tables baselines --num-envs 4096 --seeds 5`",
                      ctx.link("baselines/baselines.json")])
     rows.append(["Table \"action space\": precision of absolute vs relative control", PAPER_ACTION_SPACE,
-                 _experiment_ours(ctx, "action-space", precision=True), "`python -m tools.experiments run action-space`", ""])
+                 _experiment_ours(ctx, "action-space", precision=True), _experiment_seeds_gpu(ctx, "action-space"),
+                 "`python -m tools.experiments run action-space`", ""])
     ws = {(r["trained"], r["evaluated"]): r["summary"] for r in ctx.json("workspaces/workspace_generalization.json")["rows"]}
     p = PAPER_WORKSPACE[("full", "full-range")]
     rows.append(["Table \"workspace generalization\" (13 pairs), e.g. Full on Full Range",
                  f"{100 * p[0]:.1f} % reached", pct(ws[("full", "full-range")]["target_reached"]) + " reached",
+                 _json_seeds_gpu(ctx, "workspaces/workspace_generalization.json", ws[("full", "full-range")]),
                  "`python -m tools.paper_tables --tables workspace --workspace ...`", ctx.link("workspaces/README.md")])
     ob = {(r["trained"], r["evaluated"]): r["summary"] for r in ctx.json("obstacle_size/obstacle_size.json")["rows"]}
     p = PAPER_OBSTACLE[("reach", 0.3)]
     rows.append(["Table \"obstacle size\" (14 pairs), e.g. a reach agent on a 0.3 m obstacle",
                  f"{100 * p[0]:.1f} % reached, {100 * p[4]:.1f} % obstacle",
                  f"{pct(ob[('reach', 0.3)]['target_reached'])} reached, {pct(ob[('reach', 0.3)]['obstacle_collision'])} obstacle",
+                 _json_seeds_gpu(ctx, "obstacle_size/obstacle_size.json", ob[("reach", 0.3)]),
                  "`python -m tools.paper_tables --tables obstacle --obstacle ...`", ctx.link("obstacle_size/README.md")])
     env = {r["env"]: r for r in ctx.json("throughput/env_throughput.json")["rows"] if r["num_envs"] == 8192}
     for name in ("ur5e-reach", "ur5e-reach-avoid"):
         rows.append([f"Simulation performance: {name} env steps/s, 8,192 envs", thousands(PAPER_THROUGHPUT[name]),
-                     thousands(env[name]["steps_per_s"]), "`python -m benchmarks.env_throughput --sizes 8192`",
+                     thousands(env[name]["steps_per_s"]), ctx.json("throughput/env_throughput.json")["meta"]["device"],
+                     "`python -m benchmarks.env_throughput --sizes 8192`",
                      ctx.link("throughput/env_throughput.json")])
     figures = (
         ("Figure 1: a sampled initial state of the reach-avoid task", "figures/initial_state_reach_avoid.png",
@@ -673,11 +736,14 @@ def index_table(ctx: Context) -> list[list[str]]:
          "`python -m tools.plots curves RUN ... --out FILE`"),
     )
     for label, file, command in figures:
-        rows.append([label, "(figure)", "(figure)", command, ctx.link(file)])
+        experiment = re.fullmatch(r"experiments/([\w.-]+)/curves.png", file)
+        rows.append([label, "(figure)", "(figure)", _experiment_seeds_gpu(ctx, experiment.group(1)) if experiment else "",
+                     command, ctx.link(file)])
     for label, name in (("Figure: reward formulations", "reward"), ("Figure: network sizes (absolute control)", "network-size"),
                         ("Figure: UR5e SAC training curves by workspace", "sac-workspaces"),
                         ("Figure: reach-avoid observation spaces", "reach-avoid-observation")):
-        rows.append([label, "(figure)", _experiment_ours(ctx, name), f"`python -m tools.experiments run {name}`", ""])
+        rows.append([label, "(figure)", _experiment_ours(ctx, name), _experiment_seeds_gpu(ctx, name),
+                     f"`python -m tools.experiments run {name}`", ""])
     return rows
 
 
@@ -714,16 +780,14 @@ def _experiment_ours(ctx: Context, name: str, precision: bool = False, run: str 
 
 
 def experiments_table(ctx: Context) -> list[list[str]]:
-    from tools import experiments
-
-    rows = [["experiment", "paper", "paper's finding", "runs x seeds, env steps", "ours", "command"],
-            ["---", "---", "---", "---:", "---", "---"]]
-    for name, exp in experiments.EXPERIMENTS.items():
+    rows = [["experiment", "paper", "paper's finding", "runs x seeds, env steps", "ours", "seeds; GPU", "command"],
+            ["---", "---", "---", "---:", "---", "---", "---"]]
+    for name, exp in EXPERIMENTS.items():
         seeds = sorted({r.seeds for r in exp.runs})
         steps = sum(r.seeds * r.budget() for r in exp.runs)
         rows.append([f"`{name}`", exp.paper_ref, exp.paper,
                      f"{len(exp.runs)} x {'/'.join(map(str, seeds))}, {steps / 1e9:.2f}B",
-                     _experiment_ours(ctx, name), f"`python -m tools.experiments run {name}`"])
+                     _experiment_ours(ctx, name), _experiment_seeds_gpu(ctx, name), f"`python -m tools.experiments run {name}`"])
     return rows
 
 
