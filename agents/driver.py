@@ -78,7 +78,7 @@ class TrainResult:
     """The final seed-batched TrainState (on device)."""
     env_steps: int
     status: str
-    """"done", "stopped" (stop_after_steps or stop_after_seconds) or "interrupted" (Ctrl-C)."""
+    """"done", "stopped" (stop_after_steps or stop_after_seconds) or "interrupted" (Ctrl-C or SIGUSR2: `STOP_SIGNALS`)."""
     logdir: str
     config: TrainConfig
     eval_metrics: dict | None
@@ -472,23 +472,29 @@ def evaluate(programs: Programs, state, config: TrainConfig) -> dict:
     return {k: np.asarray(v).tolist() for k, v in jax.device_get(out).items()}
 
 
+STOP_SIGNALS = (signal.SIGINT, signal.SIGUSR2)
+"""Signals that ask a run to save a checkpoint after the current chunk and return "interrupted": Ctrl-C, and
+SIGUSR2, the scheduler's warning before a time limit or a preemption (Slurm's `--signal`, submitit's default)."""
+
+
 def _install_sigint(flag: dict):
+    """Installs the stop handler for `STOP_SIGNALS` (a second Ctrl-C aborts without saving); returns the handlers it
+    replaced, None off the main thread."""
     def handler(signum, frame):
-        if flag["flag"]:
+        if flag["flag"] and signum == signal.SIGINT:
             raise KeyboardInterrupt
         flag["flag"] = True
-        print("\nCtrl-C: saving a checkpoint after the current chunk (press again to abort without saving).",
+        what = "Ctrl-C" if signum == signal.SIGINT else signal.Signals(signum).name
+        print(f"\n{what}: saving a checkpoint after the current chunk (press Ctrl-C again to abort without saving).",
               file=sys.stderr, flush=True)
 
     try:
-        return signal.signal(signal.SIGINT, handler)
+        return {sig: signal.signal(sig, handler) for sig in STOP_SIGNALS}
     except ValueError:  # not the main thread
         return None
 
 
 def _restore_sigint(previous) -> None:
-    if previous is not None:
-        try:
-            signal.signal(signal.SIGINT, previous)
-        except ValueError:
-            pass
+    for sig, handler in (previous or {}).items():
+        if handler is not None:
+            signal.signal(sig, handler)
