@@ -1,4 +1,4 @@
-"""Pure building blocks of fast off-policy learning (issue 25): a categorical (distributional)
+"""Pure building blocks of fast off-policy learning: a categorical (distributional)
 critic and n-step returns.
 
 The distributional critic follows Bellemare et al. 2017, "A Distributional Perspective on

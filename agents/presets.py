@@ -67,7 +67,7 @@ _PLUS_REACH = ("joint_pos", "joint_sin_cos", "ee_pos", "target_pos", "ee_to_targ
 _UR5E_PLUS = dict(_UR5E_RELATIVE, observation=_PLUS_REACH)
 _PLUS_REACH_AVOID = _PLUS_REACH + ("obstacle_pos", "link_obstacle_dist")
 _UR5E_PLUS_AVOID = dict(_UR5E_RELATIVE, observation=_PLUS_REACH_AVOID)
-# Beyond the paper (issue 29, the future work of its Discussion): 3 obstacles of random radius moving in straight
+# Beyond the paper (the future work of its Discussion): 3 obstacles of random radius moving in straight
 # lines that bounce off the sampling cube; their radii and velocities observed.
 MOVING_OBSTACLES_3 = dict(
     num_obstacles=3, obstacle_motion="linear", obstacle_radius_range=(0.05, 0.1), obstacle_speed_range=(0.05, 0.2),

@@ -9,7 +9,8 @@ import pytest
 
 from agents.config import config_json
 from tools import adopt_run
-from tools import experiments as ex
+from tools import experiment_state as ex
+from tools import experiment_tables as tables
 
 NAME = "reach-avoid-reward/dense"  # a run no other registered run shares (its record folder is its own)
 SEEDS = 5
@@ -66,10 +67,10 @@ def test_a_matching_run_is_recorded_as_the_done_part(tmp_path):
     state = ex.run_state(*_run(), str(tmp_path / "runs"), str(out))
     assert state.status == "done" and [p.name for p in state.done_parts] == ["seeds-0-4"]
     # without timings, the table's timing cells stay empty (not 0 s); the table names the source
-    assert ex.timing_cell(state, "wall_clock") == "" == ex.timing_cell(state, "steps_per_second")
-    assert ex.merged_evaluation(state)["sources"] == [str(tmp_path / "eval.json")]
+    assert tables.timing_cell(state, "wall_clock") == "" == tables.timing_cell(state, "steps_per_second")
+    assert tables.merged_evaluation(state)["sources"] == [str(tmp_path / "eval.json")]
     exp, run = _run()
-    ex.build_default(exp, [state], str(out / "reach-avoid-reward"), code="abc1234")
+    tables.build_default(exp, [state], str(out / "reach-avoid-reward"), code="abc1234")
     table = (out / "reach-avoid-reward" / "table.md").read_text()
     assert (f"recorded with `tools.adopt_run` from the `eval.py` evaluation of the final checkpoint: dense from "
             f"{tmp_path / 'eval.json'}.") in table

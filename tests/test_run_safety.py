@@ -200,7 +200,7 @@ def test_a_checkpoint_whose_env_states_another_env_wrote_resumes_its_learner(ear
     rows_before = len((logdir / "metrics.csv").read_text().splitlines())
     original = PointMass._metrics
     monkeypatch.setattr(PointMass, "_metrics", lambda self, d, r, n: {**original(self, d, r, n), "extra": d})
-    # A learner-only copy (what tools.carry_parts packs) of the old-layout checkpoint, under the new env.
+    # A learner-only copy (small enough to move a run between machines) of the old-layout checkpoint, under the new env.
     assert driver.learner_only_checkpoint(str(logdir), str(tmp_path / "carried")) == SHORT
     carried = Checkpointer(str(tmp_path / "carried" / "checkpoints"))
     copy = carried.restore_matching(SHORT, driver._learner_only(programs.abstract_state, programs.learner))

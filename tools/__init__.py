@@ -1,17 +1,18 @@
 """User tools around trained policies: the paper's tables (`paper_tables`), why a policy fails
 (`failure_report`), shipping a policy export (`ship_checkpoint`) and figures (`plots`), the results tables
-(`results_index`), the experiments (`experiments`) and their unfinished parts moved between machines
-(`carry_parts`). Each runs as `python -m tools.<name> --help` from the repository root and imports as
-`from tools import <name>`."""
+(`results_index`) and the experiments (`experiments`: registry, state, launching, tables). Each runs as
+`python -m tools.<name> --help` from the repository root and imports as `from tools import <name>`."""
 
 import sys
 
 
 def run_cli(main) -> None:
     """Runs a tool's `main()`; bad input (a ValueError naming the field and what is allowed) prints
-    `error: ...` and exits with status 2 instead of a traceback."""
+    `error: ...` and exits with status 2 instead of a traceback; otherwise it exits with `main()`'s status where
+    that is a number, else 0."""
     try:
-        main()
+        code = main()
     except ValueError as error:
         print(f"error: {error}", file=sys.stderr)
         raise SystemExit(2)
+    raise SystemExit(code if isinstance(code, int) else 0)

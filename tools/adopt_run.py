@@ -24,7 +24,7 @@ import json
 import os
 import warnings
 
-from tools import experiments as ex
+from tools import experiment_state as ex
 
 TIMING = ("steps_per_second", "wall_seconds")
 

@@ -1,6 +1,6 @@
-"""The registered experiments: the paper's experiments that no committed result covers yet (issue 26) and our
-own studies (issues 25 and 29). Adding one: `register(Experiment(...))` here; `python -m tools.experiments
-list` shows it, and `tests/test_experiments.py` validates every run's config.
+"""The registered experiments: the paper's experiments, our own studies beyond it, and a point-mass demo that
+shows the launch machinery in two minutes on a CPU. Adding one: `register(Experiment(...))` here; `python -m
+tools.experiments list` shows it, and `tests/test_experiments.py` validates every run's config.
 
 Seeds: 5 where the paper states numbers (tables, text), 3 for comparisons it shows only as curves or words;
 fewer where a row's question was answered before its seeds were all trained (its experiment's note says so).
@@ -214,7 +214,7 @@ def _fast(name: str, env: str, label: str, overrides: dict | None = None, **fiel
 
 register(Experiment(
     "sac-fast", "Fast SAC (4,096 envs, n-step returns, categorical critic) on the four tasks, against the paper's PPO",
-    "not in the paper (issue 25); the paper's columns are its PPO rows",
+    "not in the paper; the paper's columns are its PPO rows",
     (_fast("ur5e-reach", "ur5e-reach", ""),
      _fast("panda-reach", "panda-reach", "paper's observation", _PAPER_OBS, num_timesteps=60_000_000),
      _fast("ur5e-reach-avoid", "ur5e-reach-avoid", "paper's observation", _PAPER_AVOID_OBS),
@@ -258,7 +258,7 @@ register(Experiment(
          "(more steps than the row without the suffix) and the `f32` row (float32 instead of bfloat16 hidden layers) "
          "ask whether more steps or precision close a gap; the `jl` rows add the UR5e presets' joint-limit penalty "
          "and the `ent14` row lowers the entropy target from -7 to -14, each against the Panda rows' misses at 100M "
-         "(results/failures). The 200M rows train the Panda presets' budget with issue 25's 5 seeds; the other rows "
+         "(results/failures). The 200M rows train the Panda presets' budget with 5 seeds; the other rows "
          "with fewer than 5 stopped once their question was answered; the findings and figures are in "
          "results/sac/fast. "
          "One seed per process (`--max-seeds 1`): vmapped fast-SAC seeds train no faster in all than one. The "
@@ -301,7 +301,7 @@ _STATIC = {"env.obstacle_motion": "static"}
 _UR5E_PAPER_OBS = {"env.observation": _MOVING3_OBS, "env.w_joint_limit": 1.0}
 register(Experiment(
     "obstacles-moving3", "Reach-avoid with 3 obstacles of random radius (0.05-0.1 m), moving or static, UR5e and Panda",
-    "not in the paper (issue 29; the future work of its Discussion)",
+    "not in the paper (the future work of its Discussion)",
     (Run("ur5e-moving-plus", "ur5e-reach-avoid-ppo-moving3",
          label="ur5e-moving (the preset: plus observation, no joint-limit penalty)"),
      Run("ur5e-static-plus", "ur5e-reach-avoid-ppo-moving3",
@@ -335,7 +335,7 @@ register(Experiment(
 _LATENCY_METRICS = _AVOID_METRICS + ("steps_in_target", "times_left_target")
 register(Experiment(
     "action-latency", "Reach-avoid trained with a one-step action delay, UR5e and Panda",
-    "not in the paper (issue 29; the realism its Discussion names as future work)",
+    "not in the paper (the realism its Discussion names as future work)",
     (Run("ur5e-none", "ur5e-reach-avoid-ppo", seeds=3, label="ur5e, no delay (the preset)"),
      Run("ur5e", "ur5e-reach-avoid-ppo", {"env.action_latency": 1}, seeds=3, label="ur5e, one-step delay"),
      Run("panda-none", "panda-reach-avoid-ppo", seeds=3, label="panda, no delay (the preset)"),
@@ -349,3 +349,10 @@ register(Experiment(
     note="Tests whether training with the delay (`env.action_latency=1`: each step applies the previous step's "
          "action, as a real arm's control loop does) restores the precision that the delay takes from the "
          "presets' policies."))
+
+register(Experiment(
+    "point-mass-demo", "Point mass, PPO: the experiment machinery end to end in about two minutes on a CPU",
+    "not in the paper (a demo of launch, requeue and build)",
+    (Run("ppo", "point-mass-ppo", {"eval_envs": 64, "tensorboard": False}, seeds=1, num_timesteps=4_000_000),),
+    metrics=("target_reached", "distance", "wall_clock"), curves=("episode/target_reached",),
+    note="One seed of the probe task, long enough that a job with a one-minute limit is requeued at least once."))

@@ -1,0 +1,127 @@
+"""tools/experiment_launch.py through submitit: the point-mass demo launched on submitit's local executor trains in
+one job; on a real single-node Slurm with a one-minute time limit it is stopped, requeued and resumed, and ends with
+the same final evaluation and training log as the unbroken run of the same seed; a failing part reports its error
+in `list`."""
+
+import csv
+import json
+import os
+import subprocess
+import sys
+
+import pytest
+
+from agents.config import config_json
+from tests.slurm_cluster import ensure_slurm
+from tools import experiment_launch as launch
+from tools import experiment_spec as spec
+from tools import experiment_state as state
+from tools import experiments as ex
+
+DEMO = "point-mass-demo"
+PART = os.path.join(DEMO, "ppo", "seeds-0-0")
+TIMING = ("steps_per_second", "wall_seconds")
+"""metrics.csv columns that measure the machine, not the run."""
+
+
+def _launch(runs: str, *options: str) -> subprocess.CompletedProcess:
+    """`python -m tools.experiments launch point-mass-demo` as a user types it, with its runs and results in `runs`."""
+    argv = [sys.executable, "-m", "tools.experiments", "launch", DEMO, "--runs-dir", os.path.join(runs, "runs"),
+            "--out", os.path.join(runs, "out"), "--compilation-cache", os.path.join(runs, "jax_cache"), *options]
+    return subprocess.run(argv, cwd=launch.ROOT, capture_output=True, text=True, timeout=900)
+
+
+def _evaluation(runs: str) -> dict:
+    with open(os.path.join(runs, "runs", PART, "eval.json")) as f:
+        return json.load(f)
+
+
+def _log(runs: str) -> list[dict]:
+    """metrics.csv's rows without the timing columns."""
+    with open(os.path.join(runs, "runs", PART, "metrics.csv"), newline="") as f:
+        return [{k: v for k, v in row.items() if k not in TIMING} for row in csv.DictReader(f)]
+
+
+@pytest.fixture(scope="module")
+def unbroken(tmp_path_factory) -> str:
+    """The demo launched on submitit's local executor without a time limit to meet: one job, one attempt, the
+    reference a requeued job must equal."""
+    runs = str(tmp_path_factory.mktemp("unbroken"))
+    done = _launch(runs, "--executor", "local", "--gpus-per-part", "0")
+    assert done.returncode == 0, done.stderr
+    return runs
+
+
+def test_launch_config_is_validated_where_it_is_made():
+    with pytest.raises(ValueError, match=r"executor='pbs' is unknown: allowed are slurm, local"):
+        launch.LaunchConfig(executor="pbs")
+    with pytest.raises(ValueError, match=r"gpus_per_part=-1 is impossible: allowed is a whole number >= 0"):
+        launch.LaunchConfig(gpus_per_part=-1)
+    with pytest.raises(ValueError, match=r"slurm_args entry \('--qos', 'high'\) is invalid"):
+        launch.LaunchConfig(slurm_args=(("--qos", "high"),))
+    assert launch.LaunchConfig(time_min=1).warning_s == 15  # a quarter of the limit
+    assert launch.LaunchConfig(time_min=240).warning_s == 120  # at most two minutes
+    assert launch.LaunchConfig(time_min=1, signal_delay_s=40).warning_s == 40
+
+
+def test_local_slots_group_the_visible_gpus(monkeypatch):
+    monkeypatch.setenv("CUDA_VISIBLE_DEVICES", "2,3,5")
+    assert launch.gpu_slots(1) == [[2], [3], [5]]
+    assert launch.gpu_slots(2) == [[2, 3]]  # GPU 5 alone is too few for a part
+    assert launch.gpu_slots(0) == [[]]
+    monkeypatch.setenv("CUDA_VISIBLE_DEVICES", "")
+    assert launch.gpu_slots(1) == [[]]  # no GPU: one part at a time on the CPU
+
+
+def test_the_local_executor_trains_a_part_in_one_job_and_records_it(unbroken):
+    job = json.load(open(os.path.join(unbroken, "runs", DEMO, "ppo", ".seeds-0-0.job.json")))
+    assert job["executor"] == "local"
+    assert job["status"] == "done"
+    assert job["attempts"] == 1
+    assert _evaluation(unbroken)["env_steps"] >= spec.EXPERIMENTS[DEMO].runs[0].budget()
+    recorded = os.path.join(unbroken, "out", DEMO, "runs", "ppo", "seeds-0-0", "eval.json")
+    assert json.load(open(recorded))["per_seed"] == _evaluation(unbroken)["per_seed"]
+    listed = ex.listing(state.select([DEMO]), os.path.join(unbroken, "runs"), os.path.join(unbroken, "out"))
+    assert "  1 done; table not built" in listed
+
+
+def test_slurm_requeues_a_part_past_its_limit_and_ends_as_an_unbroken_run(tmp_path, unbroken):
+    """A real Slurm: one job with a 1-minute limit, warned 25-55 s after each start (Slurm checks limits every 30
+    s), saves a checkpoint, is requeued and resumes until the part is done; the result equals the unbroken run's,
+    the training log step for step."""
+    ok, why = ensure_slurm()
+    if not ok:
+        pytest.skip(f"no Slurm cluster here: {why}")
+    runs = str(tmp_path)
+    done = _launch(runs, "--executor", "slurm", "--time", "1", "--signal-delay", "5", "--max-requeues", "20",
+                   "--gpus-per-part", "0", "--wait")
+    assert done.returncode == 0, done.stderr
+    job = json.load(open(os.path.join(runs, "runs", DEMO, "ppo", ".seeds-0-0.job.json")))
+    assert job["executor"] == "slurm"
+    assert job["status"] == "done", open(job["log"]).read()[-3000:]
+    assert job["attempts"] >= 2  # requeued at least once
+    assert _evaluation(runs)["per_seed"] == _evaluation(unbroken)["per_seed"]
+    assert _log(runs) == _log(unbroken)
+
+
+def test_a_failing_part_reports_its_error_in_list(tmp_path, monkeypatch):
+    """A part whose folder holds another run's config fails in its job; `list` names the job, the error and the
+    log."""
+    runs = str(tmp_path)
+    logdir = os.path.join(runs, "runs", PART)
+    os.makedirs(logdir)
+    run = spec.EXPERIMENTS[DEMO].runs[0]
+    other = spec.apply_overrides(run.config(logdir), {"env.dt": 0.2})
+    with open(os.path.join(logdir, "config.json"), "w") as f:
+        json.dump(config_json(other), f)
+    # A changed part is not launched: `list` says why.
+    done = _launch(runs, "--executor", "local")
+    assert "skipped: seeds-0-0:" in done.stdout and "dt" in done.stdout
+    # Launched by name as a job, it fails there and the job file keeps the error.
+    job = launch.make_executor(launch.LaunchConfig(executor="local", time_min=5), os.path.join(runs, "jobs")).submit(
+        launch.PartJob(f"{DEMO}/ppo", "seeds-0-0", os.path.join(runs, "runs"), os.path.join(runs, "out"), "off"))
+    with pytest.raises(Exception, match="move that part away to retrain it"):
+        job.result()
+    text = ex.listing(state.select([DEMO]), os.path.join(runs, "runs"), os.path.join(runs, "out"))
+    assert f"seeds-0-0: failed in job {job.job_id}: ValueError: " in text
+    assert "move that part away to retrain it" in text
