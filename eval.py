@@ -68,7 +68,7 @@ from typing import Annotated, Generic, TypeVar
 import tyro
 
 import envs
-from agents import baselines, evaluation
+from agents import baselines, evaluation, provenance
 
 EnvConfigT = TypeVar("EnvConfigT")
 
@@ -200,11 +200,11 @@ def main(argv: list[str] | None = None) -> list:
 
     command = "python eval.py " + " ".join(shlex.quote(a) for a in argv)
     print(evaluation.markdown(results))
-    print(f"\n{env_name}, overrides {overrides or 'none'}; eval seeds {eval_seeds}; device {evaluation.device_description()}")
+    print(f"\n{env_name}, overrides {overrides or 'none'}; eval seeds {eval_seeds}; device {provenance.device_description()}")
     report = {
         "command": command,
-        "device": evaluation.device_description(),
-        "code": evaluation.code_version(),
+        "device": provenance.device_description(),
+        "code": provenance.code_version(),
         "env_name": env_name,
         "env_overrides": {k: (list(v) if isinstance(v, tuple) else v) for k, v in overrides.items()},
         "num_envs": args.num_envs,

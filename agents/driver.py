@@ -31,7 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import envs
-from agents import export, registry
+from agents import export, provenance, registry
 from agents.checkpoint import Checkpointer, write_atomic
 from agents.config import (TrainConfig, config_from_json, config_json, env_steps_per_update, merge_resume_config,
                            num_devices, total_updates, validate)
@@ -205,11 +205,11 @@ def _train(config: TrainConfig, learner_cls: type | None = None) -> TrainResult:
             t0 = time.perf_counter()
             eval_metrics = evaluate(programs, state, config)
             logger.say(f"[{logger.label}] evaluation done in {time.perf_counter() - t0:.0f} s")
-            from agents.evaluation import device_description  # it imports this module
-
-            # The device of this (last) call: tables show it beside speeds, which compare only on one GPU model.
-            text = json.dumps({"env_steps": step, "eval_envs": config.eval_envs, "device": device_description(),
-                               "per_seed": eval_metrics,
+            # What made it (command, code, device, date); tables show the device beside speeds, which compare only
+            # on one GPU model.
+            made = provenance.stamp()
+            text = json.dumps({"env_steps": step, "eval_envs": config.eval_envs, "device": made["device"],
+                               "provenance": made, "per_seed": eval_metrics,
                                "mean": {k: float(np.mean(v)) for k, v in eval_metrics.items()}}, indent=2)
             for path in (os.path.join(ckpt.step_dir(step), "eval.json"), os.path.join(logdir, "eval.json")):
                 write_atomic(path, text)

@@ -505,40 +505,11 @@ def markdown(results: list[Result], spread: str = "std_units") -> str:
     return "\n".join(lines)
 
 
-def code_version() -> str:
-    """The git commit of this checkout, "+modified" if tracked files differ from it: results name
-    the code that made them. A copy without .git says "unknown" unless REACH_AVOID_CODE_VERSION
-    names it."""
-    import subprocess
-
-    if os.environ.get("REACH_AVOID_CODE_VERSION"):
-        return os.environ["REACH_AVOID_CODE_VERSION"]
-
-    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-    try:
-        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=root, capture_output=True, text=True,
-                                timeout=10, check=True).stdout.strip()
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=root,
-                               capture_output=True, text=True, timeout=10, check=True).stdout.strip()
-    except (OSError, subprocess.SubprocessError):
-        return "unknown"
-    return commit + ("+modified" if dirty else "")
-
-
 def _physics_backend(env_config) -> str | None:
     """The backend that stepped the physics (an arm config's `backend` resolved; None for envs without one)."""
     from envs import physics
     backend = getattr(env_config, "backend", None)
     return physics.resolve(backend) if backend is not None else None
-
-
-def device_description() -> str:
-    d = jax.devices()[0]
-    kind = getattr(d, "device_kind", d.platform)
-    text = f"{d.platform.upper()} ({kind})" if kind.lower() != d.platform else d.platform.upper()
-    if d.platform == "cpu":
-        text += f", {os.cpu_count()} cores"
-    return text
 
 
 # ------------------------------------------------------------------------------------------------

@@ -625,9 +625,11 @@ def test_toy_experiment_trains_resumes_and_builds(tmp_path, monkeypatch):
         assert st.status == "done" and st.steps == 10_240
     with open(os.path.join(logdir, "eval.json")) as f:
         written = json.load(f)
-    from agents.evaluation import device_description
+    from agents.provenance import device_description
 
     assert written["env_steps"] == 10_240 and written["device"] == device_description() == f"CPU, {os.cpu_count()} cores"
+    assert written["provenance"]["device"] == written["device"]
+    assert written["provenance"]["command"].startswith("python ")
 
     # The cross-evaluation ran once run a was done: its policies on a 0.5 m goal, as eval.py computes it.
     a_part = state.run_state(TOY, TOY.runs[0], runs_dir).done_parts[0]

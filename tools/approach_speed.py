@@ -116,7 +116,7 @@ def main(argv: list[str] | None = None) -> dict:
         parser.error("one of --checkpoint and --env is required")
     sys.path.insert(0, os.getcwd())
     import envs
-    from agents import evaluation
+    from agents import evaluation, provenance
 
     if args.checkpoint:
         policy = evaluation.checkpoint_policy(args.checkpoint)
@@ -128,8 +128,8 @@ def main(argv: list[str] | None = None) -> dict:
         config = dataclasses.replace(config, action_scale=args.action_scale)
     config.validate()
     env = envs.from_config(env_name, config)
-    out = {"env_name": env_name, "env_config": dataclasses.asdict(config), "device": evaluation.device_description(),
-           "code": evaluation.code_version(), "cap": servo_cap(env)}
+    out = {"env_name": env_name, "env_config": dataclasses.asdict(config), "device": provenance.device_description(),
+           "code": provenance.code_version(), "cap": servo_cap(env)}
     print(f"{env_name}: action_scale {config.action_scale}; a full commanded step moves the joints "
           f"{out['cap']['moving_step']} rad per env step while moving "
           f"({out['cap']['moving_step_fraction_of_scale']} of the step)")

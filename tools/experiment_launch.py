@@ -25,7 +25,7 @@ import traceback
 import jax
 import submitit
 
-from agents import driver
+from agents import driver, provenance
 from agents.checkpoint import write_atomic
 from tools.experiment_spec import EXPERIMENTS
 from tools.experiment_state import (
@@ -348,6 +348,8 @@ def launch(selection, config: LaunchConfig, runs_dir: str, out: str, max_seeds: 
         log("nothing to train: every selected run is done")
         return []
     executor = make_executor(config, os.path.join(folder, "%j"))
+    # The jobs' results name the command that launched them (a job itself runs submitit's bootstrap).
+    os.environ.setdefault(provenance.COMMAND_VARIABLE, provenance.command())
     slots = gpu_slots(config.gpus_per_part) if config.executor == "local" else []
     jobs, running = [], {}
     for key, part in items:

@@ -20,7 +20,7 @@ import os
 import statistics
 
 import envs
-from agents import evaluation
+from agents import evaluation, provenance
 from agents.checkpoint import write_atomic
 from agents.config import config_json, merge_resume_config, read_config, validate
 from agents.presets import PRESETS
@@ -390,7 +390,7 @@ def cross_evaluate(run: Run, part: PartState, cross: Cross) -> str:
     path = os.path.join(part.logdir, f"cross-{cross.name}.json")
     write_atomic(path, json.dumps({"env_steps": part.steps, "eval_envs": config.eval_envs, "env": cross.env,
                                    "actions": "stochastic" if cross.stochastic else "deterministic",
-                                   **driver_metrics(result.units)}, indent=2))
+                                   "provenance": provenance.stamp(), **driver_metrics(result.units)}, indent=2))
     return path
 
 

@@ -14,7 +14,8 @@ import os
 import statistics
 
 from agents.checkpoint import write_atomic
-from agents.evaluation import COLUMNS, EXTRA_COLUMNS, code_version
+from agents.evaluation import COLUMNS, EXTRA_COLUMNS
+from agents.provenance import code_version
 from tools.experiment_spec import Cross, Experiment, Run
 from tools.experiment_state import (
     TIMING_COLUMNS, RunState, cross_path, millions, record_folder, run_state, table_metrics,

@@ -239,7 +239,7 @@ def markdown(summary: dict, title: str) -> str:
 
 def main(argv: list[str] | None = None) -> dict:
     import envs
-    from agents import evaluation
+    from agents import evaluation, provenance
 
     p = argparse.ArgumentParser(prog="python -m tools.failure_report", description=__doc__.splitlines()[0])
     p.add_argument("--checkpoint", required=True, help="train.py logdir, checkpoint step directory or policy export")
@@ -269,7 +269,7 @@ def main(argv: list[str] | None = None) -> dict:
     if args.json:
         with open(args.json, "w") as f:
             json.dump({"command": " ".join(["python", "-m", "tools.failure_report"] + (argv or sys.argv[1:])),
-                       "device": evaluation.device_description(), "summary": summary, "episodes": rows}, f, indent=1)
+                       "device": provenance.device_description(), "summary": summary, "episodes": rows}, f, indent=1)
     return summary
 
 

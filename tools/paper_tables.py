@@ -41,7 +41,7 @@ import shlex
 import sys
 
 import envs
-from agents import evaluation
+from agents import evaluation, provenance
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -86,8 +86,8 @@ class Writer:
     def __init__(self, out: str, name: str, title: str, command: str, note: str = ""):
         self.out, self.name = out, name
         self.lines = [f"# {title}", "", note, ""] if note else [f"# {title}", ""]
-        self.data = {"table": name, "command": command, "device": evaluation.device_description(),
-                     "code": evaluation.code_version(), "date": datetime.date.today().isoformat(), "rows": []}
+        self.data = {"table": name, "command": command, "device": provenance.device_description(),
+                     "code": provenance.code_version(), "date": datetime.date.today().isoformat(), "rows": []}
         self.command = command
 
     def table(self, header: list[str], rows: list[list[str]]) -> None:
