@@ -206,16 +206,16 @@ def _fake_cross(events: list):
 
 
 def test_read_timing_takes_the_speed_after_the_first_chunk(tmp_path):
-    """The first chunk holds the compilation: the speed is the median after it, the start-up its excess; rows of
-    no positive, finite speed (a hand-edited or corrupt file) are skipped; one chunk gives no speed."""
+    """The first chunk holds the compilation: the speed is the median after it; rows of no positive, finite
+    speed (a hand-edited or corrupt file) are skipped; one chunk gives no speed."""
     rows = ["env_steps,seed,steps_per_second,wall_seconds", "2560,0,1000,12.56", "5120,0,0,1.0", "7680,0,nan,1.0",
             "10240,0,-5,1.0", "12800,0,1000,2.56", "15360,0,500,5.12"]
     _write(str(tmp_path / "a" / "metrics.csv"), "\n".join(rows) + "\n")
-    rate, startup, wall = state.read_timing(str(tmp_path / "a"), 1)
-    assert rate == 750.0 and startup == pytest.approx(12.56 - 2560 / 750.0) and wall == pytest.approx(20.24)
+    rate, wall = state.read_timing(str(tmp_path / "a"), 1)
+    assert rate == 750.0 and wall == pytest.approx(20.24)
     _write(str(tmp_path / "b" / "metrics.csv"), "\n".join(rows[:2]) + "\n")
-    assert state.read_timing(str(tmp_path / "b"), 1) == (None, 12.56, 12.56)
-    assert state.read_timing(str(tmp_path / "c"), 1) == (None, None, 0.0)
+    assert state.read_timing(str(tmp_path / "b"), 1) == (None, 12.56)
+    assert state.read_timing(str(tmp_path / "c"), 1) == (None, 0.0)
 
 
 def test_listing_and_commands_on_a_hand_made_runs_folder(tmp_path):
@@ -237,7 +237,7 @@ def test_listing_and_commands_on_a_hand_made_runs_folder(tmp_path):
     assert states["b"].steps == 5120 and states["b"].seeds_done == 1
     part = states["b"].parts[1]
     assert (part.first, part.count, part.status, part.rate) == (1, 1, "partial", 1000.0)
-    assert part.startup == pytest.approx(10.0) and part.wall_seconds == pytest.approx(15.12)
+    assert part.wall_seconds == pytest.approx(15.12)
     assert "dt" in states["d"].reason and "seeds-0-0" in states["d"].reason
     text = ex.listing([(exp, list(exp.runs))], runs_dir, out)
     assert "1 done, 1 partial, 1 missing, 1 changed; table not built" in text
@@ -305,11 +305,15 @@ def test_a_table_shows_the_joint_speed_and_acceleration_means_where_evaluated(tm
     new = _part(a, runs_dir, "toy", "a", 0, 2, steps=[10240], evaluated=10240)
     _write(os.path.join(new, "eval.json"), json.dumps({"env_steps": 10240, "eval_envs": 16, "per_seed": {
         "episode/target_reached": [0.5, 0.7], "episode/mean_joint_vel": [0.5, 0.7],
-        "episode/mean_joint_acc": [10.0, 14.0]}}))
+        "episode/mean_joint_acc": [10.0, 14.0]}, "source": {"eval_json": "results/a_eval.json"}}))
     _part(b, runs_dir, "toy", "b", 0, 2, steps=[10240], evaluated=10240)  # target_reached only
     tables.build([(exp, list(exp.runs))], runs_dir, out, registry={"toy": exp}, log=lambda s: None)
     with open(os.path.join(out, "toy", "table.md")) as f:
-        lines = [line for line in f.read().splitlines() if line.startswith("| ")]
+        text = f.read()
+    lines = [line for line in text.splitlines() if line.startswith("| ")]
+    # a's part was recorded from an earlier train.py run: the table names the eval.py file it came from
+    assert "Recorded from an earlier `train.py` run (the `eval.py` evaluation of its final checkpoint): " \
+           "a from results/a_eval.json." in text
     assert "| mean joint speed (rad/s) | mean joint acceleration (rad/s²) |" in lines[0]
     cells = {line.split(" | ")[0]: line.split(" | ") for line in lines}
     assert cells["| a"][4:6] == ["0.60 ± 0.10", "12.0 ± 2.0"]  # after the paper's target reached and ours
@@ -317,6 +321,7 @@ def test_a_table_shows_the_joint_speed_and_acceleration_means_where_evaluated(tm
     with open(os.path.join(out, "toy", "table.json")) as f:
         rows = {r["run"]: r for r in json.load(f)["rows"]}
     assert rows["a"]["mean"]["mean_joint_acc"] == pytest.approx(12.0) and "mean_joint_acc" not in rows["b"]["mean"]
+    assert rows["a"]["sources"] == ["results/a_eval.json"] and "sources" not in rows["b"]
 
 
 def test_a_partial_run_builds_a_row_of_its_done_seeds(tmp_path):

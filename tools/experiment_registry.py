@@ -5,10 +5,11 @@ tools.experiments list` shows it, and `tests/test_experiments.py` validates ever
 Seeds: 5 where the paper states numbers (tables, text), 3 for comparisons it shows only as curves or words;
 fewer where a row's question was answered before its seeds were all trained (its experiment's note says so).
 Budgets: the presets' (the paper states none per experiment), except where a run's `num_timesteps` says otherwise
-(its table names it beside the overrides).
+(its table names it beside the overrides). The paper's numbers beside a run (`paper=`) come from
+assets/paper_numbers.json (`paper_row`).
 """
 
-from tools.experiment_spec import Cross, Experiment, Run, register
+from tools.experiment_spec import Cross, Experiment, Run, paper_row, register
 
 _REACH_OBS = ("joint_pos", "ee_pos", "target_pos", "ee_to_target")
 _AVOID_OBS = _REACH_OBS + ("obstacle_pos", "link_obstacle_dist")
@@ -23,14 +24,12 @@ _AVOID_DEPARTS = "`ur5e-reach-avoid-ppo` has a joint-limit penalty of 1.0 and ac
 _AVOID_METRICS = ("target_reached", "self_collision", "obstacle_collision", "distance")
 _AVOID_CURVES = ("episode/target_reached", "episode/self_collision", "episode/obstacle_collision")
 
-_RELATIVE_PRECISION = dict(target_reached=0.964, self_collision=0.023, distance=0.005, steps_in_target=99.1,
-                           times_left_target=0.05)
+_RELATIVE_PRECISION = paper_row("action_space", control="relative")
 register(Experiment(
     "action-space", "UR5e reach: absolute vs relative joint position control, success and precision",
     'Table "action space" (tab:reaching_actionspace_differences), section "Action space"',
     (Run("relative", "ur5e-reach-ppo", paper=_RELATIVE_PRECISION),
-     Run("absolute", "ur5e-reach-absolute-ppo", paper=dict(target_reached=0.965, self_collision=0.030, distance=0.012,
-                                                           steps_in_target=41.5, times_left_target=21.7))),
+     Run("absolute", "ur5e-reach-absolute-ppo", paper=paper_row("action_space", control="absolute"))),
     metrics=("target_reached", "self_collision", "distance", "steps_in_target", "times_left_target"),
     curves=("episode/target_reached", "episode/self_collision", "episode/steps_in_target"),
     paper="Same success (96.5 vs 96.4 %); relative control stays in the target twice as long and leaves it in 5 % of "
@@ -76,7 +75,7 @@ register(Experiment(
          seeds=3),
      Run("ee-pos", "ur5e-reach-ppo", {"env.observation": ("joint_pos", "ee_pos", "target_pos")}, seeds=3),
      Run("paper", "ur5e-reach-ppo", label="paper's (+ ee_pos, ee_to_target)", seeds=3,
-         paper=dict(target_reached=0.96, distance=0.005)),
+         paper=paper_row("reach_observation", observation="ee-pos")),
      Run("velocities", "ur5e-reach-ppo", {"env.observation": _REACH_OBS + ("joint_vel", "ee_vel")}, seeds=3),
      Run("prev-action", "ur5e-reach-ppo", {"env.observation": _REACH_OBS + ("prev_action",)}, seeds=3),
      Run("absolute-no-prev-action", "ur5e-reach-absolute-ppo", {"env.observation": _REACH_OBS}, seeds=3),
@@ -116,8 +115,7 @@ register(Experiment(
 register(Experiment(
     "reach-avoid-reward", "UR5e reach-avoid: semi-sparse vs dense reward",
     'Section "Reach-Avoid Task" (Results), third paragraph',
-    (Run("semi-sparse", "ur5e-reach-avoid-ppo", paper=dict(target_reached=0.868, self_collision=0.027,
-                                                            obstacle_collision=0.048)),
+    (Run("semi-sparse", "ur5e-reach-avoid-ppo", paper=paper_row("reach_avoid", run="ur5e-reach-avoid-ppo")),
      Run("dense", "ur5e-reach-avoid-ppo", {"env.reward": "dense"}),
      Run("dense-penalty", "ur5e-reach-avoid-ppo", {"env.reward": "dense", "env.collision_penalty": 55.0}, seeds=3,
          label="dense, collision penalty 55 (not in the paper)"),
@@ -134,8 +132,9 @@ register(Experiment(
     "reach-avoid-observation", "UR5e reach-avoid: link-to-obstacle distances and the obstacle size observed or not",
     'Figure "reach-avoid observation spaces" (fig:static_observation_space), section "Reach-Avoid Task" (Results)',
     (Run("no-link-dist", "ur5e-reach-avoid-ppo", {"env.observation": _REACH_OBS + ("obstacle_pos",)}, seeds=3,
-         paper=dict(obstacle_collision=0.08)),
-     Run("link-dist", "ur5e-reach-avoid-ppo", seeds=3, label="link-dist (the preset)", paper=dict(obstacle_collision=0.045)),
+         paper=paper_row("reach_avoid_observation", observation="no-link-dist")),
+     Run("link-dist", "ur5e-reach-avoid-ppo", seeds=3, label="link-dist (the preset)",
+         paper=paper_row("reach_avoid_observation", observation="link-dist")),
      Run("size", "ur5e-reach-avoid-ppo", {"env.observation": _REACH_OBS + ("obstacle_pos", "obstacle_size")}, seeds=3),
      Run("link-dist-size", "ur5e-reach-avoid-ppo", {"env.observation": _AVOID_OBS + ("obstacle_size",)}, seeds=3)),
     metrics=_AVOID_METRICS, curves=_AVOID_CURVES,
@@ -146,13 +145,11 @@ register(Experiment(
 register(Experiment(
     "reach-avoid-front", "Reach-avoid in the Front workspace, UR5e and Panda",
     'Section "Reach-Avoid Task" (Results), fifth paragraph',
-    (Run("ur5e", "ur5e-reach-avoid-ppo", {"env.workspace": "front"},
-         paper=dict(target_reached=0.935, self_collision=0.011, obstacle_collision=0.030)),
+    (Run("ur5e", "ur5e-reach-avoid-ppo", {"env.workspace": "front"}, paper=paper_row("reach_avoid_front", robot="ur5e")),
      Run("ur5e-limited", "ur5e-reach-avoid-ppo", {"env.workspace": "front", "env.init_range": "limited"},
-         label="ur5e, limited initial range",
-         paper=dict(target_reached=0.935, self_collision=0.011, obstacle_collision=0.030)),
+         label="ur5e, limited initial range", paper=paper_row("reach_avoid_front", robot="ur5e")),
      Run("panda", "panda-reach-avoid-ppo", {"env.workspace": "front"},
-         paper=dict(target_reached=0.961, self_collision=0.001, obstacle_collision=0.017))),
+         paper=paper_row("reach_avoid_front", robot="panda"))),
     metrics=_AVOID_METRICS, curves=_AVOID_CURVES,
     paper="Front: UR5e 93.5 % (1.1 % self, 3.0 % obstacle), Panda 96.1 % (0.1 %, 1.7 %); the Full workspace rows are "
           "the headline ones (results/headline).",
@@ -164,24 +161,20 @@ register(Experiment(
 register(Experiment(
     "obstacle-size-ur5e", "UR5e reach-avoid trained and evaluated with obstacle radii 0.025 to 0.3 m",
     'Table "obstacle size" (tab:static_obst_size), diagonal rows, and figure fig:static_obstacle_size',
-    tuple(Run(f"r{r}", "ur5e-reach-avoid-ppo", {"env.obstacle_radius": r}, label=f"{r} m", paper=dict(zip(
-        ("target_reached", "self_collision", "obstacle_collision"), p)))
-          for r, p in ((0.025, (0.880, 0.037, 0.037)), (0.05, (0.860, 0.038, 0.040)), (0.1, (0.826, 0.043, 0.041)),
-                       (0.2, (0.796, 0.047, 0.040)), (0.3, (0.781, 0.049, 0.042)))),
+    tuple(Run(f"r{r}", "ur5e-reach-avoid-ppo", {"env.obstacle_radius": r}, label=f"{r} m",
+              paper=paper_row("obstacle_size", trained=str(r), evaluated=r)) for r in (0.025, 0.05, 0.1, 0.2, 0.3)),
     metrics=("target_reached", "self_collision", "obstacle_collision"),
     curves=("episode/target_reached", "episode/obstacle_collision"),
     cross=tuple(Cross(f"r{r}", f"r{r}-on-0.1", {"obstacle_radius": 0.1}, label=f"{r} m, evaluated on 0.1 m",
-                      paper=dict(zip(("target_reached", "self_collision", "obstacle_collision"), p)))
-                for r, p in ((0.025, (0.844, 0.038, 0.066)), (0.05, (0.842, 0.040, 0.052)), (0.2, (0.814, 0.046, 0.037)),
-                             (0.3, (0.803, 0.047, 0.033)))),
+                      paper=paper_row("obstacle_size", trained=str(r), evaluated=0.1)) for r in (0.025, 0.05, 0.2, 0.3)),
     paper="Success falls as the obstacle grows (88.0 % at 0.025 m to 78.1 % at 0.3 m); obstacle collisions stay near 4 %; "
           "agents trained on small obstacles collide more with a 0.1 m one, those trained on large ones less.",
     note="The table's rows of a reach agent on the reach-avoid env (another env) are measured with eval.py for the "
          "shipped UR5e reach policy in results/obstacle_size/README.md (last section), which also has the whole "
          "table for the Panda."))
 
-_SAC_ROWS = {"panda": dict(target_reached=0.879, self_collision=0.027),
-             "ur5e-limited": dict(target_reached=0.848, self_collision=0.035)}
+_SAC_ROWS = {"panda": paper_row("reach", run="panda-reach-sac"),
+             "ur5e-limited": paper_row("reach", run="ur5e-reach-sac-limited-init")}
 register(Experiment(
     "sac-reach", "Reach with SAC: Panda, and UR5e from the limited (360 degree) initial range",
     'Section "Results", second and fourth paragraphs',
@@ -197,10 +190,8 @@ register(Experiment(
 
 # Our own studies beyond the paper, with the paper's best rows (PPO) as the bar.
 
-_PPO_ROWS = {"ur5e-reach": dict(target_reached=0.961, self_collision=0.022),
-             "panda-reach": dict(target_reached=0.988, self_collision=0.003),
-             "ur5e-reach-avoid": dict(target_reached=0.868, self_collision=0.027, obstacle_collision=0.048),
-             "panda-reach-avoid": dict(target_reached=0.952, self_collision=0.001, obstacle_collision=0.025)}
+_PPO_ROWS = {env: paper_row("reach_avoid" if "avoid" in env else "reach", run=f"{env}-ppo")
+             for env in ("ur5e-reach", "panda-reach", "ur5e-reach-avoid", "panda-reach-avoid")}
 _PAPER_OBS = {"env.observation": _REACH_OBS}
 _PAPER_AVOID_OBS = {"env.observation": _AVOID_OBS}
 _100M = 100_000_000  # the budget of the rows trained at 100M env steps

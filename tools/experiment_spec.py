@@ -1,7 +1,7 @@
 """What an experiment is: `Run` (a preset, field overrides, seeds and a budget), `Cross` (a cross-evaluation of
 a run's policies) and `Experiment` (runs, table columns, figure curves), the registry `EXPERIMENTS` and
-`register`. The registered experiments are in `tools/experiment_registry.py`; `tools/experiments.py` trains,
-lists and tabulates them.
+`register`, and the paper's numbers (`paper_table`, `paper_row`: assets/paper_numbers.json). The registered
+experiments are in `tools/experiment_registry.py`; `tools/experiments.py` trains, lists and tabulates them.
 
 Only the standard library at the top: the results index reads the registry without importing jax.
 """
@@ -9,10 +9,40 @@ Only the standard library at the top: the results index reads the registry witho
 from __future__ import annotations
 
 import dataclasses
+import functools
+import json
+import os
 from typing import Callable
 
 MANAGED_FIELDS = ("seeds", "num_timesteps", "logdir", "resume", "stop_after_steps", "preset", "env_name", "env", "algo")
 """TrainConfig fields a Run sets itself (or that name other things), never through `overrides`."""
+
+PAPER_NUMBERS = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "assets", "paper_numbers.json")
+"""The paper's numbers that runs and results tables are compared with: one entry per table or paragraph, each
+naming the section or table it comes from. Read here because this module is the one jax-free module that both
+the registry (`Run.paper`) and the results index import."""
+
+
+@functools.cache
+def _paper_numbers() -> dict:
+    with open(PAPER_NUMBERS, encoding="utf-8") as f:
+        return json.load(f)
+
+
+def paper_table(name: str) -> list[dict]:
+    """The rows of entry `name` of assets/paper_numbers.json as {column: value}, values the paper does not state
+    (null) left out."""
+    entry = _paper_numbers()[name]
+    return [{c: v for c, v in zip(entry["columns"], row) if v is not None} for row in entry["rows"]]
+
+
+def paper_row(name: str, **key) -> dict:
+    """The paper's means in the one row of entry `name` whose columns equal `key` (e.g. trained="0.1",
+    evaluated=0.1), as a `Run.paper`: {metric: value}, without the key columns and the '_std' ones."""
+    rows = [r for r in paper_table(name) if all(r.get(k) == v for k, v in key.items())]
+    if len(rows) != 1:
+        raise KeyError(f"paper_numbers.json: {name} has {len(rows)} rows with {key}: allowed is exactly one.")
+    return {c: v for c, v in rows[0].items() if c not in key and not c.endswith("_std")}
 
 
 
@@ -33,7 +63,7 @@ class Run:
     label: str = ""
     """The row's name in the table ("" = `name`)."""
     paper: dict = dataclasses.field(default_factory=dict)
-    """The paper's numbers for this run, {metric: value} (rates in [0, 1], distances in m)."""
+    """The paper's numbers for this run, {metric: value} (rates in [0, 1], distances in m): a `paper_row`."""
 
     @property
     def title(self) -> str:

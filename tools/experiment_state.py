@@ -116,9 +116,6 @@ class PartState:
     rate: float | None = None
     """Measured env steps per second per seed (median over logged chunks after the first), None with fewer
     than two chunks logged."""
-    startup: float | None = None
-    """Seconds the first logged chunk took beyond its steps at `rate` (compilation, restore); with one chunk
-    logged, that chunk's whole time (an upper bound); None if none logged."""
     wall_seconds: float = 0.0
     """Training wall-clock summed over logged chunks (compilation included)."""
     reason: str = ""
@@ -185,7 +182,7 @@ class RunState:
     @property
     def wall_seconds(self) -> float:
         """Training wall-clock of one process, mean over the done parts with timings (compilation included); 0
-        without any (a part recorded by tools.adopt_run --no-timing)."""
+        without any (a part recorded from an earlier train.py run, its timings left out)."""
         parts = [p for p in self.done_parts if p.wall_seconds > 0]
         return sum(p.wall_seconds for p in parts) / len(parts) if parts else 0.0
 
@@ -205,16 +202,15 @@ def checkpoint_steps(logdir: str) -> list[int]:
     return sorted(int(d) for d in os.listdir(directory) if d.isdigit() and os.path.isdir(os.path.join(directory, d)))
 
 
-def read_timing(logdir: str, seeds: int) -> tuple[float | None, float | None, float]:
-    """(env steps/s per seed, startup seconds, wall-clock seconds) from metrics.csv: one row per logged
-    chunk (the seeds' rows share the speed; rows of no positive, finite speed are skipped); a resumed run's
-    re-logged steps count once. The speed is the median over the chunks after the first (which holds the
-    compilation; the first chunk of each later call, a resume, stays in: with many chunks a call it moves the
-    median little): None with one chunk only, whose time then bounds the start-up. None, None, 0 without
-    chunks."""
+def read_timing(logdir: str, seeds: int) -> tuple[float | None, float]:
+    """(env steps/s per seed, wall-clock seconds) from metrics.csv: one row per logged chunk (the seeds' rows
+    share the speed; rows of no positive, finite speed are skipped); a resumed run's re-logged steps count once.
+    The speed is the median over the chunks after the first (which holds the compilation; the first chunk of each
+    later call, a resume, stays in: with many chunks a call it moves the median little): None with one chunk
+    only. None, 0 without chunks."""
     path = os.path.join(logdir, "metrics.csv")
     if not os.path.isfile(path):
-        return None, None, 0.0
+        return None, 0.0
     chunks: dict[int, tuple[float, float]] = {}
     with open(path, newline="") as f:
         for row in csv.DictReader(f):
@@ -225,21 +221,18 @@ def read_timing(logdir: str, seeds: int) -> tuple[float | None, float | None, fl
             except (KeyError, TypeError, ValueError):
                 continue
     if not chunks:
-        return None, None, 0.0
+        return None, 0.0
     steps = sorted(chunks)
-    wall = sum(w for _, w in chunks.values())
-    if len(steps) == 1:
-        return None, chunks[steps[0]][1], wall
-    rate = statistics.median(chunks[s][0] / seeds for s in steps[1:])
-    return rate, max(0.0, chunks[steps[0]][1] - steps[0] / rate), wall
+    rate = statistics.median(chunks[s][0] / seeds for s in steps[1:]) if len(steps) > 1 else None
+    return rate, sum(w for _, w in chunks.values())
 
 
 def part_state(run: Run, logdir: str, first: int, count: int) -> PartState:
     """The state of seeds `first` .. `first + count - 1` of `run` from the files in `logdir`."""
     budget = run.budget()
     steps = (checkpoint_steps(logdir) or [0])[-1]
-    rate, startup, wall = read_timing(logdir, count)
-    state = PartState(logdir, first, count, "missing", steps, budget, rate, startup, wall)
+    rate, wall = read_timing(logdir, count)
+    state = PartState(logdir, first, count, "missing", steps, budget, rate, wall)
     stored = os.path.join(logdir, "config.json")
     if os.path.isfile(stored):
         reason = config_difference(run.config(logdir, first_seed=first, seeds=count), stored)
@@ -283,11 +276,6 @@ def storage(experiment: Experiment, run: Run, registry: dict | None = None) -> t
                 if other is run or recipe(other) == key:
                     return exp.name, other.name
     return experiment.name, run.name
-
-
-def run_folders(selection: list[tuple[Experiment, list[Run]]]) -> list[str]:
-    """The `<experiment>/<run>` folders (under a runs folder) that train the selected runs (`storage`)."""
-    return sorted({"/".join(storage(exp, run)) for exp, runs in selection for run in runs})
 
 
 def record_folder(record: str, experiment: str, run: str) -> str:

@@ -69,7 +69,7 @@ def merged_evaluation(state: RunState, files: dict[str, str] | None = None) -> d
         merged["seeds"] += keep
         if ev.get("device"):  # eval.json files written before the device was recorded lack it
             merged.setdefault("devices", []).extend([ev["device"]] * keep)  # one per seed
-        if ev.get("source"):  # a part recorded by tools.adopt_run: the evaluation it was made from
+        if ev.get("source"):  # a part recorded from an earlier train.py run: the eval.py file it was made from
             merged.setdefault("sources", []).append(ev["source"]["eval_json"])
         for name, values in ev["per_seed"].items():
             merged["per_seed"].setdefault(name, []).extend(values[:keep])
@@ -135,7 +135,6 @@ def build_default(experiment: Experiment, states: list[RunState], out_dir: str, 
         rows.append(cells)
         table.append(row)
 
-    adopted = []  # runs trained by train.py before their experiment existed (tools.adopt_run)
     for st in states:
         run = st.run
         row = {"run": run.name, "label": run.title, "preset": run.preset, "overrides": run.overrides,
@@ -150,7 +149,6 @@ def build_default(experiment: Experiment, states: list[RunState], out_dir: str, 
         evaluated = merged_evaluation(st) if st.done_parts else None
         if evaluated and evaluated.get("sources"):
             row["sources"] = evaluated["sources"]
-            adopted.append(f"{run.name} from {', '.join(evaluated['sources'])}")
         add(cells, row, run.paper, evaluated, st, run.seeds)
     by_name = {st.run.name: st for st in states}
     for cross in experiment.cross:
@@ -174,14 +172,15 @@ def build_default(experiment: Experiment, states: list[RunState], out_dir: str, 
     budget = ", ".join(f"{st.run.name} {st.run.seeds} x {millions(st.budget)}" for st in states)
     command = f"python -m tools.experiments run {experiment.name}"
     shared = [f"{st.run.name} trains in {st.shared}" for st in states if st.shared]
+    earlier = [f"{r['run']} from {', '.join(r['sources'])}" for r in table if r.get("sources")]
     lines += ["", "Ours: the deterministic policy's evaluation at the end of training (the runs' eval.json; "
               "a cross row: the setting its second column names), mean ± std over seeds; rates in %, "
               "distances in m. Each run's config.json, eval.json and metrics.csv per part (the "
               "seeds trained in one process): `runs/<run>/seeds-<first>-<last>/` beside this table"
               + (f" ({'; '.join(shared)}: the same training config, trained once)" if shared else "") + ".",
               f"Runs (seeds x env steps): {budget}.", f"Command: `{command}`."
-              + (f" Trained by `train.py` before this experiment and recorded with `tools.adopt_run` from the "
-                 f"`eval.py` evaluation of the final checkpoint: {'; '.join(adopted)}." if adopted else ""),
+              + (f" Recorded from an earlier `train.py` run (the `eval.py` evaluation of its final checkpoint): "
+                 f"{'; '.join(earlier)}." if earlier else ""),
               f"Code {code}, built {datetime.date.today().isoformat()}.", ""]
     os.makedirs(out_dir, exist_ok=True)
     written = [os.path.join(out_dir, "table.md"), os.path.join(out_dir, "table.json")]

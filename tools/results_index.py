@@ -6,9 +6,8 @@
 A markdown file holds a generated table between `<!-- table:NAME -->` and `<!-- /table -->`; this tool
 rewrites what lies between them from `TABLES[NAME]` and leaves the rest of the file alone. The files it
 reads are README.md, results/README.md and results/<study>/README.md. Our numbers come only from the JSON
-files that eval.py, tools/paper_tables.py and the benchmarks wrote; the paper's numbers come from the
-`PAPER_*` tables below, each citing the paper's table or section (Schubert et al., "Learning Reach-Avoid
-Task with Reinforcement Learning: Vectorized Simulation and Benchmark").
+files that eval.py, tools/paper_tables.py and the benchmarks wrote; the paper's numbers come from
+assets/paper_numbers.json, each entry citing the paper's table or section.
 """
 
 from __future__ import annotations
@@ -24,84 +23,28 @@ import sys
 from typing import Callable
 
 from tools import experiment_registry  # noqa: F401  (registers the experiments in EXPERIMENTS)
-from tools.experiment_spec import EXPERIMENTS
+from tools.experiment_spec import EXPERIMENTS, paper_row, paper_table
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 # ------------------------------------------------------------------------------------------------
-# The paper's numbers (percentages unless noted). Nothing of ours is typed in here.
+# The paper's numbers (assets/paper_numbers.json; rates in [0, 1]). Nothing of ours is typed in there.
 
-PAPER_ROWS = {
-    # Section "Results", first paragraph (the abstract repeats the PPO ones): (reached, self, obstacle).
-    "ur5e-reach-ppo": (96.1, 2.2, None),
-    "panda-reach-ppo": (98.8, 0.3, None),
-    "ur5e-reach-sac": (61.6, 17.3, None),
-    "panda-reach-sac": (87.9, 2.7, None),
-    "ur5e-reach-sac-limited-init": (84.8, 3.5, None),
-    # Section "Results", subsection "Reach-Avoid Task" (2 cm target, 0.1 m obstacle).
-    "ur5e-reach-avoid-ppo": (86.8, 2.7, 4.8),
-    "panda-reach-avoid-ppo": (95.2, 0.1, 2.5),
-}
-
-PAPER_THROUGHPUT = {"ur5e-reach": 185_000, "ur5e-reach-avoid": 125_000}
-"""Section "Simulation performance": env steps/s of the UR5e envs at 8,192 envs on an RTX 3090 Ti."""
-
-PAPER_BASELINES = {
-    # Table "reaching baselines" (tab:reaching_baselines): (agent, target radius) -> (reached, self collision,
-    # distance mean, distance std), rates in [0, 1], distances in m. The robot is the UR5e.
-    ("random", 0.01): (0.000, 0.300, 0.929, 0.328),
-    ("standstill", 0.01): (0.000, 0.000, 0.855, 0.318),
-    ("pseudo_ik", 0.01): (0.369, 0.222, 0.033, 0.035),
-    ("random", 0.02): (0.001, 0.300, 0.929, 0.328),
-    ("standstill", 0.02): (0.000, 0.000, 0.855, 0.318),
-    ("pseudo_ik", 0.02): (0.510, 0.222, 0.033, 0.035),
-}
-
-PAPER_WORKSPACE = {
-    # Table "workspace generalization" (tab:reaching_workspace_generalization), UR5e, PPO:
-    # (trained, evaluated) -> (reached, std, self collision, std, distance in m), rates in [0, 1].
-    ("pandagym", "pandagym"): (1.000, 0.000, 0.000, 0.000, 0.001),
-    ("front", "front"): (0.993, 0.001, 0.007, 0.001, 0.002),
-    ("upper", "upper"): (0.988, 0.002, 0.010, 0.002, 0.002),
-    ("full", "full"): (0.989, 0.001, 0.010, 0.002, 0.002),
-    ("full-range", "full-range"): (0.959, 0.003, 0.025, 0.003, 0.005),
-    ("pandagym", "front"): (0.139, 0.035, 0.143, 0.066, 0.211),
-    ("pandagym", "full"): (0.040, 0.016, 0.632, 0.069, 0.356),
-    ("front", "full"): (0.645, 0.021, 0.186, 0.019, 0.082),
-    ("upper", "full"): (0.945, 0.012, 0.024, 0.006, 0.007),
-    ("front", "pandagym"): (1.000, 0.000, 0.000, 0.000, 0.001),
-    ("full", "pandagym"): (1.000, 0.000, 0.000, 0.000, 0.002),
-    ("full", "upper"): (0.988, 0.002, 0.011, 0.002, 0.002),
-    ("full", "full-range"): (0.601, 0.023, 0.178, 0.027, 0.161),
-}
+PAPER_ROWS = {r["run"]: r for r in paper_table("reach") + paper_table("reach_avoid")}
+"""The paper's headline rows by name: target_reached, self_collision and (reach-avoid) obstacle_collision."""
+PAPER_BASELINES = {(r["agent"], r["target_radius"]): r for r in paper_table("baselines")}
+PAPER_WORKSPACE = {(r["trained"], r["evaluated"]): r for r in paper_table("workspace")}
+PAPER_OBSTACLE = {(r["trained"], r["evaluated"]): r for r in paper_table("obstacle_size")}
+PAPER_THROUGHPUT = {r["env"]: r["env_steps_per_second"] for r in paper_table("simulation_performance")}
+PAPER_OBSERVATION = {r["task"]: r["parts"] for r in paper_table("observation")}
 WORKSPACE_NAMES = {"pandagym": "PandaGym", "front": "Front", "upper": "Upper", "full": "Full", "full-range": "Full Range"}
 
-PAPER_OBSTACLE = {
-    # Table "obstacle size" (tab:static_obst_size): (trained, evaluated radius in m) -> (reached, std, self
-    # collision, std, obstacle collision, std), rates in [0, 1]; "reach" is a reach agent.
-    ("0.025", 0.025): (0.880, 0.016, 0.037, 0.007, 0.037, 0.002),
-    ("0.05", 0.05): (0.860, 0.014, 0.038, 0.005, 0.040, 0.002),
-    ("0.1", 0.1): (0.826, 0.027, 0.043, 0.005, 0.041, 0.002),
-    ("0.2", 0.2): (0.796, 0.015, 0.047, 0.006, 0.040, 0.007),
-    ("0.3", 0.3): (0.781, 0.017, 0.049, 0.004, 0.042, 0.002),
-    ("0.025", 0.1): (0.844, 0.015, 0.038, 0.008, 0.066, 0.002),
-    ("0.05", 0.1): (0.842, 0.014, 0.040, 0.006, 0.052, 0.002),
-    ("0.2", 0.1): (0.814, 0.017, 0.046, 0.006, 0.037, 0.004),
-    ("0.3", 0.1): (0.803, 0.022, 0.047, 0.004, 0.033, 0.002),
-    ("reach", 0.025): (0.844, 0.007, 0.021, 0.002, 0.125, 0.005),
-    ("reach", 0.05): (0.813, 0.009, 0.020, 0.002, 0.156, 0.006),
-    ("reach", 0.1): (0.758, 0.009, 0.019, 0.001, 0.213, 0.007),
-    ("reach", 0.2): (0.673, 0.006, 0.018, 0.001, 0.301, 0.006),
-    ("reach", 0.3): (0.603, 0.006, 0.016, 0.002, 0.373, 0.006),
-}
 
-PAPER_ACTION_SPACE = "absolute: 0.012 m, 41.5 steps in target, 21.7 exits; relative: 0.005 m, 99.1, 0.05"
-"""Table "action space" (tab:reaching_actionspace_differences): distance, steps in target, times left target."""
-
-PAPER_OBSERVATION = {"reach": ("joint_pos", "ee_pos", "target_pos", "ee_to_target"),
-                     "reach-avoid": ("joint_pos", "ee_pos", "target_pos", "ee_to_target", "obstacle_pos",
-                                     "link_obstacle_dist")}
-"""The paper's observation parts (section "Observation Space"; our names), to name what a run adds."""
+def paper_action_space() -> str:
+    """'absolute: 0.012 m, 41.5 steps in target, 21.7 exits; relative: 0.005 m, 99.1, 0.05' (the precision table)."""
+    a, r = (paper_row("action_space", control=c) for c in ("absolute", "relative"))
+    return (f"absolute: {a['distance']:g} m, {a['steps_in_target']:g} steps in target, {a['times_left_target']:g} exits; "
+            f"relative: {r['distance']:g} m, {r['steps_in_target']:g}, {r['times_left_target']:g}")
 
 
 # ------------------------------------------------------------------------------------------------
@@ -153,7 +96,8 @@ def thousands(rate_per_s: float) -> str:
 
 
 def paper_pct(value: float | None) -> str:
-    return "" if value is None else f"{value:.1f} %"
+    """'96.1 %' from the paper's rate 0.961."""
+    return "" if value is None else f"{100 * value:.1f} %"
 
 
 def has_obstacle(ev: dict) -> bool:
@@ -169,8 +113,9 @@ def collisions(ev: dict) -> str:
 
 
 def paper_collisions(key: str) -> str:
-    _, self_c, obstacle = PAPER_ROWS[key]
-    return ", ".join([f"{self_c:.1f} % self"] + ([f"{obstacle:.1f} % obstacle"] if obstacle is not None else []))
+    row = PAPER_ROWS[key]
+    return ", ".join([f"{paper_pct(row['self_collision'])} self"]
+                     + ([f"{paper_pct(row['obstacle_collision'])} obstacle"] if "obstacle_collision" in row else []))
 
 
 def added_observation(ev: dict) -> str:
@@ -203,7 +148,7 @@ Cell = Callable[[dict, Run, Context], str]
 COLUMNS: dict[str, tuple[str, str, Cell]] = {  # key -> (header, alignment, cell)
     "run": ("run", "---", lambda ev, run, ctx: run.label),
     "preset": ("preset", "---", lambda ev, run, ctx: f"`{run.preset or _train_config(ev).get('preset', '')}`"),
-    "paper_reached": ("paper: reached", "---:", lambda ev, run, ctx: paper_pct(PAPER_ROWS[run.paper][0]) if run.paper else ""),
+    "paper_reached": ("paper: reached", "---:", lambda ev, run, ctx: paper_pct(PAPER_ROWS[run.paper]["target_reached"]) if run.paper else ""),
     "paper_collisions": ("paper: collisions", "---:", lambda ev, run, ctx: paper_collisions(run.paper) if run.paper else ""),
     "reached": ("reached", "---:", lambda ev, run, ctx: pct(ev["summary"]["target_reached"])),
     "self": ("self collision", "---:", lambda ev, run, ctx: pct(ev["summary"]["self_collision"])),
@@ -468,7 +413,7 @@ def _experiment_cell(row: dict, paper_key: str) -> str:
     paper's row counts them)."""
     seeds = row["per_seed"]
     ours = [_seed_rate(seeds["target_reached"]), _seed_rate(seeds["self_collision"]) + " self"]
-    if PAPER_ROWS[paper_key][2] is not None:  # the paper's row counts obstacle collisions
+    if "obstacle_collision" in PAPER_ROWS[paper_key]:  # the paper's row counts obstacle collisions
         ours[1] += ", " + _seed_rate(seeds["obstacle_collision"]) + " obstacle"
     return f"{ours[0]} / {ours[1]} at {row['seeds_evaluated']} seeds x {millions(row['env_steps'])} steps"
 
@@ -477,7 +422,7 @@ def readme_table(ctx: Context) -> list[list[str]]:
     """README.md's short table: the headline rows, the pseudo-IK baseline and the speeds."""
     rows = [["", "paper (RTX 3090 Ti)", "ours"], ["---", "---:", "---:"]]
     for run in HEADLINE:
-        paper = " / ".join([paper_pct(PAPER_ROWS[run.paper][0]), paper_collisions(run.paper)])
+        paper = " / ".join([paper_pct(PAPER_ROWS[run.paper]["target_reached"]), paper_collisions(run.paper)])
         label, experiment, name = README_FROM_EXPERIMENTS.get(run.file, (run.label, "", ""))
         row = _finished_experiment_row(ctx, experiment, name) if experiment else None
         if row is not None:
@@ -492,12 +437,12 @@ def readme_table(ctx: Context) -> list[list[str]]:
         if row is None:
             continue
         rows.append([label + ": reached / collisions",
-                     " / ".join([paper_pct(PAPER_ROWS[paper_key][0]), paper_collisions(paper_key)]),
+                     " / ".join([paper_pct(PAPER_ROWS[paper_key]["target_reached"]), paper_collisions(paper_key)]),
                      _experiment_cell(row, paper_key)])
     b = _baseline_rows(ctx)
     ik = [b[("ur5e", "pseudo_ik", "absolute", r)]["summary"]["target_reached"] for r in (0.01, 0.02)]
     rows.append(["baseline: pseudo-IK, UR5e, absolute control: reached, 1 cm / 2 cm",
-                 " / ".join(f"{100 * PAPER_BASELINES[('pseudo_ik', r)][0]:.1f} %" for r in (0.01, 0.02)),
+                 " / ".join(paper_pct(PAPER_BASELINES[("pseudo_ik", r)]["target_reached"]) for r in (0.01, 0.02)),
                  " / ".join(pct(s) for s in ik)])
     env = {r["env"]: r for r in ctx.json("throughput/env_throughput.json")["rows"] if r["num_envs"] == 8192}
     meta = ctx.json("throughput/env_throughput.json")["meta"]
@@ -528,8 +473,8 @@ def baselines_table(ctx: Context) -> list[list[str]]:
         s = r["summary"]
         paper = PAPER_BASELINES.get((r["agent"], r["target_radius"])) if (r["robot"], r["action"]) == ("ur5e", "absolute") else None
         rows.append([r["robot"], r["agent"], r["action"], f"{r['target_radius']:g} m",
-                     f"{100 * paper[0]:.1f} %" if paper else "", pct(s["target_reached"]),
-                     f"{100 * paper[1]:.1f} %" if paper else "", pct(s["self_collision"]),
+                     paper_pct(paper["target_reached"]) if paper else "", pct(s["target_reached"]),
+                     paper_pct(paper["self_collision"]) if paper else "", pct(s["self_collision"]),
                      f"{s['distance']['mean']:.3f}"])
     return rows
 
@@ -539,8 +484,10 @@ def workspace_table(ctx: Context) -> list[list[str]]:
              "self collision", "paper: distance (m)", "distance (m)"], ["---", "---", "---:", "---:", "---:", "---:", "---:", "---:"]]
     for r in ctx.json("workspaces/workspace_generalization.json")["rows"]:
         s, p = r["summary"], PAPER_WORKSPACE[(r["trained"], r["evaluated"])]
-        rows.append([WORKSPACE_NAMES[r["trained"]], WORKSPACE_NAMES[r["evaluated"]], rate(p[0], p[1]), pct(s["target_reached"]),
-                     rate(p[2], p[3]), pct(s["self_collision"]), f"{p[4]:.3f}", f"{s['distance']['mean']:.3f}"])
+        rows.append([WORKSPACE_NAMES[r["trained"]], WORKSPACE_NAMES[r["evaluated"]],
+                     rate(p["target_reached"], p["target_reached_std"]), pct(s["target_reached"]),
+                     rate(p["self_collision"], p["self_collision_std"]), pct(s["self_collision"]),
+                     f"{p['distance']:.3f}", f"{s['distance']['mean']:.3f}"])
     return rows
 
 
@@ -549,7 +496,8 @@ def obstacle_table(ctx: Context) -> list[list[str]]:
              "obstacle collision"], ["---", "---", "---:", "---:", "---:", "---:"]]
     for r in ctx.json("obstacle_size/obstacle_size.json")["rows"]:
         s, p = r["summary"], PAPER_OBSTACLE[(r["trained"], r["evaluated"])]
-        rows.append([r["trained"], f"{r['evaluated']:g}", f"{100 * p[0]:.1f} / {100 * p[2]:.1f} / {100 * p[4]:.1f} %",
+        paper = " / ".join(f"{100 * p[m]:.1f}" for m in ("target_reached", "self_collision", "obstacle_collision"))
+        rows.append([r["trained"], f"{r['evaluated']:g}", paper + " %",
                      pct(s["target_reached"]), pct(s["self_collision"]), pct(s["obstacle_collision"])])
     return rows
 
@@ -687,33 +635,33 @@ def index_table(ctx: Context) -> list[list[str]]:
         if ev["policy"]["env_steps"] < 0.98 * _train_config(ev)["num_timesteps"]:  # stopped before its schedule's end
             command += f" --stop-after-steps {ev['policy']['env_steps']}"
         paper = PAPER_ROWS[run.paper]
-        rows.append([f"Results: {run.label}", f"{paper_pct(paper[0])} / {paper_collisions(run.paper)}",
+        rows.append([f"Results: {run.label}", f"{paper_pct(paper['target_reached'])} / {paper_collisions(run.paper)}",
                      _eval_cell(ctx, run.file), _json_seeds_gpu(ctx, run.file), f"`{command}`", ctx.link(run.file)])
     for key, run, label in (("panda-reach-sac", "panda", "Results: Panda reach, SAC"),
                             ("ur5e-reach-sac-limited-init", "ur5e-limited", "Results: UR5e reach, SAC, 360° initial range")):
         paper = PAPER_ROWS[key]
-        rows.append([label, f"{paper_pct(paper[0])} / {paper_collisions(key)}", _experiment_ours(ctx, "sac-reach", run=run),
+        rows.append([label, f"{paper_pct(paper['target_reached'])} / {paper_collisions(key)}", _experiment_ours(ctx, "sac-reach", run=run),
                      _experiment_seeds_gpu(ctx, "sac-reach", run), "`python -m tools.experiments run sac-reach`", ""])
     b = _baseline_rows(ctx)
     for radius in (0.01, 0.02):
         s = b[("ur5e", "pseudo_ik", "absolute", radius)]["summary"]
         rows.append([f"Table \"reaching baselines\": pseudo-IK, {radius * 100:g} cm target (UR5e, absolute control)",
-                     f"{100 * PAPER_BASELINES[('pseudo_ik', radius)][0]:.1f} % reached", pct(s["target_reached"]) + " reached",
+                     f"{paper_pct(PAPER_BASELINES[('pseudo_ik', radius)]['target_reached'])} reached", pct(s["target_reached"]) + " reached",
                      _json_seeds_gpu(ctx, "baselines/baselines.json", s), "`python -m tools.paper_tables --tables baselines --num-envs 4096 --seeds 5`",
                      ctx.link("baselines/baselines.json")])
-    rows.append(["Table \"action space\": precision of absolute vs relative control", PAPER_ACTION_SPACE,
+    rows.append(["Table \"action space\": precision of absolute vs relative control", paper_action_space(),
                  _experiment_ours(ctx, "action-space", precision=True), _experiment_seeds_gpu(ctx, "action-space"),
                  "`python -m tools.experiments run action-space`", ""])
     ws = {(r["trained"], r["evaluated"]): r["summary"] for r in ctx.json("workspaces/workspace_generalization.json")["rows"]}
     p = PAPER_WORKSPACE[("full", "full-range")]
     rows.append(["Table \"workspace generalization\" (13 pairs), e.g. Full on Full Range",
-                 f"{100 * p[0]:.1f} % reached", pct(ws[("full", "full-range")]["target_reached"]) + " reached",
+                 f"{paper_pct(p['target_reached'])} reached", pct(ws[("full", "full-range")]["target_reached"]) + " reached",
                  _json_seeds_gpu(ctx, "workspaces/workspace_generalization.json", ws[("full", "full-range")]),
                  "`python -m tools.paper_tables --tables workspace --workspace ...`", ctx.link("workspaces/README.md")])
     ob = {(r["trained"], r["evaluated"]): r["summary"] for r in ctx.json("obstacle_size/obstacle_size.json")["rows"]}
     p = PAPER_OBSTACLE[("reach", 0.3)]
     rows.append(["Table \"obstacle size\" (14 pairs), e.g. a reach agent on a 0.3 m obstacle",
-                 f"{100 * p[0]:.1f} % reached, {100 * p[4]:.1f} % obstacle",
+                 f"{paper_pct(p['target_reached'])} reached, {paper_pct(p['obstacle_collision'])} obstacle",
                  f"{pct(ob[('reach', 0.3)]['target_reached'])} reached, {pct(ob[('reach', 0.3)]['obstacle_collision'])} obstacle",
                  _json_seeds_gpu(ctx, "obstacle_size/obstacle_size.json", ob[("reach", 0.3)]),
                  "`python -m tools.paper_tables --tables obstacle --obstacle ...`", ctx.link("obstacle_size/README.md")])
