@@ -150,3 +150,61 @@ def test_seeds_and_gpus_of_an_experiment_come_from_its_parts(tmp_path):
     assert ri._experiment_seeds_gpu(ctx, "x") == "3/5; NVIDIA H100 80GB HBM3, NVIDIA H200"
     assert ri._experiment_seeds_gpu(ctx, "x", run="b") == "5; NVIDIA H200"
     assert ri._experiment_seeds_gpu(ctx, "not-built") == ""
+
+
+def _named_files(value):
+    """The files that results/index.json names: the values of its keys `file` and `*_file`, at any depth."""
+    if isinstance(value, dict):
+        for key, item in value.items():
+            if key == "file" or key.endswith("_file"):
+                yield item
+            else:
+                yield from _named_files(item)
+    elif isinstance(value, list):
+        for item in value:
+            yield from _named_files(item)
+
+
+def test_every_file_the_index_names_exists():
+    """results/index.json (which file makes which row) names only committed files under results/, its tables are
+    tables that tools/results_index.py writes, and its eval.py tables pick their columns from COLUMNS."""
+    with open(os.path.join(ROOT, "results", "index.json"), encoding="utf-8") as f:
+        index = json.load(f)
+    files = list(_named_files(index))
+    assert len(files) > 100 and "headline/ur5e_reach_ppo_eval.json" in files
+    assert [f for f in files if not os.path.isfile(os.path.join(ROOT, "results", f))] == []
+    assert set(index) - {"about"} <= set(ri.TABLES)
+    for name, table in index.items():
+        if isinstance(table, dict) and "columns" in table:
+            assert set(table["columns"]) <= set(ri.COLUMNS), name
+            assert all(set(row) <= {f.name for f in ri.dataclasses.fields(ri.Run)} for row in table["rows"]), name
+
+
+def test_an_index_row_is_read_from_the_file_it_names():
+    """The results index's row for the UR5e reach PPO headline: every cell of ours computed by hand from the JSON
+    file that results/index.json names for the row, and the committed results/README.md holds that row."""
+    ctx = ri.Context(ROOT)
+    row = next(r for r in ctx.index["headline"]["rows"] if r["label"] == "UR5e reach, PPO, 1 cm target")
+    assert row["file"] == "headline/ur5e_reach_ppo_eval.json" and row["paper"] == "ur5e-reach-ppo"
+    with open(os.path.join(ROOT, "results", row["file"]), encoding="utf-8") as f:
+        data = json.load(f)
+    ev = data["evaluations"][0]
+    reached, self_c = ev["summary"]["target_reached"], ev["summary"]["self_collision"]
+    train_config = ev["policy"]["train_config"]
+    assert ev["env_name"] == "ur5e-reach"  # no obstacle: the collisions cell is self collisions only
+    assert ev["policy"]["env_steps"] >= 0.98 * train_config["num_timesteps"]  # ran its schedule: no --stop-after-steps
+    assert data["device"].startswith("GPU (") and data["device"].endswith(")")
+    paper = ri.PAPER_ROWS[row["paper"]]
+    expected = [
+        "Results: UR5e reach, PPO, 1 cm target",
+        f"{100 * paper['target_reached']:.1f} % / {100 * paper['self_collision']:.1f} % self",
+        f"{100 * reached['mean']:.1f} ± {100 * reached['std_units']:.1f} % / "
+        f"{100 * self_c['mean']:.1f} ± {100 * self_c['std_units']:.1f} % self",
+        f"{reached['units']}; {data['device'][len('GPU ('):-1]}",
+        f"`python train.py {train_config['preset']} --seeds 5`",
+        "[ur5e_reach_ppo_eval.json](headline/ur5e_reach_ppo_eval.json)",
+    ]
+    generated = next(r for r in ri.index_table(ctx) if r[0] == expected[0])
+    assert generated == expected
+    with open(os.path.join(ROOT, "results", "README.md"), encoding="utf-8") as f:
+        assert "\n| " + " | ".join(expected) + " |\n" in f.read()

@@ -170,7 +170,7 @@ def build_default(experiment: Experiment, states: list[RunState], out_dir: str, 
     lines += ["| " + " | ".join(head[i] for i in keep) + " |", "|" + "---|" * len(keep)]
     lines += ["| " + " | ".join(r[i] for i in keep) + " |" for r in rows]
     budget = ", ".join(f"{st.run.name} {st.run.seeds} x {millions(st.budget)}" for st in states)
-    command = f"python -m tools.experiments run {experiment.name}"
+    command = f"python -m tools.experiments launch {experiment.name}"
     shared = [f"{st.run.name} trains in {st.shared}" for st in states if st.shared]
     earlier = [f"{r['run']} from {', '.join(r['sources'])}" for r in table if r.get("sources")]
     lines += ["", "Ours: the deterministic policy's evaluation at the end of training (the runs' eval.json; "

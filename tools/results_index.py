@@ -8,6 +8,14 @@ rewrites what lies between them from `TABLES[NAME]` and leaves the rest of the f
 reads are README.md, results/README.md and results/<study>/README.md. Our numbers come only from the JSON
 files that eval.py, tools/paper_tables.py and the benchmarks wrote; the paper's numbers come from
 assets/paper_numbers.json, each entry citing the paper's table or section.
+
+Which results file makes which row is not listed here but in results/index.json, the results' own index: for
+each table its rows, each with its label, its file (relative to results/) and the table's other fields (the
+paper's row beside it, the experiment and run a row is read from, a figure's command), and for a table of
+eval.py runs its columns (keys of COLUMNS). This module holds only the rendering: the cells, the tables built
+from the rows, and the tables computed from one JSON file (baselines, workspaces, throughput, ...). To add a
+row: write its JSON under results/<study>/, add the row to its table in results/index.json, and run
+`python -m tools.results_index`; tests/test_results_index.py checks that every file the index names exists.
 """
 
 from __future__ import annotations
@@ -26,6 +34,8 @@ from tools import experiment_registry  # noqa: F401  (registers the experiments 
 from tools.experiment_spec import EXPERIMENTS, paper_row, paper_table
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+INDEX = "index.json"
+"""The results' own index, relative to results/: which file makes which row of each table."""
 
 # ------------------------------------------------------------------------------------------------
 # The paper's numbers (assets/paper_numbers.json; rates in [0, 1]). Nothing of ours is typed in there.
@@ -64,6 +74,11 @@ class Context:
             with open(os.path.join(self.results, file), encoding="utf-8") as f:
                 self._cache[file] = json.load(f)
         return self._cache[file]
+
+    @property
+    def index(self) -> dict:
+        """results/index.json: each table's rows (and a table of eval.py runs its columns) by the table's name."""
+        return self.json(INDEX)
 
     def evaluation(self, file: str) -> dict:
         """The first evaluation of an eval.py JSON file."""
@@ -130,10 +145,12 @@ def _train_config(ev: dict) -> dict:
 
 
 # ------------------------------------------------------------------------------------------------
-# Tables of eval.py runs: one row per JSON file, columns picked from COLUMNS.
+# Tables of eval.py runs: one row per JSON file, columns picked from COLUMNS; results/index.json lists each
+# table's columns and rows.
 
 @dataclasses.dataclass(frozen=True)
 class Run:
+    """One row of a table of eval.py runs (a row of that table in results/index.json)."""
     label: str
     """The row's first cell: what this run is."""
     file: str
@@ -185,198 +202,35 @@ class EvalTable:
         return rows
 
 
+def runs(ctx: Context, table: str) -> tuple[Run, ...]:
+    """The rows of `table` in results/index.json (a row's keys are Run's fields; an unknown key is an error)."""
+    return tuple(Run(**row) for row in ctx.index[table]["rows"])
+
+
+def listed_table(name: str) -> Callable[[Context], list[list[str]]]:
+    """The table of eval.py runs `name` of results/index.json: an EvalTable of its columns and its rows."""
+    def table(ctx: Context) -> list[list[str]]:
+        return EvalTable(tuple(ctx.index[name]["columns"]), runs(ctx, name))(ctx)
+    return table
+
+
 def markdown(rows: list[list[str]]) -> str:
     """Header, alignment row and body rows as a markdown table."""
     return "\n".join("| " + " | ".join(r) + " |" if i != 1 else "|" + "|".join(r) + "|" for i, r in enumerate(rows))
 
 
 # ------------------------------------------------------------------------------------------------
-# The studies.
-
-HEADLINE = (
-    Run("UR5e reach, PPO, 1 cm target", "headline/ur5e_reach_ppo_eval.json", "ur5e-reach-ppo"),
-    Run("Panda reach, PPO, 1 cm target", "headline/panda_reach_ppo_eval.json", "panda-reach-ppo"),
-    Run("UR5e reach-avoid, PPO, 2 cm target, 0.1 m obstacle", "headline/ur5e_reach_avoid_ppo_eval.json", "ur5e-reach-avoid-ppo"),
-    Run("Panda reach-avoid, PPO, 2 cm target, 0.1 m obstacle", "headline/panda_reach_avoid_ppo_eval.json", "panda-reach-avoid-ppo"),
-    Run("UR5e reach, SAC", "headline/ur5e_reach_sac_eval.json", "ur5e-reach-sac"),
-    Run("UR5e reach, PPO, plus observations (not in the paper)", "headline/ur5e_reach_ppo_plus_eval.json", "ur5e-reach-ppo"),
-    Run("UR5e reach-avoid, PPO, plus observations (not in the paper)", "headline/ur5e_reach_avoid_ppo_plus_eval.json",
-        "ur5e-reach-avoid-ppo"),
-    Run("Panda reach, PPO, plus observations (not in the paper)", "headline/panda_reach_ppo_plus_eval.json", "panda-reach-ppo",
-        "panda-reach-ppo-plus"),
-    Run("UR5e reach, SAC, plus observations (not in the paper)", "headline/ur5e_reach_sac_plus_eval.json", "ur5e-reach-sac"),
-)
-
-DISCOUNT = EvalTable(("run", "discount", "env_steps", "reached", "self", "obstacle", "file"), (
-    Run("`ur5e-reach-ppo` (no joint-limit penalty)", "discount/ur5e_reach_ppo_gamma0.97_eval.json"),
-    Run("`ur5e-reach-ppo` (no joint-limit penalty)", "joint_limit/ur5e_reach_ppo_no_joint_limit_eval.json"),
-    Run("`ur5e-reach-ppo-plus`", "discount/ur5e_reach_ppo_plus_gamma0.97_eval.json"),
-    Run("`ur5e-reach-ppo-plus`", "headline/ur5e_reach_ppo_plus_eval.json"),
-    Run("`panda-reach-ppo`", "discount/panda_reach_ppo_gamma0.97_eval.json"),
-    Run("`panda-reach-ppo`", "headline/panda_reach_ppo_eval.json"),
-    Run("`ur5e-reach-avoid-ppo` (no joint-limit penalty)", "joint_limit/ur5e_reach_avoid_ppo_no_joint_limit_eval.json"),
-    Run("`ur5e-reach-avoid-ppo` (no joint-limit penalty)", "discount/ur5e_reach_avoid_ppo_gamma0.99_eval.json"),
-    Run("`ur5e-reach-avoid-ppo-plus`", "headline/ur5e_reach_avoid_ppo_plus_eval.json"),
-    Run("`ur5e-reach-avoid-ppo-plus`", "discount/ur5e_reach_avoid_ppo_plus_gamma0.99_eval.json"),
-    Run("`panda-reach-avoid-ppo`", "discount/panda_reach_avoid_ppo_gamma0.97_eval.json"),
-    Run("`panda-reach-avoid-ppo`", "discount/panda_reach_avoid_ppo_gamma0.99_eval.json"),
-    Run("`panda-reach-avoid-ppo`, 2 GPUs", "discount/panda_reach_avoid_ppo_gamma0.97_100m_eval.json"),
-    Run("`panda-reach-avoid-ppo`, 2 GPUs (the headline row)", "headline/panda_reach_avoid_ppo_eval.json"),
-    Run("`panda-reach-avoid-ppo`, 1 GPU", "discount/panda_reach_avoid_ppo_gamma0.98_1gpu_eval.json"),
-    Run("`panda-reach-avoid-ppo`", "discount/panda_reach_avoid_ppo_gamma0.99_100m_eval.json"),
-))
-
-JOINT_LIMIT = EvalTable(("run", "w_joint_limit", "env_steps", "schedule", "reached", "self", "obstacle", "distance", "file"), (
-    Run("`ur5e-reach-ppo`", "joint_limit/ur5e_reach_ppo_no_joint_limit_eval.json"),
-    Run("`ur5e-reach-ppo` (the headline row)", "headline/ur5e_reach_ppo_eval.json"),
-    Run("`ur5e-reach-ppo`", "joint_limit/ur5e_reach_ppo_joint_limit0.2_eval.json"),
-    Run("`ur5e-reach-avoid-ppo`", "joint_limit/ur5e_reach_avoid_ppo_no_joint_limit_eval.json"),
-    Run("`ur5e-reach-avoid-ppo`", "joint_limit/ur5e_reach_avoid_ppo_joint_limit0.1_eval.json"),
-    Run("`ur5e-reach-avoid-ppo`", "joint_limit/ur5e_reach_avoid_ppo_joint_limit0.3_eval.json"),
-    Run("`ur5e-reach-avoid-ppo`, 2 GPUs, stopped", "joint_limit/ur5e_reach_avoid_ppo_joint_limit0.6_151m_eval.json"),
-    Run("`ur5e-reach-avoid-ppo`, 2 GPUs, stopped", "joint_limit/ur5e_reach_avoid_ppo_joint_limit1.0_151m_eval.json"),
-    Run("the same resumed to its schedule's end (the headline row)", "headline/ur5e_reach_avoid_ppo_eval.json"),
-))
-
-OBSERVATIONS = EvalTable(("run", "observation", "discount", "env_steps", "reached", "self", "obstacle", "distance",
-                          "steps_in_target", "file"), (
-    Run("`ur5e-reach-ppo`, action scale 0.3", "observations/ur5e_reach_ppo_75m_eval.json"),
-    Run("`ur5e-reach-ppo`, action scale 0.3", "observations/ur5e_reach_ppo_75m_sincos_eval.json"),
-    Run("`ur5e-reach-ppo`, action scale 0.3", "observations/ur5e_reach_ppo_75m_selfdist_eval.json"),
-    Run("`ur5e-reach-ppo`, action scale 0.3 (= `ur5e-reach-ppo-plus`)", "observations/ur5e_reach_ppo_75m_sincos_selfdist_eval.json"),
-    Run("`ur5e-reach-ppo-plus`", "discount/ur5e_reach_ppo_plus_gamma0.97_eval.json"),
-    Run("`ur5e-reach-ppo-plus`, the 150M run resumed with a 230M schedule", "observations/ur5e_reach_ppo_plus_230m_eval.json"),
-    Run("`ur5e-reach-ppo-plus`, 4x256 networks, stopped", "observations/ur5e_reach_ppo_plus_4x256_101m_eval.json"),
-    Run("`ur5e-reach-ppo-plus`, 4x256 networks", "observations/ur5e_reach_ppo_plus_4x256_eval.json"),
-    Run("`panda-reach-avoid-ppo` with the plus parts (no preset)", "observations/panda_reach_avoid_ppo_plus_eval.json"),
-))
-
-ACTION_SCALE = EvalTable(("run", "action_scale", "env_steps", "schedule", "reached", "self", "obstacle", "distance", "file"), (
-    Run("`ur5e-reach-ppo`, discount 0.97, no joint-limit penalty", "action_scale/ur5e_reach_ppo_scale0.1_eval.json"),
-    Run("`ur5e-reach-ppo`, discount 0.97, no joint-limit penalty", "action_scale/ur5e_reach_ppo_scale0.2_eval.json"),
-    Run("`ur5e-reach-ppo`, discount 0.97, no joint-limit penalty", "discount/ur5e_reach_ppo_gamma0.97_eval.json"),
-    Run("`ur5e-reach-avoid-ppo`, no joint-limit penalty, one run resumed", "action_scale/ur5e_reach_avoid_ppo_62m_eval.json"),
-    Run("", "action_scale/ur5e_reach_avoid_ppo_137m_eval.json"),
-    Run("", "action_scale/ur5e_reach_avoid_ppo_210m_eval.json"),
-    Run("", "action_scale/ur5e_reach_avoid_ppo_scale0.2_eval.json"),
-    Run("`ur5e-reach-avoid-ppo`, no joint-limit penalty, stopped", "action_scale/ur5e_reach_avoid_ppo_scale0.3_121m_eval.json"),
-    Run("the same resumed with a 192M schedule", "joint_limit/ur5e_reach_avoid_ppo_no_joint_limit_eval.json"),
-))
-
-OTHER_LEVERS = EvalTable(("run", "env_steps", "schedule", "reached", "self", "obstacle", "distance", "file"), (
-    Run("`ur5e-reach-ppo`, action scale 0.3, discount 0.97, no joint-limit penalty", "observations/ur5e_reach_ppo_75m_eval.json"),
-    Run("the same with `--env.collision-penalty 10`", "other_levers/ur5e_reach_ppo_75m_collision_penalty10_eval.json"),
-    Run("the same with 4x256 networks", "other_levers/ur5e_reach_ppo_75m_4x256_eval.json"),
-    Run("`ur5e-reach-ppo` (the headline row)", "headline/ur5e_reach_ppo_eval.json"),
-    Run("the same with 4x256 networks", "other_levers/ur5e_reach_ppo_4x256_eval.json"),
-    Run("the same with `--env.collision-penalty 3`", "other_levers/ur5e_reach_ppo_collision_penalty3_eval.json"),
-    Run("the same with a 250M schedule on 4 GPUs, stopped", "other_levers/ur5e_reach_ppo_250m_schedule_184m_eval.json"),
-    Run("`ur5e-reach-avoid-ppo` (the headline row)", "headline/ur5e_reach_avoid_ppo_eval.json"),
-    Run("the same with `--env.collision-penalty 10`", "other_levers/ur5e_reach_avoid_ppo_collision_penalty10_eval.json"),
-    Run("`panda-reach-avoid-ppo` (the headline row)", "headline/panda_reach_avoid_ppo_eval.json"),
-    Run("the same with `--env.w-joint-limit 0.3`", "other_levers/panda_reach_avoid_ppo_joint_limit0.3_eval.json"),
-))
-
-LR_SCHEDULE = EvalTable(("run", "env_steps", "schedule", "reached", "self", "obstacle", "steps_in_target", "times_left",
-                         "file"), (
-    Run("`panda-reach-ppo`, discount 0.97, stopped", "lr_schedule/panda_reach_ppo_49m_eval.json"),
-    Run("`panda-reach-ppo`, discount 0.97, stopped", "lr_schedule/panda_reach_ppo_52m_eval.json"),
-    Run("`panda-reach-ppo`, discount 0.97", "lr_schedule/panda_reach_ppo_40m_eval.json"),
-    Run("`panda-reach-ppo`, discount 0.97", "discount/panda_reach_ppo_gamma0.97_eval.json"),
-    Run("`panda-reach-avoid-ppo`, discount 0.97, stopped", "lr_schedule/panda_reach_avoid_ppo_46m_eval.json"),
-    Run("`panda-reach-avoid-ppo`, discount 0.97", "discount/panda_reach_avoid_ppo_gamma0.97_eval.json"),
-    Run("`panda-reach-avoid-ppo`, discount 0.97, stopped", "lr_schedule/panda_reach_avoid_ppo_66m_eval.json"),
-))
-
-SAC_GRAD_STEPS = EvalTable(("run", "grad_steps", "env_steps", "reached", "self", "file"), (
-    Run("`ur5e-reach-sac`", "sac/ur5e_reach_sac_g1_eval.json"),
-    Run("`ur5e-reach-sac`", "sac/ur5e_reach_sac_8m_eval.json"),
-    Run("`ur5e-reach-sac`, resumed", "sac/ur5e_reach_sac_16m_eval.json"),
-    Run("`ur5e-reach-sac`, resumed again (the headline row)", "headline/ur5e_reach_sac_eval.json"),
-    Run("`ur5e-reach-sac`", "sac/ur5e_reach_sac_g32_4m_eval.json"),
-    Run("`ur5e-reach-sac-plus`", "sac/ur5e_reach_sac_plus_g1_eval.json"),
-    Run("`ur5e-reach-sac-plus`", "sac/ur5e_reach_sac_plus_8m_eval.json"),
-    Run("`ur5e-reach-sac-plus`, resumed (the headline row)", "headline/ur5e_reach_sac_plus_eval.json"),
-))
-
-SAC_ENTROPY = EvalTable(("run", "grad_steps", "env_steps", "actions", "reached", "self", "file"), (
-    Run("`ur5e-reach-sac`, target entropy -3", "sac/ur5e_reach_sac_brax_entropy_8m_eval.json"),
-    Run("", "sac/ur5e_reach_sac_brax_entropy_16m_eval.json"),
-    Run("", "sac/ur5e_reach_sac_brax_entropy_25m_eval.json"),
-    Run("", "sac/ur5e_reach_sac_brax_entropy_25m_stochastic_eval.json"),
-    Run("`ur5e-reach-sac-plus`, target entropy -3", "sac/ur5e_reach_sac_plus_brax_entropy_8m_eval.json"),
-    Run("", "sac/ur5e_reach_sac_plus_brax_entropy_16m_eval.json"),
-    Run("", "sac/ur5e_reach_sac_plus_brax_entropy_25m_eval.json"),
-    Run("", "sac/ur5e_reach_sac_plus_brax_entropy_25m_stochastic_eval.json"),
-    Run("`ur5e-reach-sac-plus`, target entropy -3", "sac/ur5e_reach_sac_plus_brax_entropy_g16_6m_eval.json"),
-    Run("", "sac/ur5e_reach_sac_plus_brax_entropy_g16_12m_eval.json"),
-    Run("", "sac/ur5e_reach_sac_plus_brax_entropy_g16_18m_eval.json"),
-    Run("", "sac/ur5e_reach_sac_plus_brax_entropy_g16_18m_stochastic_eval.json"),
-    Run("`ur5e-reach-sac`, target entropy -3", "sac/ur5e_reach_sac_brax_entropy_g16_6m_stochastic_eval.json"),
-))
-
-SAC_CPU = EvalTable(("run", "env_steps", "episodes", "actions", "reached", "self", "times_left", "file"), (
-    Run("shipped `ur5e-reach-sac-plus` seed, 2-core CPU", "sac/ur5e_reach_sac_plus_cpu_deterministic_eval.json"),
-    Run("the same, sampled actions", "sac/ur5e_reach_sac_plus_cpu_stochastic_eval.json"),
-))
-
-SAMPLED = (  # label, deterministic evaluation, the same policy with sampled actions
-    ("UR5e reach, discount 0.97, no joint-limit penalty", "discount/ur5e_reach_ppo_gamma0.97_eval.json",
-     "sampled_actions/ur5e_reach_ppo_gamma0.97_stochastic_eval.json"),
-    ("UR5e reach, discount 0.99, no joint-limit penalty", "joint_limit/ur5e_reach_ppo_no_joint_limit_eval.json",
-     "sampled_actions/ur5e_reach_ppo_no_joint_limit_stochastic_eval.json"),
-    ("Panda reach, discount 0.97", "discount/panda_reach_ppo_gamma0.97_eval.json",
-     "sampled_actions/panda_reach_ppo_gamma0.97_stochastic_eval.json"),
-    ("Panda reach (headline row)", "headline/panda_reach_ppo_eval.json", "sampled_actions/panda_reach_ppo_stochastic_eval.json"),
-    ("UR5e reach-avoid, no joint-limit penalty", "joint_limit/ur5e_reach_avoid_ppo_no_joint_limit_eval.json",
-     "sampled_actions/ur5e_reach_avoid_ppo_no_joint_limit_stochastic_eval.json"),
-    ("UR5e reach-avoid (headline row)", "headline/ur5e_reach_avoid_ppo_eval.json",
-     "sampled_actions/ur5e_reach_avoid_ppo_stochastic_eval.json"),
-    ("Panda reach-avoid, discount 0.97, 58M", "discount/panda_reach_avoid_ppo_gamma0.97_eval.json",
-     "sampled_actions/panda_reach_avoid_ppo_gamma0.97_stochastic_eval.json"),
-    ("UR5e reach, SAC (headline row)", "headline/ur5e_reach_sac_eval.json", "sampled_actions/ur5e_reach_sac_stochastic_eval.json"),
-    ("UR5e reach plus, discount 0.97", "discount/ur5e_reach_ppo_plus_gamma0.97_eval.json",
-     "sampled_actions/ur5e_reach_ppo_plus_gamma0.97_stochastic_eval.json"),
-    ("UR5e reach plus (headline row)", "headline/ur5e_reach_ppo_plus_eval.json",
-     "sampled_actions/ur5e_reach_ppo_plus_stochastic_eval.json"),
-    ("UR5e reach-avoid plus (headline row)", "headline/ur5e_reach_avoid_ppo_plus_eval.json",
-     "sampled_actions/ur5e_reach_avoid_ppo_plus_stochastic_eval.json"),
-    ("Panda reach plus (headline row)", "headline/panda_reach_ppo_plus_eval.json",
-     "sampled_actions/panda_reach_ppo_plus_stochastic_eval.json"),
-    ("UR5e reach, SAC, plus (headline row)", "headline/ur5e_reach_sac_plus_eval.json",
-     "sampled_actions/ur5e_reach_sac_plus_stochastic_eval.json"),
-)
-
+# The studies: the rows of the tables below are listed in results/index.json.
 
 def sampled_table(ctx: Context) -> list[list[str]]:
     rows = [["policy", "deterministic: reached", "sampled: reached", "deterministic: collisions", "sampled: collisions",
              "files"], ["---", "---:", "---:", "---:", "---:", "---"]]
-    for label, det, sto in SAMPLED:
+    for row in ctx.index["sampled_actions"]["rows"]:  # a deterministic evaluation, the same policy with sampled actions
+        label, det, sto = row["label"], row["file"], row["sampled_file"]
         d, s = ctx.evaluation(det), ctx.evaluation(sto)
         rows.append([label, pct(d["summary"]["target_reached"]), pct(s["summary"]["target_reached"]), collisions(d),
                      collisions(s), f"{ctx.link(det)}, {ctx.link(sto)}"])
     return rows
-
-
-EXPERIMENT_HEADLINE = (  # the paper's other SAC rows; fast SAC with the plus observation: per task its best run
-    ("Panda reach, SAC, the paper's settings", "sac-reach", "panda", "panda-reach-sac"),
-    ("UR5e reach, SAC, the paper's settings, 360° initial range", "sac-reach", "ur5e-limited",
-     "ur5e-reach-sac-limited-init"),
-    ("UR5e reach, fast SAC, 4,096 envs (not in the paper; beside the paper's SAC)", "sac-fast", "ur5e-reach",
-     "ur5e-reach-sac"),
-    ("Panda reach, fast SAC, 4,096 envs (not in the paper; beside the paper's SAC)", "sac-fast",
-     "panda-reach-plus-200m", "panda-reach-sac"),
-    ("UR5e reach-avoid, fast SAC, 4,096 envs (not in the paper; beside the paper's PPO)", "sac-fast",
-     "ur5e-reach-avoid-plus", "ur5e-reach-avoid-ppo"),
-    ("Panda reach-avoid, fast SAC, 4,096 envs (not in the paper; beside the paper's PPO)", "sac-fast",
-     "panda-reach-avoid-plus-200m", "panda-reach-avoid-ppo"),
-)
-"""README rows taken from a registered experiment's table.json: (label, experiment, run, PAPER_ROWS key of the
-paper's row beside it); a row appears once every seed of its run is evaluated."""
-
-
-SAC_FAST_THROUGHPUT = "sac/fast/train_throughput_sac_fast_bf16_h200.json"
-"""benchmarks/train_throughput.py's measurement of the fast SAC preset (its `1dev` row) for the README."""
 
 
 def _finished_experiment_row(ctx: Context, experiment: str, run: str) -> dict | None:
@@ -395,19 +249,6 @@ def _seed_rate(values: list[float]) -> str:
     return rate(statistics.mean(values), statistics.pstdev(values))
 
 
-def headline_table(ctx: Context) -> list[list[str]]:
-    return EvalTable(("run", "paper_reached", "paper_collisions", "reached", "collisions", "env_steps", "preset", "file"),
-                     HEADLINE)(ctx)
-
-
-README_FROM_EXPERIMENTS = {
-    "headline/ur5e_reach_sac_eval.json": ("UR5e reach, SAC, the paper's settings, full initial range, the preset's budget",
-                                          "sac-workspaces", "full-range"),
-}
-"""Headline rows the README shows from a registered experiment's run of the same config trained further: {the
-headline file: (label, experiment, run)}; the headline file's row stands until every seed of that run is evaluated."""
-
-
 def _experiment_cell(row: dict, paper_key: str) -> str:
     """'96.5 ± 0.3 % / 0.6 ± 0.1 % self at 5 seeds x 100.0M steps' from a table.json row (collisions as the
     paper's row counts them)."""
@@ -419,11 +260,16 @@ def _experiment_cell(row: dict, paper_key: str) -> str:
 
 
 def readme_table(ctx: Context) -> list[list[str]]:
-    """README.md's short table: the headline rows, the pseudo-IK baseline and the speeds."""
+    """README.md's short table: the headline rows, the pseudo-IK baseline and the speeds. A headline row that
+    results/index.json's `readme.from_experiments` names shows its registered experiment's run of the same config
+    trained further, once every seed of that run is evaluated; the rows of `readme.experiment_rows` follow the
+    headline rows, each once every seed of its run is evaluated."""
+    readme = ctx.index["readme"]
+    from_experiments = {r["file"]: (r["label"], r["experiment"], r["run"]) for r in readme["from_experiments"]}
     rows = [["", "paper (RTX 3090 Ti)", "ours"], ["---", "---:", "---:"]]
-    for run in HEADLINE:
+    for run in runs(ctx, "headline"):
         paper = " / ".join([paper_pct(PAPER_ROWS[run.paper]["target_reached"]), paper_collisions(run.paper)])
-        label, experiment, name = README_FROM_EXPERIMENTS.get(run.file, (run.label, "", ""))
+        label, experiment, name = from_experiments.get(run.file, (run.label, "", ""))
         row = _finished_experiment_row(ctx, experiment, name) if experiment else None
         if row is not None:
             rows.append([label + ": reached / collisions", paper, _experiment_cell(row, run.paper)])
@@ -432,8 +278,9 @@ def readme_table(ctx: Context) -> list[list[str]]:
         rows.append([run.label + ": reached / collisions", paper,
                      f"{pct(ev['summary']['target_reached'])} / {collisions(ev)} at "
                      f"{ev['summary']['target_reached']['units']} seeds x {millions(ev['policy']['env_steps'])} steps"])
-    for label, experiment, run, paper_key in EXPERIMENT_HEADLINE:
-        row = _finished_experiment_row(ctx, experiment, run)
+    for listed in readme["experiment_rows"]:
+        label, paper_key = listed["label"], listed["paper"]
+        row = _finished_experiment_row(ctx, listed["experiment"], listed["run"])
         if row is None:
             continue
         rows.append([label + ": reached / collisions",
@@ -454,7 +301,7 @@ def readme_table(ctx: Context) -> list[list[str]]:
     rows.append([f"UR5e reach PPO training env steps/s, 1 seed, 8,192 envs per GPU ({train['meta']['date']})", "",
                  f"{thousands(one['train_steps_per_s'])} on 1 GPU"
                  + "".join(f", {thousands(r['train_steps_per_s'])} on {r['devices']}" for r in train["rows"] if r["devices"] > 1)])
-    sac = ctx.json(SAC_FAST_THROUGHPUT)
+    sac = ctx.json(readme["sac_fast_throughput_file"])  # benchmarks/train_throughput.py on the fast SAC preset
     row = next(r for r in sac["rows"] if r["setting"] == "1dev")
     rows.append([f"UR5e reach fast SAC training env steps/s, 1 seed, {row['num_envs']:,} envs ({sac['meta']['date']})", "",
                  f"{thousands(row['train_steps_per_s'])} on 1 GPU"])
@@ -551,29 +398,11 @@ def brax_table(ctx: Context) -> list[list[str]]:
     return rows
 
 
-FAILURES = (  # label, file
-    ("UR5e reach, discount 0.97, action scale 0.2", "failures/failures_ur5e_reach_ppo_scale0.2.json"),
-    ("UR5e reach, discount 0.97", "failures/failures_ur5e_reach_ppo_gamma0.97.json"),
-    ("UR5e reach, discount 0.99, no joint-limit penalty", "failures/failures_ur5e_reach_ppo_no_joint_limit.json"),
-    ("UR5e reach (shipped)", "failures/failures_ur5e_reach_ppo.json"),
-    ("UR5e reach plus, discount 0.97", "failures/failures_ur5e_reach_ppo_plus_gamma0.97.json"),
-    ("UR5e reach plus (shipped)", "failures/failures_ur5e_reach_ppo_plus.json"),
-    ("UR5e reach-avoid, no joint-limit penalty", "failures/failures_ur5e_reach_avoid_ppo_no_joint_limit.json"),
-    ("UR5e reach-avoid, joint-limit penalty 1.0, seed 0 at 150.7M", "failures/failures_ur5e_reach_avoid_ppo_151m.json"),
-    ("UR5e reach-avoid (shipped)", "failures/failures_ur5e_reach_avoid_ppo.json"),
-    ("Panda reach, fast SAC, plus observation, seed 3", "failures/failures_panda_reach_sac_fast_plus_seed3.json"),
-    ("Panda reach, fast SAC, plus observation, seed 4", "failures/failures_panda_reach_sac_fast_plus_seed4.json"),
-    ("Panda reach-avoid, fast SAC, plus observation, seed 3",
-     "failures/failures_panda_reach_avoid_sac_fast_plus_seed3.json"),
-    ("UR5e reach-avoid, fast SAC, plus observation, seed 1",
-     "failures/failures_ur5e_reach_avoid_sac_fast_plus_seed1.json"),
-)
-
-
 def failures_table(ctx: Context) -> list[list[str]]:
     rows = [["policy", "episodes", "reached", "self collision", "obstacle collision", "missed", "file"],
             ["---", "---:", "---:", "---:", "---:", "---:", "---"]]
-    for label, file in FAILURES:
+    for listed in ctx.index["failures"]["rows"]:
+        label, file = listed["label"], listed["file"]
         s = ctx.json(file)["summary"]
         o = s["outcomes"]
         cell = lambda k: f"{100 * o[k]:.1f} %" if k in o else ""  # noqa: E731
@@ -629,7 +458,7 @@ def _eval_cell(ctx: Context, file: str) -> str:
 def index_table(ctx: Context) -> list[list[str]]:
     rows = [["paper", "paper's number", "ours", "seeds; GPU", "command", "file"],
             ["---", "---:", "---:", "---", "---", "---"]]
-    for run in HEADLINE:
+    for run in runs(ctx, "headline"):
         ev = ctx.evaluation(run.file)
         command = f"python train.py {run.preset or _train_config(ev)['preset']} --seeds 5"
         if ev["policy"]["env_steps"] < 0.98 * _train_config(ev)["num_timesteps"]:  # stopped before its schedule's end
@@ -637,11 +466,13 @@ def index_table(ctx: Context) -> list[list[str]]:
         paper = PAPER_ROWS[run.paper]
         rows.append([f"Results: {run.label}", f"{paper_pct(paper['target_reached'])} / {paper_collisions(run.paper)}",
                      _eval_cell(ctx, run.file), _json_seeds_gpu(ctx, run.file), f"`{command}`", ctx.link(run.file)])
-    for key, run, label in (("panda-reach-sac", "panda", "Results: Panda reach, SAC"),
-                            ("ur5e-reach-sac-limited-init", "ur5e-limited", "Results: UR5e reach, SAC, 360° initial range")):
+    listed = ctx.index["index"]
+    for row in listed["experiment_rows"]:  # a paper row that one run of a registered experiment answers
+        key, name, run = row["paper"], row["experiment"], row["run"]
         paper = PAPER_ROWS[key]
-        rows.append([label, f"{paper_pct(paper['target_reached'])} / {paper_collisions(key)}", _experiment_ours(ctx, "sac-reach", run=run),
-                     _experiment_seeds_gpu(ctx, "sac-reach", run), "`python -m tools.experiments run sac-reach`", ""])
+        rows.append([row["label"], f"{paper_pct(paper['target_reached'])} / {paper_collisions(key)}",
+                     _experiment_ours(ctx, name, run=run), _experiment_seeds_gpu(ctx, name, run),
+                     f"`python -m tools.experiments launch {name}`", ""])
     b = _baseline_rows(ctx)
     for radius in (0.01, 0.02):
         s = b[("ur5e", "pseudo_ik", "absolute", radius)]["summary"]
@@ -651,7 +482,7 @@ def index_table(ctx: Context) -> list[list[str]]:
                      ctx.link("baselines/baselines.json")])
     rows.append(["Table \"action space\": precision of absolute vs relative control", paper_action_space(),
                  _experiment_ours(ctx, "action-space", precision=True), _experiment_seeds_gpu(ctx, "action-space"),
-                 "`python -m tools.experiments run action-space`", ""])
+                 "`python -m tools.experiments launch action-space`", ""])
     ws = {(r["trained"], r["evaluated"]): r["summary"] for r in ctx.json("workspaces/workspace_generalization.json")["rows"]}
     p = PAPER_WORKSPACE[("full", "full-range")]
     rows.append(["Table \"workspace generalization\" (13 pairs), e.g. Full on Full Range",
@@ -671,27 +502,15 @@ def index_table(ctx: Context) -> list[list[str]]:
                      thousands(env[name]["steps_per_s"]), ctx.json("throughput/env_throughput.json")["meta"]["device"],
                      "`python -m benchmarks.env_throughput --sizes 8192`",
                      ctx.link("throughput/env_throughput.json")])
-    figures = (
-        ("Figure 1: a sampled initial state of the reach-avoid task", "figures/initial_state_reach_avoid.png",
-         "`python -m tools.plots env --out results/figures`"),
-        ("Figures: target distribution and the four workspaces", "figures/targets_ur5e.png",
-         "`python -m tools.plots env --out results/figures`"),
-        ("Figure: UR5e PPO training curves by workspace", "figures/curves_ur5e_workspaces.png",
-         "`python -m tools.plots curves RUN ... --out FILE`"),
-        ("Figure: reach-avoid training curves by obstacle size (UR5e)", "experiments/obstacle-size-ur5e/curves.png",
-         "`python -m tools.experiments run obstacle-size-ur5e`"),
-        ("Figure: reach-avoid training curves by obstacle size (Panda)", "figures/curves_panda_obstacle_sizes.png",
-         "`python -m tools.plots curves RUN ... --out FILE`"),
-    )
-    for label, file, command in figures:
+    for figure in listed["figures"]:  # a figure file and the command that draws it
+        label, file, command = figure["label"], figure["file"], f"`{figure['command']}`"
         experiment = re.fullmatch(r"experiments/([\w.-]+)/curves.png", file)
         rows.append([label, "(figure)", "(figure)", _experiment_seeds_gpu(ctx, experiment.group(1)) if experiment else "",
                      command, ctx.link(file)])
-    for label, name in (("Figure: reward formulations", "reward"), ("Figure: network sizes (absolute control)", "network-size"),
-                        ("Figure: UR5e SAC training curves by workspace", "sac-workspaces"),
-                        ("Figure: reach-avoid observation spaces", "reach-avoid-observation")):
+    for figure in listed["experiment_figures"]:  # a figure that a registered experiment draws
+        label, name = figure["label"], figure["experiment"]
         rows.append([label, "(figure)", _experiment_ours(ctx, name), _experiment_seeds_gpu(ctx, name),
-                     f"`python -m tools.experiments run {name}`", ""])
+                     f"`python -m tools.experiments launch {name}`", ""])
     return rows
 
 
@@ -735,7 +554,7 @@ def experiments_table(ctx: Context) -> list[list[str]]:
         steps = sum(r.seeds * r.budget() for r in exp.runs)
         rows.append([f"`{name}`", exp.paper_ref, exp.paper,
                      f"{len(exp.runs)} x {'/'.join(map(str, seeds))}, {steps / 1e9:.2f}B",
-                     _experiment_ours(ctx, name), _experiment_seeds_gpu(ctx, name), f"`python -m tools.experiments run {name}`"])
+                     _experiment_ours(ctx, name), _experiment_seeds_gpu(ctx, name), f"`python -m tools.experiments launch {name}`"])
     return rows
 
 
@@ -745,17 +564,17 @@ TABLES: dict[str, Callable[[Context], list[list[str]]]] = {
     "index": index_table,
     "experiments": experiments_table,
     "readme": readme_table,
-    "headline": headline_table,
+    "headline": listed_table("headline"),
     "baselines": baselines_table,
-    "discount": DISCOUNT,
-    "joint_limit": JOINT_LIMIT,
-    "observations": OBSERVATIONS,
-    "action_scale": ACTION_SCALE,
-    "other_levers": OTHER_LEVERS,
-    "lr_schedule": LR_SCHEDULE,
-    "sac_grad_steps": SAC_GRAD_STEPS,
-    "sac_entropy": SAC_ENTROPY,
-    "sac_cpu": SAC_CPU,
+    "discount": listed_table("discount"),
+    "joint_limit": listed_table("joint_limit"),
+    "observations": listed_table("observations"),
+    "action_scale": listed_table("action_scale"),
+    "other_levers": listed_table("other_levers"),
+    "lr_schedule": listed_table("lr_schedule"),
+    "sac_grad_steps": listed_table("sac_grad_steps"),
+    "sac_entropy": listed_table("sac_entropy"),
+    "sac_cpu": listed_table("sac_cpu"),
     "sampled_actions": sampled_table,
     "workspaces": workspace_table,
     "obstacle_size": obstacle_table,
