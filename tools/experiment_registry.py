@@ -342,7 +342,7 @@ register(Experiment(
          "presets' policies."))
 
 register(Experiment(
-    "point-mass-demo", "Point mass, PPO: the experiment machinery end to end in about two minutes on a CPU",
+    "point-mass-demo", "Point mass, PPO: launch, requeue and build in two minutes on a CPU",
     "not in the paper (a demo of launch, requeue and build)",
     (Run("ppo", "point-mass-ppo", {"eval_envs": 64, "tensorboard": False}, seeds=1, num_timesteps=4_000_000),),
     metrics=("target_reached", "distance", "wall_clock"), curves=("episode/target_reached",),
