@@ -1,23 +1,17 @@
-"""tools/experiments.py and tools/experiment_registry.py: every registered run builds a valid config (and its
-train.py command parses back to it), the state listing and command list on a hand-made runs folder, the
-time-limit plan, and a two-run toy experiment on the point mass that trains, resumes after an interruption and
-builds its table."""
+"""The experiment tools (registry, state, tables, the in-process runner and the CLI): every registered run builds a
+valid config (and its train.py command parses back to it), the state listing and command list on a hand-made runs
+folder, part locks, and a two-run toy experiment on the point mass that trains, resumes after an interruption and
+builds its table. Launching through submitit: tests/test_experiment_launch.py."""
 
 import contextlib
 import dataclasses
 import importlib.util
 import json
 import os
-import re
-import signal
 import shutil
 import subprocess
 import sys
-import tarfile
-import time
-import types
 
-import jax
 import pytest
 
 import train

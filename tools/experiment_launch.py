@@ -27,9 +27,8 @@ import submitit
 
 from agents import driver, provenance
 from agents.checkpoint import write_atomic
-from tools.experiment_spec import EXPERIMENTS
 from tools.experiment_state import (
-    PartState, cross_evaluate, folder_crosses, parse_part, part_state, pending_parts, planners, run_state, select,
+    cross_evaluate, folder_crosses, parse_part, part_state, pending_parts, planners, run_state, select,
 )
 from tools.experiment_tables import record_parts
 
