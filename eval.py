@@ -202,9 +202,7 @@ def main(argv: list[str] | None = None) -> list:
     print(evaluation.markdown(results))
     print(f"\n{env_name}, overrides {overrides or 'none'}; eval seeds {eval_seeds}; device {provenance.device_description()}")
     report = {
-        "command": command,
-        "device": provenance.device_description(),
-        "code": provenance.code_version(),
+        **provenance.stamp(command),  # command, code, device, date
         "env_name": env_name,
         "env_overrides": {k: (list(v) if isinstance(v, tuple) else v) for k, v in overrides.items()},
         "num_envs": args.num_envs,

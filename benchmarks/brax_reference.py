@@ -36,7 +36,7 @@ import jax
 import jax.numpy as jnp
 
 import envs
-from agents import driver, presets, registry
+from agents import driver, presets, provenance, registry
 from agents.loop import make_evaluate
 from benchmarks.train_throughput import trace_chunk
 
@@ -235,8 +235,9 @@ def main(argv=None):
     device = jax.devices()[0]
     command = " ".join(["python", "-m", "benchmarks.brax_reference"] + (sys.argv[1:] if argv is None else list(argv)))
     report = {"meta": {"device": device.device_kind, "jax": jax.__version__, "date": datetime.date.today().isoformat(),
-                       "command": command, "preset": args.preset, "env_name": config.env_name,
-                       "num_timesteps": total, "eval_envs": args.eval_envs, "algo": dataclasses.asdict(config.algo)},
+                       "command": command, "code": provenance.code_version(), "preset": args.preset,
+                       "env_name": config.env_name, "num_timesteps": total, "eval_envs": args.eval_envs,
+                       "algo": dataclasses.asdict(config.algo)},
               "ours": {"evals": []}, "brax": {"evals": []}}
 
     def save():

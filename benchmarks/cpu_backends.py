@@ -30,6 +30,7 @@ import time
 import jax
 import mujoco
 
+from agents import provenance
 from benchmarks.env_throughput import env_rollout
 from envs import native
 
@@ -188,8 +189,10 @@ def main(argv=None):
         "machine": f"{cpu_name()}, {native.num_threads()} cores usable, {platform.system()}",
         "jax": jax.__version__, "mujoco": mujoco.__version__, "python": platform.python_version(),
         "jax_device": jax.devices()[0].platform,
+        "device": provenance.device_description(),
         "date": datetime.date.today().isoformat(),
         "command": "python -m benchmarks.cpu_backends " + " ".join(shlex.quote(a) for a in (argv or sys.argv[1:])),
+        "code": provenance.code_version(),
         "rates": [], "eval": [], "bridge": [],
     }
     for name in args.envs:

@@ -37,6 +37,7 @@ import mujoco
 from mujoco import mjx
 
 import envs
+from agents import provenance
 from agents.presets import MOVING_OBSTACLES_3
 from envs.fast_mjx import fast_mjx
 from envs.robots import ROBOTS
@@ -143,6 +144,7 @@ def main():
         "jax": jax.__version__, "mujoco": mujoco.__version__, "python": platform.python_version(),
         "date": datetime.date.today().isoformat(),
         "command": " ".join(["python", "-m", "benchmarks.env_throughput"] + sys.argv[1:]),
+        "code": provenance.code_version(),
         "substeps": args.substeps, "steps_per_call": args.steps, "repeats": args.repeats,
         "variants": {v: VARIANTS[v] for v in args.variants},
     }

@@ -266,7 +266,12 @@ def main():
     host = host_summary(events, names)
     print(format_summary(summary, host))
     if args.json:
-        Path(args.json).write_text(json.dumps({"devices": summary, "host": host}, indent=2))
+        from agents import provenance  # jax: imported only for the record
+
+        meta = provenance.stamp()
+        meta["device"] = (f"{', '.join(summary)} of the trace (it does not name the model); summarised on "
+                          f"{meta['device']}")
+        Path(args.json).write_text(json.dumps({"meta": meta, "devices": summary, "host": host}, indent=2))
 
 
 if __name__ == "__main__":

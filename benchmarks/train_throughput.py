@@ -41,7 +41,7 @@ from pathlib import Path
 import jax
 import jax.numpy as jnp
 
-from agents import config as config_lib, driver, presets
+from agents import config as config_lib, driver, presets, provenance
 from agents.loop import MULTI_DEVICE_MODES
 from benchmarks.env_throughput import env_rollout, time_calls
 
@@ -215,6 +215,7 @@ def write_report(out: Path, args, base, settings: dict, runs: dict, rates: dict,
     meta = {"device": device.device_kind, "local_devices": jax.local_device_count(), "jax": jax.__version__,
             "date": datetime.date.today().isoformat(),
             "command": " ".join(["python", "-m", "benchmarks.train_throughput"] + sys.argv[1:]),
+            "code": provenance.code_version(),
             "preset": args.preset, "updates": args.updates, "rounds": rounds, "rounds_asked": args.rounds,
             "env_steps": args.env_steps, "algo": dataclasses.asdict(base.algo), "env_name": base.env_name,
             "env": dataclasses.asdict(base.env), "matmul_precision": base.matmul_precision,

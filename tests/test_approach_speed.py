@@ -1,10 +1,30 @@
 """tools/approach_speed: the relative-control speed cap against a plain C MuJoCo loop over the same model."""
 
+import datetime
+import json
+import shlex
+
 import mujoco
 import numpy as np
 
 import envs
+from agents import provenance
 from tools import approach_speed
+
+
+def test_the_json_names_what_made_it(tmp_path, monkeypatch):
+    """--json carries the command, code, device and date (agents/provenance.py); the measurement is stubbed."""
+    monkeypatch.delenv(provenance.COMMAND_VARIABLE, raising=False)
+    monkeypatch.setattr(approach_speed, "servo_cap", lambda env: {"moving_step": [0.01] * 6,
+                                                                   "moving_step_fraction_of_scale": [0.1] * 6})
+    out = tmp_path / "speed.json"
+    approach_speed.main(["--env", "ur5e-reach", "--json", str(out)])
+    data = json.loads(out.read_text())
+    assert data["command"] == shlex.join(["python", "-m", "tools.approach_speed", "--env", "ur5e-reach",
+                                          "--json", str(out)])
+    assert data["code"] == provenance.code_version()
+    assert data["device"] == provenance.device_description()
+    assert data["date"] == datetime.date.today().isoformat()
 
 
 def test_full_step_moves_match_a_plain_mujoco_loop():

@@ -8,8 +8,10 @@ in-process tests with the persistent compilation cache (`.jax_cache/`, see conft
 """
 
 import dataclasses
+import datetime
 import json
 import os
+import shlex
 import shutil
 import subprocess
 import sys
@@ -345,6 +347,7 @@ def test_cli_baseline_json_csv(baseline_runs):
     ev = report["evaluations"][0]
     assert report["env_name"] == "ur5e-reach" and report["num_envs"] == 16 and report["eval_seeds"] == [1_000_000]
     assert report["command"].startswith("python eval.py --env ur5e-reach --num-envs 16")
+    assert report["date"] == datetime.date.today().isoformat()  # with command, code, device: agents/provenance.py
     assert ev["policy"] == {"kind": "baseline", "name": "standstill"}
     assert ev["env_config"]["action"] == "absolute" and ev["env_config"]["episode_length"] == 100
     assert ev["env_config"]["substeps"] == 20  # untouched fields: the env's defaults
@@ -906,6 +909,27 @@ def test_failure_report_bins_outcomes_by_target_height():
     text = failure_report.markdown({"episodes": 7, "outcomes": {}, "ending_at_a_joint_limit": {},
                                     "by_target_height": bins}, "t")
     assert "| 0-10 cm | 2 | 50.0 % | 50.0 % | 0.0 % |" in text
+
+
+def test_failure_report_json_names_what_made_it(tmp_path, monkeypatch):
+    """--json carries the command, code, device and date (agents/provenance.py); the rollout and its reading are
+    stubbed: only the shipped policy's export is loaded."""
+    from agents import provenance
+    from tools import failure_report
+
+    monkeypatch.delenv(provenance.COMMAND_VARIABLE, raising=False)
+    monkeypatch.setattr(evaluation, "rollout", lambda *a, **k: None)
+    monkeypatch.setattr(failure_report, "classify", lambda *a, **k: [])
+    monkeypatch.setattr(failure_report, "summarize", lambda rows, near_limit=None: {"episodes": 0})
+    monkeypatch.setattr(failure_report, "markdown", lambda summary, title: "")
+    out, checkpoint = tmp_path / "report.json", os.path.join(ROOT, "results", "checkpoints", "ur5e-reach-ppo")
+    failure_report.main(["--checkpoint", checkpoint, "--num-envs", "1", "--json", str(out)])
+    report = json.loads(out.read_text())
+    assert report["command"] == shlex.join(["python", "-m", "tools.failure_report", "--checkpoint", checkpoint,
+                                            "--num-envs", "1", "--json", str(out)])
+    assert report["code"] == provenance.code_version()
+    assert report["device"] == provenance.device_description()
+    assert report["date"] == datetime.date.today().isoformat()
 
 
 def test_a_part_observed_at_one_value_in_training_is_refused_where_it_changes():

@@ -1,7 +1,10 @@
 """benchmarks.trace_summary on a hand-made trace whose totals are known."""
 
+import datetime
 import gzip
 import json
+import shlex
+import sys
 
 from benchmarks import trace_summary as ts
 
@@ -54,6 +57,23 @@ def test_summary_of_a_known_trace(tmp_path):
     assert host == [{"name": "cuGraphLaunch", "us": 30.0, "count": 10}]  # python frames and one-offs left out
     text = ts.format_summary(summary, host)
     assert "kernels busy 0.0 ms (52%)" in text and "| env_step | 0.0 | 3 |" in text
+
+
+def test_the_json_names_what_made_it(tmp_path, monkeypatch):
+    """--json: the summary with the command, code, device (the trace's, which names no model) and date."""
+    from agents import provenance
+
+    _trace(tmp_path)
+    monkeypatch.delenv(provenance.COMMAND_VARIABLE, raising=False)
+    out = tmp_path / "summary.json"
+    monkeypatch.setattr(sys, "argv", [ts.__file__, str(tmp_path), "--json", str(out)])
+    ts.main()
+    meta = json.loads(out.read_text())["meta"]
+    assert meta["command"] == shlex.join(["python", "-m", "benchmarks.trace_summary", str(tmp_path),
+                                          "--json", str(out)])
+    assert meta["code"] == provenance.code_version()
+    assert meta["device"].startswith("/device:GPU:0 of the trace")
+    assert meta["date"] == datetime.date.today().isoformat()
 
 
 def test_per_scope_detail_names_where_kernels_come_from(tmp_path):

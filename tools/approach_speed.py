@@ -128,8 +128,8 @@ def main(argv: list[str] | None = None) -> dict:
         config = dataclasses.replace(config, action_scale=args.action_scale)
     config.validate()
     env = envs.from_config(env_name, config)
-    out = {"env_name": env_name, "env_config": dataclasses.asdict(config), "device": provenance.device_description(),
-           "code": provenance.code_version(), "cap": servo_cap(env)}
+    made = provenance.stamp(provenance.command(None if argv is None else [__file__] + list(argv)))
+    out = {"env_name": env_name, "env_config": dataclasses.asdict(config), **made, "cap": servo_cap(env)}
     print(f"{env_name}: action_scale {config.action_scale}; a full commanded step moves the joints "
           f"{out['cap']['moving_step']} rad per env step while moving "
           f"({out['cap']['moving_step_fraction_of_scale']} of the step)")

@@ -26,7 +26,6 @@ import argparse
 import collections
 import json
 import os
-import sys
 
 import numpy as np
 
@@ -268,8 +267,8 @@ def main(argv: list[str] | None = None) -> dict:
     print(markdown(summary, f"{args.checkpoint} (seed {policy.units[args.unit]}) on {env_name}, eval seed {args.seed}"))
     if args.json:
         with open(args.json, "w") as f:
-            json.dump({"command": " ".join(["python", "-m", "tools.failure_report"] + (argv or sys.argv[1:])),
-                       "device": provenance.device_description(), "summary": summary, "episodes": rows}, f, indent=1)
+            made = provenance.stamp(provenance.command(None if argv is None else [__file__] + list(argv)))
+            json.dump({**made, "summary": summary, "episodes": rows}, f, indent=1)
     return summary
 
 
