@@ -1,7 +1,7 @@
 """tools/experiment_launch.py through submitit: the point-mass demo launched on submitit's local executor trains in
-one job; on a real single-node Slurm with a one-minute time limit it is stopped, requeued and resumed, and ends with
-the same final evaluation and training log as the unbroken run of the same seed; a failing part reports its error
-in `list`."""
+one job; launched at the same time on a real single-node Slurm with a one-minute time limit, it is stopped, requeued
+and resumed, and ends with the same final evaluation and training log as the unbroken run of the same seed; a
+failing part reports its error in `list`."""
 
 import csv
 import json
@@ -24,11 +24,23 @@ TIMING = ("steps_per_second", "wall_seconds")
 """metrics.csv columns that measure the machine, not the run."""
 
 
-def _launch(runs: str, *options: str) -> subprocess.CompletedProcess:
-    """`python -m tools.experiments launch point-mass-demo` as a user types it, with its runs and results in `runs`."""
+def _launch(runs: str, *options: str) -> subprocess.Popen:
+    """Starts `python -m tools.experiments launch point-mass-demo` as a user types it, with its runs and results in
+    `runs` (its output in `runs/launch.log`)."""
+    os.makedirs(runs, exist_ok=True)
     argv = [sys.executable, "-m", "tools.experiments", "launch", DEMO, "--runs-dir", os.path.join(runs, "runs"),
             "--out", os.path.join(runs, "out"), "--compilation-cache", os.path.join(runs, "jax_cache"), *options]
-    return subprocess.run(argv, cwd=launch.ROOT, capture_output=True, text=True, timeout=900)
+    with open(os.path.join(runs, "launch.log"), "w") as log:
+        return subprocess.Popen(argv, cwd=launch.ROOT, stdout=log, stderr=subprocess.STDOUT, text=True)
+
+
+def _ended(process: subprocess.Popen, runs: str) -> str:
+    """Waits for a launch; returns its output, asserting it exited 0."""
+    code = process.wait(timeout=900)
+    with open(os.path.join(runs, "launch.log")) as f:
+        text = f.read()
+    assert code == 0, text[-3000:]
+    return text
 
 
 def _evaluation(runs: str) -> dict:
@@ -43,12 +55,20 @@ def _log(runs: str) -> list[dict]:
 
 
 @pytest.fixture(scope="module")
-def unbroken(tmp_path_factory) -> str:
-    """The demo launched on submitit's local executor without a time limit to meet: one job, one attempt, the
-    reference a requeued job must equal."""
-    runs = str(tmp_path_factory.mktemp("unbroken"))
-    done = _launch(runs, "--executor", "local", "--gpus-per-part", "0")
-    assert done.returncode == 0, done.stderr
+def launched(tmp_path_factory) -> dict:
+    """The demo launched twice side by side: on submitit's local executor without a time limit to meet (one job, one
+    attempt: the unbroken reference), and, where a Slurm cluster answers, on Slurm with a 1-minute limit (warned
+    25-55 s after each start, as Slurm checks limits every 30 s). {"local": runs folder, "slurm": runs folder or
+    the reason there is none}."""
+    root = tmp_path_factory.mktemp("launched")
+    ok, why = ensure_slurm()
+    runs = {"local": str(root / "local"), "slurm": str(root / "slurm") if ok else f"no Slurm cluster here: {why}"}
+    started = {"local": _launch(runs["local"], "--executor", "local", "--gpus-per-part", "0")}
+    if ok:
+        started["slurm"] = _launch(runs["slurm"], "--executor", "slurm", "--time", "1", "--signal-delay", "5",
+                                   "--max-requeues", "20", "--gpus-per-part", "0", "--wait")
+    for name, process in started.items():
+        _ended(process, runs[name])
     return runs
 
 
@@ -73,7 +93,8 @@ def test_local_slots_group_the_visible_gpus(monkeypatch):
     assert launch.gpu_slots(1) == [[]]  # no GPU: one part at a time on the CPU
 
 
-def test_the_local_executor_trains_a_part_in_one_job_and_records_it(unbroken):
+def test_the_local_executor_trains_a_part_in_one_job_and_records_it(launched):
+    unbroken = launched["local"]
     job = json.load(open(os.path.join(unbroken, "runs", DEMO, "ppo", ".seeds-0-0.job.json")))
     assert job["executor"] == "local"
     assert job["status"] == "done"
@@ -85,17 +106,12 @@ def test_the_local_executor_trains_a_part_in_one_job_and_records_it(unbroken):
     assert "  1 done; table not built" in listed
 
 
-def test_slurm_requeues_a_part_past_its_limit_and_ends_as_an_unbroken_run(tmp_path, unbroken):
-    """A real Slurm: one job with a 1-minute limit, warned 25-55 s after each start (Slurm checks limits every 30
-    s), saves a checkpoint, is requeued and resumes until the part is done; the result equals the unbroken run's,
-    the training log step for step."""
-    ok, why = ensure_slurm()
-    if not ok:
-        pytest.skip(f"no Slurm cluster here: {why}")
-    runs = str(tmp_path)
-    done = _launch(runs, "--executor", "slurm", "--time", "1", "--signal-delay", "5", "--max-requeues", "20",
-                   "--gpus-per-part", "0", "--wait")
-    assert done.returncode == 0, done.stderr
+def test_slurm_requeues_a_part_past_its_limit_and_ends_as_an_unbroken_run(launched):
+    """A real Slurm: the job with a 1-minute limit is warned, saves a checkpoint, is requeued and resumes until the
+    part is done; its evaluation and training log (step for step) equal the unbroken run's."""
+    runs, unbroken = launched["slurm"], launched["local"]
+    if runs.startswith("no Slurm"):
+        pytest.skip(runs)
     job = json.load(open(os.path.join(runs, "runs", DEMO, "ppo", ".seeds-0-0.job.json")))
     assert job["executor"] == "slurm"
     assert job["status"] == "done", open(job["log"]).read()[-3000:]
@@ -114,9 +130,12 @@ def test_a_failing_part_reports_its_error_in_list(tmp_path, monkeypatch):
     other = spec.apply_overrides(run.config(logdir), {"env.dt": 0.2})
     with open(os.path.join(logdir, "config.json"), "w") as f:
         json.dump(config_json(other), f)
-    # A changed part is not launched: `list` says why.
-    done = _launch(runs, "--executor", "local")
-    assert "skipped: seeds-0-0:" in done.stdout and "dt" in done.stdout
+    # A changed part is not launched: the launch says why and exits 1 (the run is not done).
+    assert _launch(runs, "--executor", "local").wait(timeout=300) == 1
+    text = open(os.path.join(runs, "launch.log")).read()
+    assert "skipped: seeds-0-0:" in text
+    assert "dt" in text
+    assert "not finished: point-mass-demo/ppo" in text
     # Launched by name as a job, it fails there and the job file keeps the error.
     job = launch.make_executor(launch.LaunchConfig(executor="local", time_min=5), os.path.join(runs, "jobs")).submit(
         launch.PartJob(f"{DEMO}/ppo", "seeds-0-0", os.path.join(runs, "runs"), os.path.join(runs, "out"), "off"))
