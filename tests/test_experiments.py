@@ -668,3 +668,18 @@ def test_toy_experiment_trains_resumes_and_builds(tmp_path, monkeypatch):
     assert "| paper: target reached | target reached |" in text and "| 50.0 % |" in text
     assert ex.listing(selection, runs_dir, out).splitlines()[1] == "  2 done; table built"
     assert ex.commands(selection, runs_dir) == []
+
+
+def test_the_docs_recipe_for_an_experiment_registers_and_validates():
+    """docs/experiments.md's "Add an experiment" block, run as written against a fresh registry."""
+    with open(os.path.join(launch.ROOT, "docs", "experiments.md")) as f:
+        text = f.read()
+    block = text.split("## Add an experiment", 1)[1].split("```python\n", 1)[1].split("```", 1)[0]
+    registry = {}
+    names = {"register": lambda exp: spec.register(exp, registry), "Experiment": spec.Experiment, "Run": spec.Run,
+             "Cross": spec.Cross, "paper_row": spec.paper_row}
+    exec(block, names)
+    (exp,) = registry.values()
+    state.validate_experiment(exp)
+    assert exp.runs[0].paper == {"target_reached": 0.961, "self_collision": 0.022}  # the paper's UR5e reach PPO row
+    assert exp.runs[1].budget() == 100_000_000
