@@ -3,18 +3,15 @@
     python -m benchmarks.fidelity_ur5e --episodes 1024 --out results/fidelity/default.json
     python -m benchmarks.fidelity_ur5e --env-option init_range=limited --variant no_base damping=1.5 --out x.json
 
-What the paper pins (its sections): Table "reaching baselines" (random, standstill, pseudo-IK at 1 and 2 cm;
-section "Baselines"), the sampling of initial poses and targets ("Initial pose and target sampling"), the
-model ("Simulation settings": Menagerie's UR5e, end-effector cylinder made a capsule, joint damping added
-because the default controller exceeded the real speeds by up to 5x) and the episode ("Reach Task": 125 steps
-of 20 x 2 ms, reach-and-stay, a collision ends the episode). Results: results/fidelity/README.md.
-
-Baselines are `agents.baselines`' agents, one rollout per (action mode, agent) read at every target radius
-(reach-and-stay: the radius does not change the motion). Rates come with their binomial standard error
-sqrt(p (1 - p) / n); one --seed draws the same episodes for every configuration (up to resets whose rejection
-sampling a variant changes), so differences between configurations are paired and less noisy than that.
-VARIANTS are EXPERIMENTAL hypotheses without an env field: each edits one built env in place (its robot's
-MuJoCo model, collision pairs, sampling or physics hook), never the env's defaults.
+The paper pins: Table "reaching baselines" (section "Baselines"), "Initial pose and target sampling", "Simulation
+settings" (Menagerie's UR5e, end-effector cylinder made a capsule, damping added as the default controller ran up
+to 5x the real speeds) and "Reach Task" (125 steps of 20 x 2 ms, a collision ends the episode). Findings:
+results/fidelity/README.md. Baselines are `agents.baselines`' agents, one rollout per (action mode, agent) read
+at both target radii (reach-and-stay: the radius does not change the motion); rates come with their binomial
+standard error sqrt(p (1 - p) / n), and one --seed draws the same episodes for every configuration (but resets
+whose rejection sampling a variant changes), so differences between configurations are paired.
+VARIANTS are EXPERIMENTAL hypotheses without an env field: each edits one built env in place, never the env's
+defaults.
 """
 
 from __future__ import annotations
@@ -42,25 +39,6 @@ LIMIT_MARGINS = (0.1, 0.5)  # distances (rad) from a joint limit counted as "nea
 SPEED_STEPS = 25  # env steps (1 s) of the speed scenarios
 
 
-def paper_baselines() -> dict:
-    """(agent, radius) -> (reached, self collision, distance, distance std): the paper's Table "reaching baselines"."""
-    with open(os.path.join(ROOT, "assets", "paper_numbers.json")) as f:
-        table = json.load(f)["baselines"]
-    cols = table["columns"]
-    return {(r[0], r[1]): tuple(r[cols.index(c)] for c in ("target_reached", "self_collision", "distance", "distance_std"))
-            for r in table["rows"]}
-
-
-# EXPERIMENTAL variants: each takes the built env and a value string.
-
-def _old_menagerie_servo(env, value):
-    """Menagerie's older UR5e servos (shared/reference/menagerie/ur5e.xml's note): kp 3500 / 3000, no kv,
-    joint damping 200 / 15."""
-    m, kp = env.robot.mj_model, np.array([3500.0] * 3 + [3000.0] * 3)
-    m.actuator_gainprm[:, 0], m.actuator_biasprm[:, 1], m.actuator_biasprm[:, 2] = kp, -kp, 0.0
-    m.dof_damping[:] = [200.0] * 3 + [15.0] * 3
-
-
 def _no_base(env, value):
     """Menagerie's UR5e has no base collision geom: drop our base sphere's pairs."""
     robot, base = env.robot, env.robot.mj_model.geom("base").id
@@ -68,8 +46,7 @@ def _no_base(env, value):
 
 
 def _floor(env, value):
-    """A floor at z = 0 (Menagerie's scene.xml) counted as a self collision for every geom but base and shoulder
-    (resets reject on it too)."""
+    """A floor at z = 0 (Menagerie's scene.xml) counted as a self collision (but for base and shoulder)."""
     robot, own = env.robot, env.robot.self_distances
     geoms = np.array([g for g in robot.robot_geoms if robot.mj_model.geom(g).name not in ("base", "shoulder")])
 
@@ -81,12 +58,6 @@ def _floor(env, value):
     robot.self_distances = with_floor
 
 
-def _margin(env, value):
-    """A self collision when geoms come closer than `value` m (a contact margin), not only on overlap."""
-    robot, own = env.robot, env.robot.self_distances
-    robot.self_distances = lambda xpos, xmat: own(xpos, xmat) - float(value)
-
-
 def _step_end(env, value):
     """Collisions checked at env-step boundaries only (Brax's pipeline_step returns the last substep's data)."""
     run = env.physics.run
@@ -94,8 +65,7 @@ def _step_end(env, value):
 
 
 def _contacts(env, value):
-    """MuJoCo contact forces on the model's pairs (the paper's MJX model kept contacts on: links push each other
-    apart instead of passing through); with step_end, a contact resolved before the step ends goes unseen."""
+    """Contact forces on the model's pairs (the paper's MJX model kept contacts on; combine with step_end)."""
     env.robot.mj_model.opt.disableflags &= ~int(mujoco.mjtDisableBit.mjDSBL_CONTACT)
 
 
@@ -114,12 +84,11 @@ def _elbow_2pi(env, value):
 
 
 def _ctrl_pi(env, value):
-    """Servo targets (absolute actions, clipping) span +-pi, the 360 deg that reach every pose, so targets come from
-    +-pi poses too; start poses keep the full range. For absolute control (relative targets would be clipped too)."""
+    """Absolute actions and servo targets span +-pi (targets come from +-pi poses); start poses keep the full range."""
     robot = env.robot
     env._init_low, env._init_high = robot.joint_low.copy(), robot.joint_high.copy()
-    np.clip(robot.joint_low, -np.pi, None, out=robot.joint_low)
-    np.clip(robot.joint_high, None, np.pi, out=robot.joint_high)
+    for limits in (robot.joint_low, robot.joint_high):  # in place: the arrays the env's action mapping reads
+        np.clip(limits, -np.pi, np.pi, out=limits)
 
 
 def _ee_at_wrist_3(env, value):
@@ -127,19 +96,18 @@ def _ee_at_wrist_3(env, value):
     env.robot.mj_model.site_pos[env.robot.ee_site] = 0.0  # before the first kinematics call caches the model
 
 
-VARIANTS = {
+VARIANTS = {  # name -> apply(env, value string); on the command line NAME or NAME=VALUE
     # joint damping x v, or x v_i per joint for a comma-separated list (0: Menagerie's, no damping)
     "damping": lambda env, v: env.robot.mj_model.dof_damping.__imul__(np.array(v.split(","), float)),
-    "kv": lambda env, v: env.robot.mj_model.actuator_biasprm[:, 2].__imul__(float(v)),  # servo kv x v
-    "old_servo": _old_menagerie_servo, "no_base": _no_base, "floor": _floor, "margin": _margin,
-    "step_end": _step_end, "contacts": _contacts, "target_limited": _target_limited, "ee_wrist_3": _ee_at_wrist_3,
-    "elbow_2pi": _elbow_2pi, "ctrl_pi": _ctrl_pi}
-"""name -> apply(env, value string); on the command line NAME or NAME=VALUE."""
+    # MuJoCo's default integrator, for an <option> line that names none (ours and Menagerie's: implicitfast)
+    "euler": lambda env, v: setattr(env.robot.mj_model.opt, "integrator", int(mujoco.mjtIntegrator.mjINT_EULER)),
+    "no_base": _no_base, "floor": _floor, "step_end": _step_end, "contacts": _contacts, "ee_wrist_3": _ee_at_wrist_3,
+    "target_limited": _target_limited, "elbow_2pi": _elbow_2pi, "ctrl_pi": _ctrl_pi}
 
 
-def build(robot: str, options: dict, variants: list[str]):
+def build(options: dict, variants: list[str]):
     """The unwrapped reach env of `options` with the `variants` applied, in order."""
-    env = envs.make(f"{robot}-reach", **options)
+    env = envs.make("ur5e-reach", **options)
     for item in variants:
         name, _, value = item.partition("=")
         if name not in VARIANTS:
@@ -149,14 +117,13 @@ def build(robot: str, options: dict, variants: list[str]):
 
 
 def pseudo_ik_targets(env, start_q, target_q, mode: str):
-    """The joint configuration the pseudo-IK agent commands: the target pose's own angles ("sampled"), or
-    ("nearest") each joint's angle +- 2 pi within its range that is nearest the start pose (same pose, shorter path)."""
+    """The configuration the pseudo-IK agent commands: the target pose's angles ("sampled") or ("nearest") for each
+    joint the one of angle, angle +- 2 pi within its range nearest the start pose (the same pose, a shorter path)."""
     if mode == "sampled":
         return target_q
-    low, high = env.robot.joint_low, env.robot.joint_high
+    low, high = env.robot.joint_low[:, None] - 1e-6, env.robot.joint_high[:, None] + 1e-6
     options = target_q[..., None] + jnp.array([0.0, -2 * np.pi, 2 * np.pi])
-    dist = jnp.where((options >= low[:, None] - 1e-6) & (options <= high[:, None] + 1e-6),
-                     jnp.abs(options - start_q[..., None]), jnp.inf)
+    dist = jnp.where((options >= low) & (options <= high), jnp.abs(options - start_q[..., None]), jnp.inf)
     return jnp.take_along_axis(options, jnp.argmin(dist, -1)[..., None], -1)[..., 0]
 
 
@@ -171,11 +138,8 @@ def rollout(env, agent: str, key, num: int, pseudo_ik: str = "sampled"):
         goal = pseudo_ik_targets(env, start.pipeline_state.qpos, start.info["target_qpos"], pseudo_ik)
 
         def step(s, k):
-            if agent == "pseudo_ik":
-                action = baselines.joint_target_action(env.config, env.robot, goal, s.pipeline_state.qpos)
-            else:
-                action = base_act(index, s, start, k)
-            n = benv.step(s, action)
+            ik = baselines.joint_target_action(env.config, env.robot, goal, s.pipeline_state.qpos)
+            n = benv.step(s, ik if agent == "pseudo_ik" else base_act(index, s, start, k))
             return n, (n.metrics["distance"], n.metrics["self_collision"], n.done, n.pipeline_state.qpos)
 
         keys = jax.random.split(jax.random.fold_in(key, 1), env.config.episode_length)
@@ -185,8 +149,7 @@ def rollout(env, agent: str, key, num: int, pseudo_ik: str = "sampled"):
 
 
 def rate(values) -> dict:
-    """Mean of 0/1 outcomes and its binomial standard error."""
-    p = float(np.mean(values))
+    p = float(np.mean(values))  # a share of episodes and its binomial standard error
     return {"rate": p, "se": float(np.sqrt(p * (1 - p) / len(values)))}
 
 
@@ -197,7 +160,8 @@ def episode_summary(env, records, goal) -> dict:
     steps, n = dist.shape
     end = np.where(done.any(0), np.argmax(done > 0, axis=0), steps - 1)
     alive, collided, q_end = np.arange(steps)[:, None] <= end, coll[end, np.arange(n)] > 0, qpos[end, np.arange(n)]
-    out = {"self_collision": rate(collided), "collision_step_mean": float(np.mean(end[collided] + 1)) if collided.any() else None}
+    out = {"self_collision": rate(collided), "collision_pairs": collision_pairs(env.robot, q_end[collided]),
+           "collision_step_mean": float(np.mean(end[collided] + 1)) if collided.any() else None}
     for r in RADII:
         out[f"reached_{r:g}"] = rate(np.any((dist < r) & alive, axis=0) & ~collided)
     final = dist[end, np.arange(n)]  # last10: the last 10 steps' mean, 0 for a collided episode
@@ -207,55 +171,45 @@ def episode_summary(env, records, goal) -> dict:
     gap = np.minimum(q_end - env.robot.joint_low, env.robot.joint_high - q_end).min(-1)
     out["pinned_at_end"] = rate((gap < 0.05) & ~collided)
     out["far_from_goal_at_end"] = rate((np.abs(q_end - np.asarray(goal)).max(-1) > 0.1) & ~collided)
-    out["collision_pairs"] = collision_pairs(env.robot, q_end[collided])
     return out
 
 
 def collision_pairs(robot, qpos) -> dict:
     """Share of collided episodes whose final pose has each self-collision pair (geom names) the deepest."""
-    if not len(qpos):
-        return {}
-    kin = robot.kinematics(jnp.asarray(qpos))
+    kin = robot.kinematics(jnp.asarray(qpos).reshape(-1, robot.nq))
     dist = np.asarray(robot.self_distances(kin.geom_xpos, kin.geom_xmat))
     names = [" - ".join(robot.mj_model.geom(g).name for g in pair) for pair in robot.self_pairs]
-    names += ["floor"] * (dist.shape[-1] - len(names))  # the floor variant's extra distances
-    out = {}
-    for i in np.argmin(dist, -1):
-        out[names[i]] = out.get(names[i], 0.0) + 1.0 / len(qpos)
-    return dict(sorted(out.items(), key=lambda kv: -kv[1]))
+    names = np.array(names + ["floor"] * (dist.shape[-1] - len(names)))  # the floor variant's extra distances
+    found, counts = np.unique(names[np.argmin(dist, -1)], return_counts=True)
+    return {str(found[i]): counts[i] / len(qpos) for i in np.argsort(-counts)}
 
 
-def baseline_table(robot, options, variants, num, seed, agents, actions, pseudo_ik):
+def baseline_table(options, variants, num, seed, agents, actions, pseudo_ik):
     """(rows: every (action mode, agent) beside the paper's numbers (UR5e), the last reset state)."""
-    paper, rows = paper_baselines(), []
+    with open(os.path.join(ROOT, "assets", "paper_numbers.json")) as f:  # the paper's Table "reaching baselines"
+        table = json.load(f)["baselines"]
+    paper, rows = {(r[0], r[1]): dict(zip(table["columns"][2:], r[2:])) for r in table["rows"]}, []
     for action in actions:
-        env = build(robot, {**options, "action": action}, variants)
+        env = build({**options, "action": action}, variants)
         for agent in agents:
             t0 = time.perf_counter()
             start, goal, records = rollout(env, agent, jax.random.PRNGKey(seed), num, pseudo_ik)
-            row = {"action": action, "agent": agent, **episode_summary(env, records, goal),
-                   "seconds": round(time.perf_counter() - t0, 1)}
-            row["paper"] = {f"{r:g}": paper.get((agent, r)) for r in RADII} if robot == "ur5e" else None
-            rows.append(row)
-            print(format_row(row), flush=True)
+            rows.append(row := {"action": action, "agent": agent, **episode_summary(env, records, goal),
+                                "paper": {f"{r:g}": paper.get((agent, r)) for r in RADII},
+                                "seconds": round(time.perf_counter() - t0, 1)})
+            shown = [f"reached_{r:g}" for r in RADII] + ["self_collision"]
+            print(f"{action:8s} {agent:10s}", *(f"{k} {100 * row[k]['rate']:5.1f} ± {100 * row[k]['se']:.1f}"
+                                                for k in shown), f"distance {row['distance']['mean']:.3f}", flush=True)
     return rows, start
 
 
-def format_row(row) -> str:
-    pct = lambda d: f"{100 * d['rate']:5.1f} ± {100 * d['se']:.1f}"
-    reached = "  ".join(f"{r:g} m {pct(row[f'reached_{r:g}'])}" for r in RADII)
-    return (f"{row['action']:8s} {row['agent']:10s} reached {reached}  self {pct(row['self_collision'])}  "
-            f"dist {row['distance']['mean']:.3f} ± {row['distance']['std']:.3f}  ({row['seconds']} s)")
-
-
-def speed_profile(robot, options, variants, num, seed) -> dict:
-    """|joint speed| over SPEED_STEPS steps from reset poses: `full_command` (absolute control commanding every joint
-    to the far end of its range) and `relative_steps` (relative control, every joint a full step towards the middle
-    of its range): the peak (rad/s and / the velocity limit), the share of steps ending above the limit, the mean
-    speed over the last half and (relative) the share of the commanded step a joint covers per env step."""
+def speed_profile(options, variants, num, seed) -> dict:
+    """|joint speed| over SPEED_STEPS steps from reset poses, every joint commanded to the far end of its range
+    (`full_command`, absolute) or a full relative step towards its middle (`relative_steps`): peak (rad/s, / limit),
+    share of steps ending above the limit, mean speed of the last half, (relative) share of the step covered."""
     out = {}
     for scenario, action in (("full_command", "absolute"), ("relative_steps", "relative")):
-        env = build(robot, {**options, "action": action}, variants)
+        env = build({**options, "action": action}, variants)
         benv, mid = envs.wrap(env, autoreset=False), (env.robot.joint_low + env.robot.joint_high) / 2
 
         @jax.jit
@@ -267,7 +221,8 @@ def speed_profile(robot, options, variants, num, seed) -> dict:
 
         q0, (qvel, qpos) = jax.device_get(run(jax.random.PRNGKey(seed)))
         limit, peak = env.robot.velocity_limits, np.abs(qvel).max(axis=(0, 1))
-        speed = (np.abs(np.diff(np.concatenate([q0[None], qpos]), axis=0)) / env.dt)[SPEED_STEPS // 2:].mean(axis=(0, 1))
+        moves = np.abs(np.diff(np.concatenate([q0[None], qpos]), axis=0))
+        speed = (moves / env.dt)[SPEED_STEPS // 2:].mean(axis=(0, 1))
         out[scenario] = {"peak": peak.tolist(), "peak_over_limit": (peak / limit).tolist(), "mean_speed_last_half":
                          speed.tolist(), "share_steps_over_limit": (np.abs(qvel) > limit).mean(axis=(0, 1)).tolist()}
         if action == "relative":
@@ -276,29 +231,26 @@ def speed_profile(robot, options, variants, num, seed) -> dict:
 
 
 def reset_distances(env, seed: int, num: int = 16384) -> dict:
-    """Start-to-target distance over `num` resets (the standstill row's distance but the servos' sag): pins the
-    start-pose and target distributions without physics."""
-    d = np.asarray(jax.jit(jax.vmap(env.reset))(jax.random.split(jax.random.PRNGKey(seed + 1), num)).metrics["distance"])
+    """Start-to-target distance over `num` resets (the standstill row's distance but the sag), without physics."""
+    keys = jax.random.split(jax.random.PRNGKey(seed + 1), num)
+    d = np.asarray(jax.jit(jax.vmap(env.reset))(keys).metrics["distance"])
     return {"num": num, "mean": float(d.mean()), "std": float(d.std()), "se_mean": float(d.std() / np.sqrt(num))}
 
 
 def limit_margins(env, start) -> dict:
     """Share of start poses and of target poses with a joint within each LIMIT_MARGINS of its range's ends."""
-    out = {}
-    for name, q in (("start", start.pipeline_state.qpos), ("target", start.info["target_qpos"])):
-        gap = np.minimum(np.asarray(q) - env.robot.joint_low, env.robot.joint_high - np.asarray(q))
-        out[name] = {f"{m:g}": {"any_joint": float(np.mean(gap.min(-1) < m)), "per_joint": np.mean(gap < m, 0).tolist()}
-                     for m in LIMIT_MARGINS}
-    return out
+    gaps = {name: np.minimum(np.asarray(q) - env.robot.joint_low, env.robot.joint_high - np.asarray(q))
+            for name, q in (("start", start.pipeline_state.qpos), ("target", start.info["target_qpos"]))}
+    return {name: {f"{m:g}": {"any_joint": float(np.mean(g.min(-1) < m)), "per_joint": np.mean(g < m, 0).tolist()}
+                   for m in LIMIT_MARGINS} for name, g in gaps.items()}
 
 
 def parse(argv):
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--robot", choices=("ur5e", "panda"), default="ur5e")
     p.add_argument("--episodes", type=int, default=1024, help="episodes per (mode, agent)")
     p.add_argument("--seed", type=int, default=0, help="reset seed: the same episodes for every configuration")
-    p.add_argument("--env-option", nargs="+", default=[], metavar="FIELD=VALUE", help="env config fields (values as JSON)")
-    p.add_argument("--variant", nargs="+", default=[], metavar="NAME[=VALUE]", help="experimental: " + ", ".join(VARIANTS))
+    p.add_argument("--env-option", nargs="+", default=[], metavar="FIELD=VALUE", help="env config fields (JSON values)")
+    p.add_argument("--variant", nargs="+", default=[], metavar="NAME[=VALUE]", help=", ".join(VARIANTS))
     p.add_argument("--agents", nargs="+", choices=AGENTS, default=list(AGENTS))
     p.add_argument("--actions", nargs="+", choices=ACTIONS, default=list(ACTIONS))
     p.add_argument("--pseudo-ik", choices=("sampled", "nearest"), default="sampled",
@@ -323,18 +275,18 @@ def _json_or_text(value: str):
 def main(argv=None):
     args = parse(sys.argv[1:] if argv is None else argv)
     t0 = time.perf_counter()
-    rows, start = baseline_table(args.robot, args.options, args.variant, args.episodes, args.seed, args.agents,
+    rows, start = baseline_table(args.options, args.variant, args.episodes, args.seed, args.agents,
                                  args.actions, args.pseudo_ik)
-    env = build(args.robot, {**args.options, "action": args.actions[-1]}, args.variant)
-    result = {**provenance.stamp(), "robot": args.robot, "env_options": args.options, "variants": args.variant,
+    env = build({**args.options, "action": args.actions[-1]}, args.variant)
+    result = {**provenance.stamp(), "env_options": args.options, "variants": args.variant,
               "pseudo_ik": args.pseudo_ik, "episodes": args.episodes, "seed": args.seed, "baselines": rows,
               "limit_margins": limit_margins(env, start), "reset_distances": reset_distances(env, args.seed)}
-    print("start-to-target distance over resets: {mean:.4f} ± {std:.4f} m (se {se_mean:.4f})".format(**result["reset_distances"]))
+    print("start-to-target distance over resets: {mean:.4f} ± {std:.4f} m".format(**result["reset_distances"]))
     if not args.no_speed:
-        result["speed"] = speed_profile(args.robot, args.options, args.variant, min(args.episodes, 256), args.seed)
+        result["speed"] = speed_profile(args.options, args.variant, min(args.episodes, 256), args.seed)
         for name, s in result["speed"].items():
-            print(f"{name}: peak / limit", *(f"{v:.2f}" for v in s["peak_over_limit"]), " mean speed",
-                  *(f"{v:.2f}" for v in s["mean_speed_last_half"]))
+            print(name, "peak / limit", np.round(s["peak_over_limit"], 2),
+                  "mean speed", np.round(s["mean_speed_last_half"], 2))
     result["seconds"] = round(time.perf_counter() - t0, 1)
     os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
     with open(args.out, "w") as f:
