@@ -48,7 +48,7 @@ Text before.
 <!-- table:tiny -->
 | run | discount | env steps per seed | reached | self collision | obstacle collision | file |
 |---|---:|---:|---:|---:|---:|---|
-| reach | 0.99 | 150.1M | 95.7 ± 0.4 % | 2.7 ± 0.1 % |  | [a_eval.json](a_eval.json) |
+| reach | 0.99 | 150.1M | 95.7 ± 0.5 % | 2.7 ± 0.1 % |  | [a_eval.json](a_eval.json) |
 | reach-avoid | 0.97 | 8.2M | 86.8 ± 0.3 % | 3.5 ± 0.1 % | 2.3 ± 0.3 % | [b_eval.json](b_eval.json) |
 <!-- /table -->
 
@@ -119,15 +119,15 @@ def test_experiment_rows_for_the_readme_only_when_every_seed_is_evaluated(tmp_pa
     assert ri._finished_experiment_row(ctx, "x", "half") is None
     assert ri._finished_experiment_row(ctx, "x", "absent") is None
     assert ri._finished_experiment_row(ctx, "not-built", "done") is None
-    assert ri._seed_rate([0.96, 0.97]) == "96.5 ± 0.5 %"  # population std, as eval.py's std_units
+    assert ri._seed_rate([0.96, 0.97]) == "96.5 ± 0.7 %"  # the sample std: 0.01 / sqrt(2)
     # The index's cell: every run row, and the cross rows that hold numbers.
-    assert ri._experiment_ours(ctx, "x") == ("done: 96.5 ± 0.5 % reached; half: 90.0 % reached (1 of 2 seeds); "
+    assert ri._experiment_ours(ctx, "x") == ("done: 96.5 ± 0.7 % reached; half: 90.0 % reached (1 of 2 seeds); "
                                              "none: not done; done, sampled: 100.0 % reached (1 of 2 seeds) "
                                              "([table.md](experiments/x/table.md))")
     assert ri._experiment_ours(ctx, "x", precision=True).startswith(
         "done: 0.005 m, 99.0, 0.05; half: 0.005 m, 99.0, 0.05 (1 of 2 seeds); none: not done; ")
     # One run's rows (a paper row that is one run of an experiment): its own row and its cross rows.
-    assert ri._experiment_ours(ctx, "x", run="done") == ("done: 96.5 ± 0.5 % reached; done, sampled: 100.0 % reached "
+    assert ri._experiment_ours(ctx, "x", run="done") == ("done: 96.5 ± 0.7 % reached; done, sampled: 100.0 % reached "
                                                          "(1 of 2 seeds) ([table.md](experiments/x/table.md))")
 
 
@@ -198,8 +198,8 @@ def test_an_index_row_is_read_from_the_file_it_names():
     expected = [
         "Results: UR5e reach, PPO, 1 cm target",
         f"{100 * paper['target_reached']:.1f} % / {100 * paper['self_collision']:.1f} % self",
-        f"{100 * reached['mean']:.1f} ± {100 * reached['std_units']:.1f} % / "
-        f"{100 * self_c['mean']:.1f} ± {100 * self_c['std_units']:.1f} % self",
+        f"{100 * reached['mean']:.1f} ± {100 * ri.sample_std(reached):.1f} % / "
+        f"{100 * self_c['mean']:.1f} ± {100 * ri.sample_std(self_c):.1f} % self",
         f"{reached['units']}; {data['device'][len('GPU ('):-1]}",
         f"`python train.py {train_config['preset']} --seeds 5`",
         "[ur5e_reach_ppo_eval.json](headline/ur5e_reach_ppo_eval.json)",
@@ -208,3 +208,9 @@ def test_an_index_row_is_read_from_the_file_it_names():
     assert generated == expected
     with open(os.path.join(ROOT, "results", "README.md"), encoding="utf-8") as f:
         assert "\n| " + " | ".join(expected) + " |\n" in f.read()
+
+
+def test_tables_show_the_sample_std_of_a_population_std():
+    """eval.py's `std_units` is the population std over seeds; the tables show the sample std (ddof 1):
+    0.0041 over 5 seeds is 0.0041 * sqrt(5 / 4) = 0.004584."""
+    assert ri.sample_std({"std_units": 0.0041, "units": 5}) == pytest.approx(0.0045840, abs=1e-7)

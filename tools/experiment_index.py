@@ -49,11 +49,11 @@ def registered() -> dict:
 
 
 def fmt(metric: str, values: list[float]) -> str:
-    """'95.8 ± 0.3 %' for a rate, '0.019 ± 0.001' otherwise (population std over seeds; one seed: the value)."""
+    """'95.8 ± 0.3 %' for a rate, '0.019 ± 0.001' otherwise (sample std over seeds; one seed: the value)."""
     digits = COLUMNS[metric][1]
     scale, unit = (100, " %") if metric in RATES else (1, "")
     mean = statistics.mean(values)
-    spread = f" ± {scale * statistics.pstdev(values):.{digits}f}" if len(values) > 1 else ""
+    spread = f" ± {scale * statistics.stdev(values):.{digits}f}" if len(values) > 1 else ""
     return f"{scale * mean:.{digits}f}{spread}{unit}"
 
 
@@ -138,7 +138,7 @@ def section(experiment, table: dict | None, out: str, findings: str = "") -> str
     if anchor:
         links.append(f"[notes](#{anchor})")
     built = f"; built at code {table['code']}, {table['date']}" if table.get("code") else ""
-    lines += [f"Ours: mean ± std over seeds, {episodes(table)} a seed{built}. " + ", ".join(links) + ".", ""]
+    lines += [f"Ours: mean ± sample std over seeds, {episodes(table)} a seed{built}. " + ", ".join(links) + ".", ""]
     if experiment.note:
         lines += [experiment.note, ""]
     return "\n".join(lines)

@@ -1,5 +1,5 @@
 """An experiment's table and figure, built from its runs' evaluations: `table.md` and `table.json` (one row per
-run and per cross-evaluation, the paper's numbers beside ours, mean ± std over seeds) and `curves.png` (training
+run and per cross-evaluation, the paper's numbers beside ours, mean ± sample std over seeds) and `curves.png` (training
 curves from metrics.csv) in `<out>/<experiment>/`. A build first records each finished part's config.json,
 eval.json, metrics.csv and cross-*.json in `<out>/<experiment>/runs/<run>/seeds-*/`: the evidence behind the table.
 """
@@ -26,11 +26,11 @@ RATE_METRICS = ("target_reached", "self_collision", "obstacle_collision")
 
 
 def fmt_metric(metric: str, values) -> str:
-    """'95.7 ± 0.4 %' for rates, '0.005 ± 0.001' for others (std over seeds; one seed: mean only)."""
+    """'95.7 ± 0.4 %' for rates, '0.005 ± 0.001' for others (sample std over seeds; one seed: mean only)."""
     digits = {name: d for name, _, d in COLUMNS + EXTRA_COLUMNS}.get(metric, 3)
     values = [float(v) for v in ([values] if isinstance(values, (int, float)) else values)]
     mean = sum(values) / len(values)
-    std = statistics.pstdev(values) if len(values) > 1 else None
+    std = statistics.stdev(values) if len(values) > 1 else None  # the sample std (ddof 1)
     if metric in RATE_METRICS:
         return f"{100 * mean:.1f}" + (f" ± {100 * std:.1f}" if std is not None else "") + " %"
     return f"{mean:.{digits}f}" + (f" ± {std:.{digits}f}" if std is not None else "")
@@ -100,7 +100,7 @@ def timing_cell(state: RunState, metric: str) -> str:
 
 
 def build_default(experiment: Experiment, states: list[RunState], out_dir: str, code: str | None = None) -> list[str]:
-    """table.md and table.json (one row per run: the paper's numbers beside ours, mean ± std over seeds of
+    """table.md and table.json (one row per run: the paper's numbers beside ours, mean ± sample std over seeds of
     the driver's evaluation) and curves.png (training curves from metrics.csv) in `out_dir`."""
     code = code or code_version()  # before anything is written (a written file would mark the tree modified)
     rows, table = [], []
@@ -174,7 +174,7 @@ def build_default(experiment: Experiment, states: list[RunState], out_dir: str, 
     shared = [f"{st.run.name} trains in {st.shared}" for st in states if st.shared]
     earlier = [f"{r['run']} from {', '.join(r['sources'])}" for r in table if r.get("sources")]
     lines += ["", "Ours: the deterministic policy's evaluation at the end of training (the runs' eval.json; "
-              "a cross row: the setting its second column names), mean ± std over seeds; rates in %, "
+              "a cross row: the setting its second column names), mean ± sample std over seeds; rates in %, "
               "distances in m. Each run's config.json, eval.json and metrics.csv per part (the "
               "seeds trained in one process): `runs/<run>/seeds-<first>-<last>/` beside this table"
               + (f" ({'; '.join(shared)}: the same training config, trained once)" if shared else "") + ".",

@@ -1,7 +1,7 @@
 """The UR5e's learner-free numbers against the paper's: the baseline table, joint speeds, joint-limit margins.
 
-    python -m benchmarks.fidelity_ur5e --episodes 1024 --out results/fidelity/default.json
-    python -m benchmarks.fidelity_ur5e --env-option init_range=limited --variant no_base damping=1.5 --out x.json
+    python -m tools.fidelity --episodes 1024 --out results/fidelity/default.json
+    python -m tools.fidelity --env-option init_range=limited --variant no_base damping=1.5 --out x.json
 
 The paper pins: Table "reaching baselines" (section "Baselines"), "Initial pose and target sampling", "Simulation
 settings" (Menagerie's UR5e, end-effector cylinder made a capsule, damping added as the default controller ran up

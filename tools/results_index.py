@@ -24,6 +24,7 @@ import argparse
 import dataclasses
 import glob
 import json
+import math
 import os
 import re
 import statistics
@@ -89,13 +90,19 @@ class Context:
         return f"[{os.path.basename(file)}]({path})"
 
 
+def sample_std(stats: dict) -> float:
+    """The sample std over seeds (ddof 1) of an eval.py summary, whose `std_units` is the population std."""
+    n = stats["units"]
+    return stats["std_units"] * math.sqrt(n / (n - 1))
+
+
 def pct(stats: dict | None) -> str:
-    """'95.7 ± 0.4 %' (mean ± std over trained seeds); one seed: '95.7 %'."""
+    """'95.7 ± 0.4 %' (mean ± sample std over trained seeds); one seed: '95.7 %'."""
     if not stats:
         return ""
     if stats.get("units", 2) < 2:
         return f"{100 * stats['mean']:.1f} %"
-    return f"{100 * stats['mean']:.1f} ± {100 * stats['std_units']:.1f} %"
+    return f"{100 * stats['mean']:.1f} ± {100 * sample_std(stats):.1f} %"
 
 
 def rate(mean: float, std: float) -> str:
@@ -245,8 +252,23 @@ def _finished_experiment_row(ctx: Context, experiment: str, run: str) -> dict | 
 
 
 def _seed_rate(values: list[float]) -> str:
-    """Mean ± std over seeds (population std, as eval.py's `std_units`)."""
-    return rate(statistics.mean(values), statistics.pstdev(values))
+    """Mean ± sample std over seeds; one seed: its value."""
+    if len(values) < 2:
+        return f"{100 * values[0]:.1f} %"
+    return rate(statistics.mean(values), statistics.stdev(values))
+
+
+def _paper_settings_cell(ctx: Context, runs_dir: str, paper_key: str) -> str:
+    """The paper-settings column: mean ± sample std over the per-seed train.py eval.json files under
+    `runs_dir`/seed*/ (the `*-paper` presets), collisions as the paper's row counts them."""
+    files = sorted(glob.glob(os.path.join(ctx.results, runs_dir, "seed*", "eval.json")))
+    seeds = [ctx.json(os.path.relpath(f, ctx.results))["mean"] for f in files]
+    get = lambda key: [s[f"episode/{key}"] for s in seeds]
+    cell = f"{_seed_rate(get('target_reached'))} / {_seed_rate(get('self_collision'))} self"
+    if "obstacle_collision" in PAPER_ROWS[paper_key]:
+        cell += f", {_seed_rate(get('obstacle_collision'))} obstacle"
+    steps = ctx.json(os.path.relpath(files[0], ctx.results))["env_steps"]
+    return f"{cell} at {len(seeds)} seed{'s' * (len(seeds) > 1)} x {millions(steps)} steps"
 
 
 def _experiment_cell(row: dict, paper_key: str) -> str:
@@ -266,16 +288,18 @@ def readme_table(ctx: Context) -> list[list[str]]:
     headline rows, each once every seed of its run is evaluated."""
     readme = ctx.index["readme"]
     from_experiments = {r["file"]: (r["label"], r["experiment"], r["run"]) for r in readme["from_experiments"]}
-    rows = [["", "paper (RTX 3090 Ti)", "ours"], ["---", "---:", "---:"]]
+    paper_settings = readme["paper_settings"]
+    rows = [["", "paper (RTX 3090 Ti)", "ours, the paper's settings", "ours, the row's preset"], ["---", "---:", "---:", "---:"]]
     for run in runs(ctx, "headline"):
         paper = " / ".join([paper_pct(PAPER_ROWS[run.paper]["target_reached"]), paper_collisions(run.paper)])
+        settings = _paper_settings_cell(ctx, paper_settings[run.file], run.paper) if run.file in paper_settings else ""
         label, experiment, name = from_experiments.get(run.file, (run.label, "", ""))
         row = _finished_experiment_row(ctx, experiment, name) if experiment else None
         if row is not None:
-            rows.append([label + ": reached / collisions", paper, _experiment_cell(row, run.paper)])
+            rows.append([label + ": reached / collisions", paper, settings, _experiment_cell(row, run.paper)])
             continue
         ev = ctx.evaluation(run.file)
-        rows.append([run.label + ": reached / collisions", paper,
+        rows.append([run.label + ": reached / collisions", paper, settings,
                      f"{pct(ev['summary']['target_reached'])} / {collisions(ev)} at "
                      f"{ev['summary']['target_reached']['units']} seeds x {millions(ev['policy']['env_steps'])} steps"])
     for listed in readme["experiment_rows"]:
@@ -285,25 +309,25 @@ def readme_table(ctx: Context) -> list[list[str]]:
             continue
         rows.append([label + ": reached / collisions",
                      " / ".join([paper_pct(PAPER_ROWS[paper_key]["target_reached"]), paper_collisions(paper_key)]),
-                     _experiment_cell(row, paper_key)])
+                     "", _experiment_cell(row, paper_key)])
     b = _baseline_rows(ctx)
     ik = [b[("ur5e", "pseudo_ik", "absolute", r)]["summary"]["target_reached"] for r in (0.01, 0.02)]
     rows.append(["baseline: pseudo-IK, UR5e, absolute control: reached, 1 cm / 2 cm",
                  " / ".join(paper_pct(PAPER_BASELINES[("pseudo_ik", r)]["target_reached"]) for r in (0.01, 0.02)),
-                 " / ".join(pct(s) for s in ik)])
+                 "", " / ".join(pct(s) for s in ik)])
     env = {r["env"]: r for r in ctx.json("throughput/env_throughput.json")["rows"] if r["num_envs"] == 8192}
     meta = ctx.json("throughput/env_throughput.json")["meta"]
     rows.append([f"UR5e reach / reach-avoid env steps/s, 8,192 envs (env only, {meta['date']})",
                  f"{thousands(PAPER_THROUGHPUT['ur5e-reach'])} / {thousands(PAPER_THROUGHPUT['ur5e-reach-avoid'])}",
-                 f"{thousands(env['ur5e-reach']['steps_per_s'])} / {thousands(env['ur5e-reach-avoid']['steps_per_s'])}"])
+                 "", f"{thousands(env['ur5e-reach']['steps_per_s'])} / {thousands(env['ur5e-reach-avoid']['steps_per_s'])}"])
     train = ctx.json("throughput/train_throughput.json")
     one = [r for r in train["rows"] if r["devices"] == 1][0]
-    rows.append([f"UR5e reach PPO training env steps/s, 1 seed, 8,192 envs per GPU ({train['meta']['date']})", "",
+    rows.append([f"UR5e reach PPO training env steps/s, 1 seed, 8,192 envs per GPU ({train['meta']['date']})", "", "",
                  f"{thousands(one['train_steps_per_s'])} on 1 GPU"
                  + "".join(f", {thousands(r['train_steps_per_s'])} on {r['devices']}" for r in train["rows"] if r["devices"] > 1)])
     sac = ctx.json(readme["sac_fast_throughput_file"])  # benchmarks/train_throughput.py on the fast SAC preset
     row = next(r for r in sac["rows"] if r["setting"] == "1dev")
-    rows.append([f"UR5e reach fast SAC training env steps/s, 1 seed, {row['num_envs']:,} envs ({sac['meta']['date']})", "",
+    rows.append([f"UR5e reach fast SAC training env steps/s, 1 seed, {row['num_envs']:,} envs ({sac['meta']['date']})", "", "",
                  f"{thousands(row['train_steps_per_s'])} on 1 GPU"])
     return rows
 
@@ -519,7 +543,7 @@ def index_table(ctx: Context) -> list[list[str]]:
 # table.json each build writes under results/experiments/<name>/.
 
 def _experiment_ours(ctx: Context, name: str, precision: bool = False, run: str | None = None) -> str:
-    """Each row's target-reached rate (mean ± std over seeds), or with `precision` its distance, steps in target
+    """Each row's target-reached rate (mean ± sample std over seeds), or with `precision` its distance, steps in target
     and exits from the target (the action-space table's columns), from the experiment's table.json; with `run`,
     only that run's rows (its own and its cross-evaluations)."""
     file = f"experiments/{name}/table.json"
