@@ -27,6 +27,7 @@ from agents import baselines, driver, evaluation, export, presets, registry
 from agents.config import config_json
 from agents.loop import episode_metrics
 from mujoco_reference import colliding_configuration, colliding_pairs, contact_model, ee_position
+from limits import HANG_GUARD_S
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 QUIET = dict(tensorboard=False, progress=False)
@@ -38,7 +39,7 @@ def _subprocess_env():
                 JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS="1")
 
 
-def _eval_cli(*args, timeout=400):
+def _eval_cli(*args, timeout=HANG_GUARD_S):
     return subprocess.run([sys.executable, "eval.py", *args], cwd=ROOT, env=_subprocess_env(), capture_output=True,
                           text=True, timeout=timeout)
 
@@ -617,7 +618,7 @@ def test_bad_option_values_exit_2():
 
 
 def test_cli_error_is_one_line_with_exit_code_2(tmp_path):
-    proc = _eval_cli("--checkpoint", str(tmp_path / "missing"), "--json", str(tmp_path / "o.json"), timeout=120)
+    proc = _eval_cli("--checkpoint", str(tmp_path / "missing"), "--json", str(tmp_path / "o.json"))
     assert proc.returncode == 2
     assert proc.stderr.strip().count("\n") == 0 and proc.stderr.startswith("error: checkpoint ")
     assert "Traceback" not in proc.stderr and not (tmp_path / "o.json").exists()

@@ -22,6 +22,7 @@ from agents.config import config_from_json, total_updates, validate
 from agents.checkpoint import Checkpointer
 from agents.ppo import PPO, PPOConfig
 from agents.sac import SACConfig
+from limits import HANG_GUARD_S
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SHORT = 30_720  # 6 updates of the PPO probe preset (same compiled program as tests/test_agents_learning.py)
@@ -37,7 +38,7 @@ def test_train_cli_writes_checkpoints_logs_and_eval_that_load_back(tmp_path):
     logdir = tmp_path / "run"
     cmd = [sys.executable, "train.py", "point-mass-ppo", "--num-timesteps", "10240", "--checkpoint-every", "5120",
            "--eval-envs", "32", "--logdir", str(logdir), "--no-progress", "--env.goal-radius", "0.15"]
-    proc = subprocess.run(cmd, cwd=ROOT, env=_subprocess_env(), capture_output=True, text=True, timeout=240)
+    proc = subprocess.run(cmd, cwd=ROOT, env=_subprocess_env(), capture_output=True, text=True, timeout=HANG_GUARD_S)
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert "done after 10,240 env steps" in proc.stdout
     # The closing summary names the paper's metrics and says what to run next.
@@ -74,7 +75,7 @@ def test_train_cli_on_the_arm_writes_a_checkpoint_that_loads_back(tmp_path):
     logdir = tmp_path / "arm"
     cmd = [sys.executable, "train.py", "ur5e-reach-ppo-cpu", "--num-timesteps", "1280", "--eval-envs", "4",
            "--logdir", str(logdir), "--no-progress", "--env.substeps", "2", "--env.sampling-candidates", "4"]
-    proc = subprocess.run(cmd, cwd=ROOT, env=_subprocess_env(), capture_output=True, text=True, timeout=600)
+    proc = subprocess.run(cmd, cwd=ROOT, env=_subprocess_env(), capture_output=True, text=True, timeout=HANG_GUARD_S)
     assert proc.returncode == 0, proc.stderr[-3000:]
     config = config_from_json(json.loads((logdir / "config.json").read_text()))
     assert config.env_name == "ur5e-reach" and config.env.substeps == 2
@@ -412,7 +413,7 @@ TWO_DEVICES = textwrap.dedent("""
 def test_two_devices_match_one_device(tmp_path):
     env = _subprocess_env(XLA_FLAGS="--xla_force_host_platform_device_count=2")
     code = TWO_DEVICES.replace("{TMP}", str(tmp_path)).replace("{ROOT}", ROOT)
-    proc = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
+    proc = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True, timeout=HANG_GUARD_S)
     assert proc.returncode == 0, proc.stderr[-3000:]
     result = json.loads(proc.stdout.split("RESULT", 1)[1])
     arms = [result.pop("arm shard_map"), result.pop("arm gspmd")]

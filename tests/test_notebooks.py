@@ -7,22 +7,27 @@ notebooks therefore run two at a time (REACH_NOTEBOOK_JOBS), which on 2 cores ta
 the time of running them one after the other.
 """
 
+import ast
 import asyncio
+import importlib.metadata
+import json
 import os
 import pathlib
+import re
+import sys
 import time
+import tomllib
 
 import nbformat
 import pytest
 from nbclient import NotebookClient
+from limits import HANG_GUARD_S
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 NOTEBOOKS = sorted((ROOT / "notebooks").glob("*.ipynb"))
-CELL_TIMEOUT = 600
-"""Seconds one cell may run: a guard against hangs, not a speed check. The longest, a small training run or
-four evaluations, take ~100 s cold alone, but on a 2-core CI machine they share the cores with the other
-notebook and pytest-xdist's other worker: 03's four evaluations once ran past 300 s beside Brax's PPO test."""
-NOTEBOOK_TIMEOUT = 900
+CELL_TIMEOUT = HANG_GUARD_S
+"""Seconds one cell may run: a hang guard, not a speed check (tests/limits.py)."""
+NOTEBOOK_TIMEOUT = HANG_GUARD_S
 """Seconds one notebook may run, kernel start included (a hang guard, as above)."""
 JOBS = int(os.environ.get("REACH_NOTEBOOK_JOBS", "2"))
 LONGEST_FIRST = ["03_evaluate_checkpoints.ipynb", "01_quickstart.ipynb", "04_environment_tour.ipynb",
@@ -84,3 +89,61 @@ def test_notebook_runs_without_error(executed, name):
     print(f"{name}: {seconds:.0f} s")
     if error is not None:
         pytest.fail(f"{name} failed after {seconds:.0f} s: {type(error).__name__}:\n{error}", pytrace=False)
+
+
+def test_every_committed_cell_has_an_id():
+    """nbformat 4.5 cell ids, in the file itself (a cell without one warns MissingIDFieldWarning on every read)."""
+    for path in NOTEBOOKS:
+        cells = json.loads(path.read_text())["cells"]
+        assert all("id" in cell for cell in cells), path.name
+
+
+PROJECT = {"envs", "agents", "tools", "benchmarks"}
+
+
+def _imports(source: str) -> tuple[set[str], set[str]]:
+    """(top-level third-party or stdlib names, project modules "pkg.mod") that `source` imports anywhere."""
+    names, project = set(), set()
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Import):
+            modules = [alias.name for alias in node.names]
+        elif isinstance(node, ast.ImportFrom) and node.level == 0:
+            modules = [node.module] + [f"{node.module}.{alias.name}" for alias in node.names]
+        else:
+            continue
+        for module in modules:
+            (project if module.split(".")[0] in PROJECT else names).add(module if module.split(".")[0] in PROJECT
+                                                                         else module.split(".")[0])
+    return names, project
+
+
+def _notebook_source(path: pathlib.Path) -> str:
+    cells = nbformat.read(path, as_version=4).cells
+    lines = [line for cell in cells if cell.cell_type == "code" for line in cell.source.splitlines()]
+    return "\n".join(line for line in lines if not line.lstrip().startswith(("%", "!")))  # IPython magics
+
+
+def _distribution(requirement: str) -> str:
+    return re.split(r"[<>=!~\[; ]", requirement, maxsplit=1)[0].lower().replace("_", "-")
+
+
+def test_the_notebook_extra_installs_what_the_notebooks_import():
+    """Every package the notebooks import, directly or through the project modules they import, is a core
+    dependency or in the `notebook` extra (pyproject.toml), so `pip install -e ".[notebook]"` runs them."""
+    with open(ROOT / "pyproject.toml", "rb") as f:
+        project = tomllib.load(f)["project"]
+    allowed = {_distribution(r) for r in project["dependencies"] + project["optional-dependencies"]["notebook"]}
+    names, modules = set(), set()
+    for path in NOTEBOOKS:
+        found, used = _imports(_notebook_source(path))
+        names, modules = names | found, modules | used
+    for module in modules:  # one level down: the project modules the notebooks use
+        file = ROOT / (module.replace(".", "/") + ".py")
+        if file.exists():
+            names |= _imports(file.read_text())[0]
+    distributions = importlib.metadata.packages_distributions()
+    third_party = sorted(n for n in names if n not in sys.stdlib_module_names and n != "__future__")
+    assert {"matplotlib", "jax", "IPython"} <= set(third_party)  # the scan sees the notebooks' own imports
+    missing = [n for n in third_party
+               if not any(_distribution(d) in allowed for d in distributions.get(n, [n]))]
+    assert missing == [], f"imported by the notebooks but installed by neither the core nor the notebook extra: {missing}"

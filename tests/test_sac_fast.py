@@ -2,7 +2,6 @@
 its probe preset and its checkpoints without the replay buffer."""
 
 import dataclasses
-import time
 
 import jax
 import jax.numpy as jnp
@@ -91,10 +90,8 @@ def test_fast_sac_saves_without_its_buffer_and_resumes(tmp_path):
     assert config.checkpoint_envs is False
     first = driver.train(config)
     assert first.status == "stopped" and first.env_steps == 3_200
-    t0 = time.perf_counter()
     resumed = driver.train(presets.make_config("point-mass-sac-fast", resume=True, **base))
     assert resumed.status == "done" and resumed.env_steps == 6_400
-    assert time.perf_counter() - t0 < 120
     # The resumed learner continued from the saved one (same temperature trajectory start), and the
     # buffer was refilled: the last chunk trained (losses non-zero).
     assert np.all(np.asarray(resumed.last_metrics["loss/critic"]) != 0)
