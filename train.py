@@ -20,6 +20,8 @@ from __future__ import annotations
 import os
 import sys
 
+import jax
+
 from agents.config import TrainConfig, adopt_saved_config, read_config, validate
 from agents.driver import NonFiniteLossError, train
 from agents.logger import summary_lines
@@ -70,8 +72,16 @@ def main(argv: list[str] | None = None):
     if result.eval_metrics:
         print(f"evaluation, deterministic policy, {config.eval_envs} episodes per seed (mean over seeds):")
         print("\n".join(summary_lines(result.eval_metrics)))
-    print(f"next: python eval.py --checkpoint {result.logdir}   |   tensorboard --logdir {result.logdir}")
+    print(next_steps(result.logdir, jax.default_backend()))
     return result
+
+
+def next_steps(logdir: str, backend: str) -> str:
+    """What to run next: an evaluation sized for this machine (a CPU runs 64 envs in about a minute; the
+    default 4,096 are for a GPU) and TensorBoard, which its own extra installs."""
+    envs_flag = "" if backend == "gpu" else " --num-envs 64"
+    return (f"next: python eval.py --checkpoint {logdir}{envs_flag}   |   tensorboard --logdir {logdir} "
+            f"(pip install -e \".[tensorboard]\")")
 
 
 INTERRUPTED = 130

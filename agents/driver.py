@@ -162,6 +162,7 @@ def _train(config: TrainConfig, learner_cls: type | None = None) -> TrainResult:
     try:
         timed = config.stop_after_seconds and updates_done < stop_updates  # a resume to evaluate runs no chunk
         compile_seconds = compile_ahead(programs, state) if timed else 0.0
+        first_chunk = True
         while updates_done < stop_updates:
             targets = [stop_updates, (updates_done // every(log_every) + 1) * every(log_every)]
             if config.checkpoint_every:
@@ -174,6 +175,7 @@ def _train(config: TrainConfig, learner_cls: type | None = None) -> TrainResult:
             metrics = jax.device_get(metrics)
             seconds = time.perf_counter() - t0
             per_update = seconds / n
+            compiled, first_chunk = first_chunk, False  # its time includes compiling (ahead, or in the call)
             seconds, compile_seconds = seconds + compile_seconds, 0.0
             updates_done += n
             step = updates_done * spu
@@ -183,7 +185,7 @@ def _train(config: TrainConfig, learner_cls: type | None = None) -> TrainResult:
                                                             removed=created and last_saved is None))
             rate = n * spu * config.seeds / seconds
             logger.log(step, metrics, {"steps_per_second": rate, "wall_seconds": seconds})
-            logger.progress(step, updates_total * spu, rate / config.seeds, metrics)
+            logger.progress(step, updates_total * spu, rate / config.seeds, metrics, compiled=compiled)
             last_metrics = metrics
             due = config.checkpoint_every and updates_done % every(config.checkpoint_every) == 0
             if due or interrupted["flag"]:
@@ -240,7 +242,7 @@ def prepare_logdir(config: TrainConfig) -> bool:
     logdir = config.logdir
     if os.path.exists(logdir) and not os.path.isdir(logdir):
         raise ValueError(f"logdir={logdir!r} is a file: allowed is a directory (a new one, or an earlier run's with "
-                         "--resume).")
+                         "resume=True, --resume on the command line).")
     if config.resume:
         if not os.path.isdir(os.path.join(logdir, "checkpoints")):
             raise ValueError(f"resume=True but logdir={logdir!r} holds no checkpoint: allowed is the directory of an "
@@ -250,8 +252,9 @@ def prepare_logdir(config: TrainConfig) -> bool:
     earlier = [name for name in RUN_FILES if os.path.exists(os.path.join(logdir, name))
                and not (os.path.isdir(os.path.join(logdir, name)) and not os.listdir(os.path.join(logdir, name)))]
     if earlier and not config.overwrite:
-        raise ValueError(f"logdir={logdir!r} holds an earlier run ({', '.join(earlier)}): allowed are --resume to "
-                         "continue it, a new --logdir, or --overwrite to delete the earlier run's files first.")
+        raise ValueError(f"logdir={logdir!r} holds an earlier run ({', '.join(earlier)}): allowed are resume=True "
+                         "(--resume) to continue it, a new logdir (--logdir), or overwrite=True (--overwrite) to delete "
+                         "the earlier run's files first.")
     created = not os.path.exists(logdir)
     try:
         os.makedirs(logdir, exist_ok=True)

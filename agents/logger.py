@@ -100,10 +100,13 @@ class Logger:
         with open(self.csv_path, newline="") as f:
             return next(csv.reader(f), None) or None
 
-    def progress(self, step: int, total: int, rate: float, metrics: dict) -> None:
+    def progress(self, step: int, total: int, rate: float, metrics: dict, compiled: bool = False) -> None:
+        """A status line. `compiled`: the chunk's time includes compiling the programs, so its rate says little
+        about the rest and no ETA is shown."""
         eta = datetime.timedelta(seconds=int((total - step) / rate)) if rate > 0 else "?"
-        parts = [f"[{self.label}] {si(step)}/{si(total)} steps ({100 * step / total:.1f}%)",
-                 f"{si(rate)} steps/s", f"ETA {eta}"]
+        speed = [f"{si(rate)} steps/s incl. compiling", "ETA after the next chunk"] if compiled else \
+            [f"{si(rate)} steps/s", f"ETA {eta}"]
+        parts = [f"[{self.label}] {si(step)}/{si(total)} steps ({100 * step / total:.1f}%)", *speed]
         for k in ["episode/return"] + [k for k in sorted(metrics) if k.startswith("episode/") and k != "episode/return"][:4]:
             if k in metrics:
                 parts.append(f"{k.split('/', 1)[1]} {np.nanmean(metrics[k]):.3g}")

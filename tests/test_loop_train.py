@@ -17,7 +17,7 @@ import pytest
 
 import envs
 import train as train_cli
-from agents import driver, presets
+from agents import driver, logger, presets
 from agents.config import config_from_json, total_updates, validate
 from agents.checkpoint import Checkpointer
 from agents.ppo import PPO, PPOConfig
@@ -449,3 +449,31 @@ def test_a_resumed_run_logs_under_its_files_header(tmp_path, capsys):
     Logger(str(fresh), seed=3, seeds=1, label="x", tensorboard=False, progress=False).log(
         5, {"loss/b": np.array([1.0])}, {"wall_seconds": 2.0})
     assert (fresh / "metrics.csv").read_text().splitlines() == ["env_steps,seed,wall_seconds,loss/b", "5,3,2.0,1.0"]
+
+
+def test_next_steps_suggest_an_evaluation_sized_for_the_machine():
+    cpu = train_cli.next_steps("runs/x", "cpu")
+    assert "python eval.py --checkpoint runs/x --num-envs 64 " in cpu
+
+
+def test_next_steps_keep_the_default_evaluation_on_a_gpu():
+    assert "--num-envs" not in train_cli.next_steps("runs/x", "gpu")
+
+
+def test_next_steps_name_the_extra_that_installs_tensorboard():
+    assert 'tensorboard --logdir runs/x (pip install -e ".[tensorboard]")' in train_cli.next_steps("runs/x", "cpu")
+
+
+def _progress_line(tmp_path, capsys, compiled):
+    log = logger.Logger(str(tmp_path), seed=0, seeds=1, label="x", tensorboard=False)
+    log.progress(1_000, 3_000, 500.0, {}, compiled=compiled)
+    return capsys.readouterr().out
+
+
+def test_progress_gives_the_eta_of_the_remaining_steps(tmp_path, capsys):
+    assert "ETA 0:00:04" in _progress_line(tmp_path, capsys, compiled=False)  # 2,000 steps at 500 a second
+
+
+def test_progress_after_a_chunk_that_compiled_gives_no_eta(tmp_path, capsys):
+    line = _progress_line(tmp_path, capsys, compiled=True)
+    assert "incl. compiling" in line and "ETA after the next chunk" in line

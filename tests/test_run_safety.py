@@ -59,7 +59,8 @@ def no_compile(monkeypatch):
 def test_logdir_of_an_earlier_run_is_refused_before_anything_is_written(earlier_run, no_compile):
     before = _snapshot(earlier_run)
     with pytest.raises(ValueError, match=r"logdir='.*run' holds an earlier run \(checkpoints, config.json, "
-                                         r"metrics.csv\): allowed are --resume .* a new --logdir, or --overwrite"):
+                                         r"metrics.csv\): allowed are resume=True \(--resume\) .* a new logdir \(--logdir\), "
+                                         r"or overwrite=True \(--overwrite\)"):
         driver.train(_config(earlier_run))
     assert _snapshot(earlier_run) == before
 
