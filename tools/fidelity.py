@@ -112,7 +112,10 @@ def build(options: dict, variants: list[str]):
         name, _, value = item.partition("=")
         if name not in VARIANTS:
             raise ValueError(f"--variant {item!r} is unknown: allowed are {', '.join(VARIANTS)}.")
-        VARIANTS[name](env, value)
+        try:
+            VARIANTS[name](env, value)
+        except ValueError as error:  # a malformed value (damping=x, damping=1,2): numpy's message names neither
+            raise ValueError(f"--variant {item!r} is invalid: {str(error).strip()}.") from error
     return env
 
 
@@ -154,8 +157,8 @@ def rate(values) -> dict:
 
 
 def episode_summary(env, records, goal) -> dict:
-    """Outcomes of one rollout: collided, reached at each radius, final distances, and of the episodes that did
-    not collide the share ending with a joint within 0.05 rad of a limit or more than 0.1 rad from `goal`."""
+    """Outcomes of one rollout: collided, reached at each radius, final distances, and the share of all episodes
+    that end without a collision with a joint within 0.05 rad of a limit or more than 0.1 rad from `goal`."""
     dist, coll, done, qpos = (np.asarray(r) for r in records)
     steps, n = dist.shape
     end = np.where(done.any(0), np.argmax(done > 0, axis=0), steps - 1)
@@ -262,6 +265,9 @@ def parse(argv):
         raise ValueError(f"--episodes={args.episodes} --env-option {args.env_option} is invalid: allowed are an "
                          "integer >= 1 and FIELD=VALUE items.")
     args.options = {k: _json_or_text(v) for k, v in (item.split("=", 1) for item in args.env_option)}
+    if "action" in args.options:  # baseline_table would override it, unnoticed but for the JSON's env_options
+        raise ValueError(f"--env-option action={args.options['action']!r} is invalid: allowed is --actions "
+                         f"({', '.join(ACTIONS)}), which sets the action mode of each rollout.")
     return args
 
 
