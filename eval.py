@@ -69,6 +69,7 @@ import tyro
 
 import envs
 from agents import baselines, evaluation, provenance
+from agents import logdir as logdirs
 
 EnvConfigT = TypeVar("EnvConfigT")
 
@@ -119,6 +120,8 @@ class EvalConfig(Generic[EnvConfigT]):
     """Envs shown in the video, as a grid."""
     video_size: Annotated[str, tyro.conf.arg(metavar="WIDTHxHEIGHT")] = "480x360"
     """Pixels per env in the video."""
+    force: bool = False
+    """Replace an existing --json, --csv or --video file (a run's or an export's own files are never replaced)."""
 
 
 def parse(argv: list[str], base=None, show_help: bool = False) -> EvalConfig:
@@ -146,8 +149,13 @@ def check(args: EvalConfig) -> None:
         _video_size(args.video_size)
         if not args.video.lower().endswith((".mp4", ".gif")):
             raise ValueError(f"--video={args.video!r} is invalid: allowed are .mp4 and .gif files.")
-        if importlib.util.find_spec("imageio") is None:
-            raise ValueError("--video needs imageio (and imageio-ffmpeg for .mp4): pip install -e '.[viz]'")
+        needed = ("imageio", "imageio_ffmpeg") if args.video.lower().endswith(".mp4") else ("imageio",)
+        missing = [name for name in needed if importlib.util.find_spec(name) is None]
+        if missing:
+            raise ValueError(f"--video={args.video!r} needs {' and '.join(missing)}: pip install -e '.[viz]'")
+    for option in ("json", "csv", "video"):
+        if getattr(args, option):
+            check_output(f"--{option}", getattr(args, option), args.force)
     if args.stochastic and args.policy:
         raise ValueError(f"--stochastic is invalid with --policy {args.policy}: allowed only with --checkpoint (the "
                          "baselines have no action distribution).")
@@ -211,9 +219,7 @@ def main(argv: list[str] | None = None) -> list:
         "pooled": evaluation.pooled(results) if len(results) > 1 else None,
     }
     if args.json:
-        _makedirs_for(args.json)
-        with open(args.json, "w") as f:
-            json.dump(evaluation.jsonable(report), f, indent=2, allow_nan=False)
+        _replace_atomically(args.json, lambda f: json.dump(evaluation.jsonable(report), f, indent=2, allow_nan=False))
     if args.csv:
         _write_csv(args.csv, results)
     if args.video:
@@ -229,15 +235,62 @@ def _progress(line: str) -> None:
     print(line, file=sys.stderr, flush=True)
 
 
+def run_file_owner(path: str) -> str | None:
+    """The train.py run or policy export that `path` would write into, or None: any file of an export
+    directory, a run's own files (agents.logdir.RUN_FILES) and anything under its checkpoints/ or tb/."""
+    path = os.path.abspath(path)
+    parent = os.path.dirname(path)
+    if os.path.isfile(os.path.join(parent, "policy.json")) or os.path.isfile(os.path.join(parent, "policy.npz")):
+        return f"the policy export {parent}"
+    child, folder = path, parent
+    while folder != os.path.dirname(folder):
+        is_run = os.path.isfile(os.path.join(folder, "config.json")) or os.path.isdir(os.path.join(folder, "checkpoints"))
+        if is_run and os.path.basename(child) in logdirs.RUN_FILES:
+            return f"the run {folder}"
+        child, folder = folder, os.path.dirname(folder)
+    return None
+
+
+def check_output(option: str, path: str, force: bool) -> None:
+    """ValueError before any work for an output path that would fail or destroy something: a directory, a
+    run's or an export's own file, an existing file without --force, or a folder that cannot be written."""
+    owner = run_file_owner(path)
+    if owner:
+        raise ValueError(f"{option}={path!r} is a file of {owner}: allowed is a path outside it (e.g. beside the run).")
+    if os.path.isdir(path):
+        raise ValueError(f"{option}={path!r} is a directory: allowed is a file path.")
+    if os.path.exists(path) and not force:
+        raise ValueError(f"{option}={path!r} exists: allowed are a new path, or --force to replace it.")
+    folder = os.path.dirname(os.path.abspath(path))
+    while not os.path.exists(folder):
+        folder = os.path.dirname(folder)
+    if not os.path.isdir(folder) or not os.access(folder, os.W_OK | os.X_OK):
+        raise ValueError(f"{option}={path!r} cannot be written ({folder} is not a writable directory): allowed is a "
+                         "path in a folder you can write to.")
+
+
+def _replace_atomically(path: str, write) -> None:
+    """`write(file)` into a temporary file beside `path`, then renames it over `path`: a failure leaves the old one."""
+    _makedirs_for(path)
+    temporary = f"{path}.tmp-{os.getpid()}"
+    try:
+        with open(temporary, "w", newline="") as f:
+            write(f)
+        os.replace(temporary, path)
+    finally:
+        if os.path.exists(temporary):
+            os.remove(temporary)
+
+
 def _makedirs_for(path: str) -> None:
     if os.path.dirname(path):
         os.makedirs(os.path.dirname(path), exist_ok=True)
 
 
 def _write_csv(path: str, results) -> None:
-    _makedirs_for(path)
     names = sorted({n for r in results for u in r.units for n in u["metrics"]})
-    with open(path, "w", newline="") as f:
+
+    def write(f):
         w = csv.writer(f)
         w.writerow(["policy", "env_name", "env_config", "num_envs", "policy_seed", "eval_seed"] + names)
         for r in results:
@@ -245,6 +298,8 @@ def _write_csv(path: str, results) -> None:
             for u in r.units:
                 w.writerow([r.policy.name, r.env_name, cfg, r.num_envs, u["policy_seed"], u["eval_seed"]]
                            + [u["metrics"].get(n, "") for n in names])
+
+    _replace_atomically(path, write)
 
 
 def _video_size(size: str) -> tuple[int, int]:

@@ -57,8 +57,9 @@ class TrainConfig(Generic[EnvConfigT, AlgoConfigT]):
     the options not typed from it (but the call's own: logdir, stop_after_*, devices, progress); a typed option
     must equal the stored one, except the run-control ones (num_timesteps may grow)."""
     overwrite: bool = False
-    """Start afresh in a logdir that holds an earlier run, removing that run's files first (checkpoints,
-    config.json, metrics.csv, eval.json, tb/). Without it (or --resume) such a logdir is refused."""
+    """Start afresh in a logdir that holds an earlier run (checkpoints, config.json, metrics.csv, eval.json, tb/):
+    its files wait in an aside folder until the new run saves its first checkpoint, then are deleted (a new run
+    that fails before puts them back). Without it (or --resume) such a logdir is refused."""
     checkpoint_every: int = 0
     """Save a checkpoint every this many env steps (0 = only at the end)."""
     keep_checkpoints: int = 3
@@ -143,7 +144,7 @@ def validate(config: TrainConfig) -> None:
         raise ValueError("logdir='' is invalid with resume=True: allowed is the directory of the run to continue.")
     if config.resume and config.overwrite:
         raise ValueError("overwrite=True is invalid with resume=True: allowed is one of them (--resume continues the "
-                         "run in logdir, --overwrite deletes it and starts afresh).")
+                         "run in logdir, --overwrite replaces it with a fresh one).")
 
 
 # ----------------------------------------------------------------------------------------------

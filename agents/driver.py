@@ -1,6 +1,6 @@
 """The training run: compiled programs, the chunk loop, checkpoints and Ctrl-C.
 
-`train(config)` checks the logdir (an earlier run there is refused unless `resume` or `overwrite`),
+`train(config)` checks the logdir (`agents.logdir`: an earlier run is refused unless `resume` or `overwrite`),
 runs compiled chunks (`agents.loop`) and, between them, logs (`agents.logger`),
 checkpoints (`agents.checkpoint`, plus the policy export of `agents.export`), honours Ctrl-C
 (checkpoint, then exit) and stops on a non-finite learner metric (keeping the last good checkpoint;
@@ -22,7 +22,6 @@ import os
 import shutil
 import signal
 import sys
-import tempfile
 import time
 import warnings
 
@@ -35,7 +34,8 @@ from agents import export, provenance, registry
 from agents.checkpoint import Checkpointer, write_atomic
 from agents.config import (TrainConfig, config_from_json, config_json, env_steps_per_update, merge_resume_config,
                            num_devices, total_updates, validate)
-from agents.logger import Logger
+from agents import logdir as logdirs
+from agents.logger import Logger, cut_rows_after
 from agents.loop import Programs
 
 
@@ -123,20 +123,24 @@ def _train(config: TrainConfig, learner_cls: type | None = None) -> TrainResult:
     logdir = config.logdir or os.path.join("runs", config.preset or config.env_name,
                                            datetime.datetime.now().strftime("%Y%m%d-%H%M%S"))
     config = dataclasses.replace(config, logdir=logdir)
-    created = prepare_logdir(config)  # refuses an earlier run's logdir before anything is written
+    prepared = logdirs.prepare(logdir, config.resume, config.overwrite)  # refusals before anything is written
+    created = prepared.created
     ckpt = Checkpointer(os.path.join(logdir, "checkpoints"), keep=config.keep_checkpoints)
     start_step = None
     try:
         if config.resume:
             ckpt, start_step, config, programs, state = _resume(ckpt, config, learner_cls)
+            cut = cut_rows_after(os.path.join(logdir, "metrics.csv"), start_step)
+            if cut:
+                print(f"metrics.csv: {cut} row(s) logged after the checkpoint at env step {start_step} were dropped; "
+                      "the resumed run logs those steps again.", file=sys.stderr)
         else:
             programs = programs_for(config, learner_cls)
             state = programs.init(seed_keys(config))
         write_atomic(os.path.join(logdir, "config.json"), json.dumps(config_json(config), indent=2))
     except BaseException:
         ckpt.close()
-        if created:
-            remove_run_files(logdir, remove_dir=True)
+        _undo_start(logdir, prepared)
         raise
     spu = env_steps_per_update(config)
     updates_total = total_updates(config)
@@ -191,6 +195,7 @@ def _train(config: TrainConfig, learner_cls: type | None = None) -> TrainResult:
             if due or interrupted["flag"]:
                 save_checkpoint(ckpt, step, state, config, programs.learner)
                 last_saved = step
+                _keep_new_run(prepared)
             if interrupted["flag"]:
                 status = "interrupted"
                 break
@@ -200,6 +205,7 @@ def _train(config: TrainConfig, learner_cls: type | None = None) -> TrainResult:
         if last_saved != step:
             save_checkpoint(ckpt, step, state, config, programs.learner)
             last_saved = step
+        _keep_new_run(prepared)
         eval_metrics = None
         if status == "done" and config.eval_envs > 0:
             logger.say(f"[{logger.label}] evaluating the deterministic policy: {config.eval_envs} episodes per seed "
@@ -216,10 +222,10 @@ def _train(config: TrainConfig, learner_cls: type | None = None) -> TrainResult:
             for path in (os.path.join(ckpt.step_dir(step), "eval.json"), os.path.join(logdir, "eval.json")):
                 write_atomic(path, text)
     except NonFiniteLossError:
-        if created and last_saved is None:  # nothing worth keeping: leave no half-made run directory
+        if last_saved is None:  # nothing worth keeping: no half-made run, and an overwritten one back in place
             logger.close()
             ckpt.close()
-            remove_run_files(logdir, remove_dir=True)
+            _undo_start(logdir, prepared)
         raise
     finally:
         logger.close()
@@ -229,65 +235,21 @@ def _train(config: TrainConfig, learner_cls: type | None = None) -> TrainResult:
     return TrainResult(state, updates_done * spu, status, logdir, config, eval_metrics, last_metrics, note)
 
 
-RUN_FILES = ("checkpoints", "corrupt_checkpoints", "config.json", "metrics.csv", "eval.json", "tb")
-"""What a run writes into its logdir (`--overwrite` removes these, and only these)."""
+def _undo_start(logdir: str, prepared: logdirs.Prepared) -> None:
+    """A run that failed before its first checkpoint: the earlier run it was to replace goes back in place, or the
+    directory it created goes."""
+    if prepared.aside:
+        logdirs.restore_aside(logdir, prepared.aside)
+        prepared.aside = None
+    elif prepared.created:
+        logdirs.remove_run_files(logdir, remove_dir=True)
 
 
-def prepare_logdir(config: TrainConfig) -> bool:
-    """Checks `config.logdir` before anything is written or compiled and makes it ready; returns
-    whether this call created it. ValueError (naming the directory) for a file in the way, a
-    directory that cannot be created or written, an earlier run without `resume` or `overwrite`
-    (with `overwrite`: that run's `RUN_FILES` are removed), or `resume` without a checkpoint (then
-    nothing is created)."""
-    logdir = config.logdir
-    if os.path.exists(logdir) and not os.path.isdir(logdir):
-        raise ValueError(f"logdir={logdir!r} is a file: allowed is a directory (a new one, or an earlier run's with "
-                         "resume=True, --resume on the command line).")
-    if config.resume:
-        if not os.path.isdir(os.path.join(logdir, "checkpoints")):
-            raise ValueError(f"resume=True but logdir={logdir!r} holds no checkpoint: allowed is the directory of an "
-                             "earlier run.")
-        _check_writable(logdir)
-        return False
-    earlier = [name for name in RUN_FILES if os.path.exists(os.path.join(logdir, name))
-               and not (os.path.isdir(os.path.join(logdir, name)) and not os.listdir(os.path.join(logdir, name)))]
-    if earlier and not config.overwrite:
-        raise ValueError(f"logdir={logdir!r} holds an earlier run ({', '.join(earlier)}): allowed are resume=True "
-                         "(--resume) to continue it, a new logdir (--logdir), or overwrite=True (--overwrite) to delete "
-                         "the earlier run's files first.")
-    created = not os.path.exists(logdir)
-    try:
-        os.makedirs(logdir, exist_ok=True)
-    except OSError as error:
-        raise ValueError(f"logdir={logdir!r} cannot be created ({error.strerror or error}): allowed is a directory "
-                         "you can write to.") from None
-    _check_writable(logdir)
-    if earlier:
-        remove_run_files(logdir)
-    return created
-
-
-def _check_writable(logdir: str) -> None:
-    # A real write: os.access says yes to root even on file systems that refuse writes.
-    try:
-        with tempfile.TemporaryFile(dir=logdir):
-            pass
-    except OSError as error:
-        raise ValueError(f"logdir={logdir!r} is not writable ({error.strerror or error}): allowed is a directory you "
-                         "can write to.") from None
-
-
-def remove_run_files(logdir: str, remove_dir: bool = False) -> None:
-    """Removes what a run wrote into `logdir` (`RUN_FILES`); with `remove_dir`, also `logdir` itself
-    if nothing else is left in it."""
-    for name in RUN_FILES:
-        path = os.path.join(logdir, name)
-        if os.path.isdir(path) and not os.path.islink(path):
-            shutil.rmtree(path)
-        elif os.path.lexists(path):
-            os.remove(path)
-    if remove_dir and os.path.isdir(logdir) and not os.listdir(logdir):
-        os.rmdir(logdir)
+def _keep_new_run(prepared: logdirs.Prepared) -> None:
+    """The new run saved a checkpoint: the earlier run it replaces (overwrite) is deleted now."""
+    if prepared.aside:
+        logdirs.discard_aside(prepared.aside)
+        prepared.aside = None
 
 
 def _newest_intact(ckpt: Checkpointer, prepare, load):

@@ -40,6 +40,27 @@ def summary_lines(eval_metrics: dict) -> list[str]:
     return lines
 
 
+def cut_rows_after(csv_path: str, step: int) -> int:
+    """Drops the rows of `csv_path` logged after env step `step` (a run killed after its last checkpoint logged
+    them; the resume from that checkpoint logs those steps again, so each step appears once). Rewrites the file
+    atomically; returns the number of rows dropped (0 leaves the file untouched)."""
+    if not os.path.exists(csv_path):
+        return 0
+    with open(csv_path, newline="") as f:
+        rows = list(csv.reader(f))
+    if not rows or "env_steps" not in rows[0]:
+        return 0
+    column = rows[0].index("env_steps")
+    kept = [rows[0]] + [r for r in rows[1:] if len(r) > column and r[column] and float(r[column]) <= step]
+    if len(kept) == len(rows):
+        return 0
+    temporary = csv_path + ".tmp"
+    with open(temporary, "w", newline="") as f:
+        csv.writer(f).writerows(kept)
+    os.replace(temporary, csv_path)
+    return len(rows) - len(kept)
+
+
 def si(x: float) -> str:
     """1234567 -> '1.23M'."""
     for unit, scale in (("G", 1e9), ("M", 1e6), ("k", 1e3)):

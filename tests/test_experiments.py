@@ -287,7 +287,7 @@ def test_a_cross_row_holds_the_parts_evaluated(tmp_path):
 
 
 def test_a_table_shows_the_joint_speed_and_acceleration_means_where_evaluated(tmp_path):
-    """mean_joint_vel / mean_joint_acc columns: mean ± std over seeds from eval.json's episode/mean_joint_* keys,
+    """mean_joint_vel / mean_joint_acc columns: mean ± sample std over seeds from eval.json's episode/mean_joint_* keys,
     with their own headers and decimals; an eval.json from before the env reported them leaves the cells empty."""
     runs_dir, out = str(tmp_path / "runs"), str(tmp_path / "out")
     a, b = TOY.runs
@@ -310,7 +310,7 @@ def test_a_table_shows_the_joint_speed_and_acceleration_means_where_evaluated(tm
            "a from results/a_eval.json." in text
     assert "| mean joint speed (rad/s) | mean joint acceleration (rad/s²) |" in lines[0]
     cells = {line.split(" | ")[0]: line.split(" | ") for line in lines}
-    assert cells["| a"][4:6] == ["0.60 ± 0.10", "12.0 ± 2.0"]  # after the paper's target reached and ours
+    assert cells["| a"][4:6] == ["0.60 ± 0.14", "12.0 ± 2.8"]  # after the paper's target reached and ours; sample std
     assert cells["| b"][4:6] == ["", ""]
     with open(os.path.join(out, "toy", "table.json")) as f:
         rows = {r["run"]: r for r in json.load(f)["rows"]}

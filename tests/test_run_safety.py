@@ -4,6 +4,7 @@
 Every run is the PPO point-mass probe with the same length, so the tests share one compiled program.
 """
 
+import csv
 import dataclasses
 import json
 import os
@@ -16,7 +17,7 @@ import numpy as np
 import pytest
 
 import train as train_cli
-from agents import driver, presets
+from agents import driver, logger, presets
 from agents.checkpoint import Checkpointer
 from agents.config import config_json, merge_resume_config
 from agents.ppo import PPO
@@ -75,6 +76,65 @@ def test_overwrite_removes_the_earlier_run_first(earlier_run, tmp_path):
     assert len((logdir / "metrics.csv").read_text().splitlines()) == 1 + 1  # header + this run's one row
     assert (logdir / "notes.txt").read_text() == "mine"
     assert json.loads((logdir / "config.json").read_text())["overwrite"] is True
+
+
+def test_overwrite_leaves_no_aside_folder_after_a_finished_run(earlier_run, tmp_path):
+    logdir = tmp_path / "run"
+    shutil.copytree(earlier_run, logdir)
+    driver.train(_config(logdir, overwrite=True, log_every=SHORT))
+    assert sorted(p.name for p in logdir.iterdir() if p.name.startswith(".")) == []
+
+
+def test_overwrite_whose_new_run_fails_to_build_keeps_the_earlier_run(earlier_run, tmp_path, monkeypatch):
+    logdir = tmp_path / "run"
+    shutil.copytree(earlier_run, logdir)
+    before = _snapshot(logdir)
+    monkeypatch.setattr(driver, "build_programs", lambda *a, **k: (_ for _ in ()).throw(RuntimeError("no memory")))
+    with pytest.raises(RuntimeError, match="no memory"):
+        driver.train(_config(logdir, overwrite=True))
+    assert _snapshot(logdir) == before  # every file back, unchanged, and no aside folder left
+
+
+def test_overwrite_whose_new_run_diverges_before_a_checkpoint_keeps_the_earlier_run(earlier_run, tmp_path, monkeypatch):
+    logdir = tmp_path / "run"
+    shutil.copytree(earlier_run, logdir)
+    before = _snapshot(logdir)
+    monkeypatch.setattr(driver, "nonfinite_learner_metrics", lambda metrics: [min(k for k in metrics if k.startswith("loss/"))])
+    with pytest.raises(driver.NonFiniteLossError):
+        driver.train(_config(logdir, overwrite=True))
+    assert _snapshot(logdir) == before
+
+
+def test_rows_logged_after_the_last_checkpoint_are_dropped_on_resume(earlier_run, tmp_path):
+    """A run killed after its checkpoint at SHORT had logged rows beyond it; the resume logs those steps again,
+    so metrics.csv ends with each (step, seed) once."""
+    logdir = tmp_path / "run"
+    shutil.copytree(earlier_run, logdir)
+    with open(logdir / "metrics.csv") as f:
+        header, *rows = list(csv.reader(f))
+    beyond = [[str(SHORT + 5120) if name == "env_steps" else value for name, value in zip(header, rows[-1])]]
+    with open(logdir / "metrics.csv", "a", newline="") as f:
+        csv.writer(f).writerows(beyond)  # what the killed process logged after its last checkpoint
+    driver.train(presets.make_config("point-mass-ppo", num_timesteps=SHORT + 15360, logdir=str(logdir), resume=True,
+                                     log_every=5120, **QUIET))
+    with open(logdir / "metrics.csv") as f:
+        logged = [(r["env_steps"], r["seed"]) for r in csv.DictReader(f)]
+    assert len(logged) == len(set(logged))
+
+
+def test_cut_rows_after_keeps_the_rows_up_to_the_step(tmp_path):
+    path = tmp_path / "metrics.csv"
+    path.write_text("env_steps,seed,loss\n10,0,1.0\n10,1,1.1\n20,0,0.9\n20,1,0.8\n30,0,0.7\n30,1,0.6\n")
+    assert logger.cut_rows_after(str(path), 20) == 2
+    assert path.read_text().splitlines() == ["env_steps,seed,loss", "10,0,1.0", "10,1,1.1", "20,0,0.9", "20,1,0.8"]
+
+
+def test_cut_rows_after_leaves_a_file_without_later_rows_untouched(tmp_path):
+    path = tmp_path / "metrics.csv"
+    path.write_text("env_steps,seed,loss\n10,0,1.0\n")
+    before = os.path.getmtime(path)
+    assert logger.cut_rows_after(str(path), 10) == 0
+    assert os.path.getmtime(path) == before
 
 
 def test_overwrite_and_resume_together_are_refused(tmp_path, no_compile):

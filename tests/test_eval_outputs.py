@@ -1,0 +1,119 @@
+"""eval.py's output files: refused before any work when writing them would fail or destroy something (a run's or
+an export's own files, an existing file without --force, a directory, a folder that cannot be written, a video
+format whose writer is not installed), and written atomically."""
+
+import importlib.util
+import json
+
+import pytest
+
+import eval as eval_cli
+
+STANDSTILL = ["--env", "ur5e-reach", "--policy", "standstill", "--num-envs", "2", "--env.episode-length", "3",
+              "--env.substeps", "2"]
+
+
+@pytest.fixture
+def run_dir(tmp_path):
+    """A train.py logdir: config.json, metrics.csv, eval.json and a checkpoint step with its policy export."""
+    run = tmp_path / "run"
+    (run / "checkpoints" / "2048" / "policy").mkdir(parents=True)
+    for name in ("config.json", "metrics.csv", "eval.json"):
+        (run / name).write_text("the run's own\n")
+    (run / "checkpoints" / "2048" / "policy" / "policy.json").write_text("{}")
+    return run
+
+
+@pytest.fixture
+def export_dir(tmp_path):
+    """A shipped policy export (results/checkpoints/<preset>/)."""
+    export = tmp_path / "shipped"
+    export.mkdir()
+    (export / "policy.json").write_text("{}")
+    (export / "policy.npz").write_bytes(b"")
+    return export
+
+
+def test_a_file_of_an_export_is_refused(export_dir):
+    with pytest.raises(ValueError, match="is a file of the policy export"):
+        eval_cli.check_output("--json", str(export_dir / "policy.json"), force=True)
+
+
+def test_a_new_file_inside_an_export_is_refused(export_dir):
+    with pytest.raises(ValueError, match="is a file of the policy export"):
+        eval_cli.check_output("--json", str(export_dir / "report.json"), force=False)
+
+
+def test_a_runs_training_log_is_refused_even_with_force(run_dir):
+    with pytest.raises(ValueError, match="is a file of the run"):
+        eval_cli.check_output("--csv", str(run_dir / "metrics.csv"), force=True)
+
+
+def test_a_runs_eval_json_is_refused(run_dir):
+    with pytest.raises(ValueError, match="is a file of the run"):
+        eval_cli.check_output("--json", str(run_dir / "eval.json"), force=False)
+
+
+def test_a_file_under_a_runs_checkpoints_is_refused(run_dir):
+    with pytest.raises(ValueError, match="is a file of the run"):
+        eval_cli.check_output("--json", str(run_dir / "checkpoints" / "2048" / "eval.json"), force=False)
+
+
+def test_a_new_file_beside_a_runs_files_is_allowed(run_dir):
+    assert eval_cli.check_output("--json", str(run_dir / "eval_front.json"), force=False) is None
+
+
+def test_an_existing_file_needs_force(tmp_path):
+    (tmp_path / "out.json").write_text("mine")
+    with pytest.raises(ValueError, match="exists: allowed are a new path, or --force"):
+        eval_cli.check_output("--json", str(tmp_path / "out.json"), force=False)
+
+
+def test_force_allows_replacing_an_existing_file(tmp_path):
+    (tmp_path / "out.json").write_text("mine")
+    assert eval_cli.check_output("--json", str(tmp_path / "out.json"), force=True) is None
+
+
+def test_a_directory_is_refused(tmp_path):
+    with pytest.raises(ValueError, match="is a directory"):
+        eval_cli.check_output("--csv", str(tmp_path), force=True)
+
+
+def test_a_folder_that_is_a_file_is_refused(tmp_path):
+    (tmp_path / "plain").write_text("")
+    with pytest.raises(ValueError, match="cannot be written"):
+        eval_cli.check_output("--json", str(tmp_path / "plain" / "out.json"), force=False)
+
+
+def test_a_missing_folder_is_allowed_and_made(tmp_path):
+    out = tmp_path / "new" / "deeper" / "out.json"
+    eval_cli.main(STANDSTILL + ["--json", str(out)])
+    assert json.loads(out.read_text())["env_name"] == "ur5e-reach"
+
+
+def test_an_existing_output_is_refused_before_the_evaluation(tmp_path, monkeypatch):
+    (tmp_path / "out.csv").write_text("mine")
+    monkeypatch.setattr(eval_cli.evaluation, "run", lambda *a, **k: pytest.fail("evaluated before refusing"))
+    with pytest.raises(ValueError, match="exists"):
+        eval_cli.main(STANDSTILL + ["--csv", str(tmp_path / "out.csv")])
+    assert (tmp_path / "out.csv").read_text() == "mine"
+
+
+def test_force_replaces_the_file_whole(tmp_path):
+    out = tmp_path / "out.csv"
+    out.write_text("mine\n" * 100)
+    eval_cli.main(STANDSTILL + ["--csv", str(out), "--force"])
+    assert out.read_text().splitlines()[0].startswith("policy,env_name,env_config")
+
+
+def test_no_temporary_file_is_left_beside_the_output(tmp_path):
+    eval_cli.main(STANDSTILL + ["--json", str(tmp_path / "out.json")])
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out.json"]
+
+
+def test_an_mp4_without_its_writer_is_refused_before_the_evaluation(tmp_path, monkeypatch):
+    real = importlib.util.find_spec
+    monkeypatch.setattr(eval_cli.importlib.util, "find_spec", lambda name: None if name == "imageio_ffmpeg" else real(name))
+    monkeypatch.setattr(eval_cli.evaluation, "run", lambda *a, **k: pytest.fail("evaluated before refusing"))
+    with pytest.raises(ValueError, match="needs imageio_ffmpeg"):
+        eval_cli.main(STANDSTILL + ["--video", str(tmp_path / "x.mp4")])
