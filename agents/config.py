@@ -9,6 +9,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import re
 import types
 import typing
 import warnings
@@ -17,6 +18,7 @@ from typing import Any, Generic, Literal, TypeVar
 import jax
 
 import envs
+from envs.validation import INT32_MAX, integer
 from agents import registry
 from agents.loop import MULTI_DEVICE_MODES
 
@@ -133,9 +135,25 @@ def validate(config: TrainConfig) -> None:
                       ("checkpoint_every", 0), ("log_every", 0), ("stop_after_steps", 0), ("eval_envs", 0)):
         if int(getattr(config, name)) < low:
             raise ValueError(f"{name}={getattr(config, name)!r} is invalid: allowed is an integer >= {low}.")
+    for name in ("seeds", "keep_checkpoints", "eval_last_steps", "eval_envs"):  # array sizes and counts in JAX
+        integer(name, int(getattr(config, name)), 0)
+    for name in ("seed", "eval_seed"):  # PRNG seeds, int32 inside JAX
+        integer(name, getattr(config, name), -INT32_MAX - 1)
+    if config.seed + config.seeds - 1 > INT32_MAX:
+        raise ValueError(f"seed={config.seed} is invalid with seeds={config.seeds}: allowed is seed <= "
+                         f"{INT32_MAX - config.seeds + 1} (the last run's seed, seed + seeds - 1, is an int32).")
+    spu = env_steps_per_update(config)
+    for name in ("num_timesteps", "checkpoint_every", "log_every", "stop_after_steps"):  # counted in int32 updates
+        if math.ceil(int(getattr(config, name)) / spu) > INT32_MAX:
+            raise ValueError(f"{name}={getattr(config, name)!r} is invalid: allowed is at most "
+                             f"{INT32_MAX * spu:,} env steps ({INT32_MAX:,} updates "
+                             f"of {spu:,}: the update counter is int32, as JAX computes).")
     if not config.stop_after_seconds >= 0:  # also refuses NaN
         raise ValueError(f"stop_after_seconds={config.stop_after_seconds!r} is invalid: allowed is a number >= 0 "
                          "(0 = no limit).")
+    if config.preset and (not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9._-]*", config.preset) or ".." in config.preset):
+        raise ValueError(f"preset={config.preset!r} is invalid: allowed is a name of letters, digits, '.', '_' and '-' "
+                         "(it names the default logdir, runs/<preset>/<date-time>).")
     if config.multi_device not in MULTI_DEVICE_MODES:
         raise ValueError(f"multi_device={config.multi_device!r} is unknown: allowed are {', '.join(MULTI_DEVICE_MODES)}.")
     if config.matmul_precision not in PRECISIONS:

@@ -6,9 +6,18 @@ from __future__ import annotations
 import math
 import numbers
 
+INT32_MAX = 2**31 - 1
+"""The largest integer JAX holds: it computes in int32 and float32 (64-bit types are off)."""
+FLOAT32_MAX = 3.4028234663852886e38
+"""The largest finite float32: a larger finite Python float becomes inf inside the compiled programs."""
+
 
 def _is_real(value) -> bool:
     return isinstance(value, numbers.Real) and not isinstance(value, bool)
+
+
+def _finite32(value) -> bool:
+    return _is_real(value) and math.isfinite(float(value)) and abs(float(value)) <= FLOAT32_MAX
 
 
 def choice(name: str, value, allowed) -> None:
@@ -18,34 +27,42 @@ def choice(name: str, value, allowed) -> None:
 
 def positive(name: str, value, strict: bool = True) -> None:
     """A finite real number > 0 (>= 0 with strict=False); numpy scalars count, bools and strings do not."""
-    ok = _is_real(value) and math.isfinite(float(value))
+    ok = _finite32(value)
     if not ok or (float(value) <= 0 if strict else float(value) < 0):
-        raise ValueError(f"{name}={value!r} is invalid: allowed is a finite number {'>' if strict else '>='} 0.")
+        raise ValueError(f"{name}={value!r} is invalid: allowed is a finite number {'>' if strict else '>='} 0 "
+                         f"(at most {FLOAT32_MAX:.4g}, float32's largest).")
 
 
 def finite(name: str, value) -> None:
     """A finite real number (numpy scalars count; bools and strings do not)."""
-    if not (_is_real(value) and math.isfinite(float(value))):
-        raise ValueError(f"{name}={value!r} is invalid: allowed is a finite number.")
+    if not _finite32(value):
+        raise ValueError(f"{name}={value!r} is invalid: allowed is a finite number (|x| <= {FLOAT32_MAX:.4g}, float32's "
+                         "largest).")
 
 
 def integer(name: str, value, minimum: int, maximum: int | None = None) -> None:
-    """An integer >= minimum (and <= maximum if given); numpy integers count, bools, floats and strings do not."""
+    """An integer >= minimum and <= maximum (default: INT32_MAX); numpy integers count, bools, floats and strings
+    do not."""
     if (not isinstance(value, numbers.Integral) or isinstance(value, bool) or value < minimum
-            or (maximum is not None and value > maximum)):
-        allowed = f"an integer >= {minimum}" if maximum is None else f"an integer in [{minimum}, {maximum}]"
+            or value > (INT32_MAX if maximum is None else maximum)):
+        if maximum is not None:
+            allowed = f"an integer in [{minimum}, {maximum}]"
+        elif isinstance(value, numbers.Integral) and value > INT32_MAX:
+            allowed = f"an integer in [{minimum}, {INT32_MAX}] (int32, as JAX computes)"
+        else:
+            allowed = f"an integer >= {minimum}"
         raise ValueError(f"{name}={value!r} is invalid: allowed is {allowed}.")
 
 
 def in_range(name: str, value, low: float, high: float) -> None:
     """A real number in [low, high]."""
-    if not (_is_real(value) and low <= float(value) <= high):
+    if not (_finite32(value) and low <= float(value) <= high):
         raise ValueError(f"{name}={value!r} is invalid: allowed is a number in [{float(low)}, {float(high)}].")
 
 
 def interval(name: str, value, strict: bool = True) -> None:
     """A (min, max) tuple of finite numbers, min <= max, both > 0 (>= 0 with strict=False)."""
-    ok = (isinstance(value, tuple) and len(value) == 2 and all(_is_real(v) and math.isfinite(float(v)) for v in value)
+    ok = (isinstance(value, tuple) and len(value) == 2 and all(_finite32(v) for v in value)
           and all(float(v) > 0 if strict else float(v) >= 0 for v in value) and float(value[0]) <= float(value[1]))
     if not ok:
         raise ValueError(f"{name}={value!r} is invalid: allowed is a tuple (min, max) of finite numbers "

@@ -1,10 +1,14 @@
 """The shared config checks (envs/validation.py) on the values a user may type: strings, bools,
 numpy scalars, infinities."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
 import envs
+from agents.config import validate
+from agents.presets import make_config
 from envs import validation
 
 
@@ -62,3 +66,52 @@ def test_bounds_leave_the_papers_values_alone():
 def test_env_name_of_the_wrong_kind_is_a_value_error(name):
     with pytest.raises(ValueError, match=r"env=.* is unknown: allowed are .*ur5e-reach"):
         envs.make(name)
+
+
+# Values that fit Python but not the int32 / float32 that JAX computes in are refused where they are made.
+
+def test_an_integer_beyond_int32_is_refused_naming_int32():
+    with pytest.raises(ValueError, match=r"episode_length=2147483648 is invalid: allowed is an integer in "
+                                         r"\[1, 2147483647\] \(int32"):
+        envs.make_config("ur5e-reach", episode_length=2**31).validate()
+
+
+def test_the_largest_int32_is_allowed():
+    validation.integer("n", 2**31 - 1, 1)
+
+
+def test_a_weight_beyond_float32_is_refused():
+    with pytest.raises(ValueError, match=r"w_dist=1e\+308 is invalid: allowed is a finite number >= 0 \(at most 3.403e\+38"):
+        envs.make_config("ur5e-reach", w_dist=1e308).validate()
+
+
+def test_a_finite_number_beyond_float32_is_refused():
+    with pytest.raises(ValueError, match=r"x=1e\+39 is invalid: allowed is a finite number"):
+        validation.finite("x", 1e39)
+
+
+def test_the_largest_float32_is_allowed():
+    validation.finite("x", 3.4e38)
+
+
+def test_a_run_longer_than_int32_updates_is_refused_before_anything_runs():
+    config = make_config("point-mass-sac", num_timesteps=10**12)  # 16 env steps an update: 6.25e10 updates
+    with pytest.raises(ValueError, match=r"num_timesteps=1000000000000 is invalid: allowed is at most "
+                                         r"34,359,738,352 env steps \(2,147,483,647 updates of 16"):
+        validate(config)
+
+
+def test_a_seed_beyond_int32_is_refused():
+    with pytest.raises(ValueError, match=r"seed=2147483648 is invalid"):
+        validate(make_config("point-mass-ppo", seed=2**31))
+
+
+def test_the_last_seed_of_several_must_fit_int32():
+    with pytest.raises(ValueError, match=r"seed=2147483647 is invalid with seeds=2: allowed is seed <= 2147483646"):
+        validate(make_config("point-mass-ppo", seed=2**31 - 1, seeds=2))
+
+
+@pytest.mark.parametrize("name", ["../outside", "a/b", "..", ".hidden"])
+def test_a_preset_name_that_would_leave_runs_is_refused(name):
+    with pytest.raises(ValueError, match=r"preset=.* is invalid: allowed is a name of letters, digits"):
+        validate(dataclasses.replace(make_config("point-mass-ppo"), preset=name))
