@@ -201,9 +201,11 @@ class GymVectorEnv(gym.vector.VectorEnv):
         Returns `(obs, rewards, terminations, truncations, infos)` as numpy arrays; ended episodes
         restart in the same step (module docstring: SAME_STEP keys of `infos`).
         """
+        if getattr(self, "closed", False):  # gymnasium's VectorEnv.close() sets it
+            raise RuntimeError("step() after close(): this env is closed; make a new one.")
         if self.state is None:
             raise RuntimeError("step() before reset(): call reset() first.")
-        actions = np.asarray(actions, dtype=np.float32)
+        actions = as_actions(actions, "actions")
         if actions.shape != self.action_space.shape:
             raise ValueError(f"actions have shape {actions.shape}: allowed is {self.action_space.shape} "
                              "(num_envs, action_size).")
@@ -231,6 +233,10 @@ class GymVectorEnv(gym.vector.VectorEnv):
     def close_extras(self, **kwargs) -> None:
         """Drops the batched state (nothing else holds resources)."""
         self.state = None
+
+    def render(self):
+        raise NotImplementedError("render() is not supported here (render_modes is empty): for pictures use the "
+                                  "envs.render module or eval.py --video.")
 
     def __repr__(self) -> str:
         return f"GymVectorEnv({type(self.env).__name__}, num_envs={self.num_envs})"
@@ -272,7 +278,7 @@ class GymEnv(gym.Env):
         truncated, info)` with the step's metrics in `info` (numpy float32 scalars)."""
         if self._needs_reset:
             raise RuntimeError("step() needs reset() first (at the start and after an episode ended).")
-        action = np.asarray(action, dtype=np.float32)
+        action = as_actions(action, "action")
         if action.shape != self.action_space.shape:
             raise ValueError(f"action has shape {action.shape}: allowed is {self.action_space.shape}.")
         obs, rewards, terminations, truncations, infos = self.vector_env.step(action[None])
@@ -286,6 +292,19 @@ class GymEnv(gym.Env):
     def close(self) -> None:
         """Releases the underlying vector environment."""
         self.vector_env.close()
+
+    def render(self):
+        raise NotImplementedError("render() is not supported here (render_modes is empty): for pictures use the "
+                                  "envs.render module or eval.py --video.")
+
+
+def as_actions(actions, name: str) -> np.ndarray:
+    """`actions` as a float32 array; ValueError naming what came for anything that is not numbers."""
+    try:
+        array = np.asarray(actions, dtype=np.float32)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name}={actions!r} is invalid: allowed are numbers in [-1, 1].") from None
+    return array
 
 
 def make_vec(name: str, num_envs: int, *, episode_length: int | None = None, **options) -> GymVectorEnv:

@@ -193,6 +193,33 @@ def test_invalid_arguments_are_rejected_at_the_boundary():
         vec.reset(options={"reset_mask": np.array([0, 1])})
 
 
+def test_step_after_close_says_the_env_is_closed():
+    vec = eg.make_vec("point-mass", 2)
+    vec.reset(seed=0)
+    vec.close()
+    with pytest.raises(RuntimeError, match=r"step\(\) after close\(\): this env is closed"):
+        vec.step(np.zeros((2, 2)))
+
+
+def test_string_actions_are_refused_naming_them():
+    vec = eg.make_vec("point-mass", 2)
+    vec.reset(seed=0)
+    with pytest.raises(ValueError, match=r"actions='left' is invalid: allowed are numbers in \[-1, 1\]"):
+        vec.step("left")
+
+
+def test_single_env_string_action_is_refused_naming_it():
+    env = eg.GymEnv(envs.make("point-mass"))
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match=r"action=\['up', 'down'\] is invalid"):
+        env.step(["up", "down"])
+
+
+def test_render_says_what_to_use_instead():
+    with pytest.raises(NotImplementedError, match="eval.py --video"):
+        eg.make_vec("point-mass", 2).render()
+
+
 def test_gymnasium_env_checker_passes_on_the_single_env():
     env = eg.make("point-mass")
     with warnings.catch_warnings(record=True) as caught:
