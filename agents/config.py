@@ -260,10 +260,6 @@ def merge_resume_config(config: TrainConfig, saved: TrainConfig, done_steps: int
     """The saved config, with only the run-control fields (`RUN_FIELDS`) taken from `config`;
     ValueError naming the first other field that differs, or a num_timesteps below the `done_steps`
     env steps the checkpoint has done. A changed num_timesteps is stored with a warning saying so."""
-    if config.num_timesteps < done_steps:
-        raise ValueError(f"num_timesteps={config.num_timesteps} is below the checkpoint's {done_steps} env steps (the "
-                         f"stored run's num_timesteps is {saved.num_timesteps}): allowed on --resume is "
-                         f"num_timesteps >= {done_steps}.")
     for field in dataclasses.fields(TrainConfig):
         if field.name in RUN_FIELDS or field.name == "preset":
             continue
@@ -276,6 +272,11 @@ def merge_resume_config(config: TrainConfig, saved: TrainConfig, done_steps: int
                             f"{field.name}.{sub.name}={getattr(mine, sub.name)!r} differs from the checkpoint's "
                             f"{getattr(theirs, sub.name)!r}: allowed on --resume is only the checkpoint's value.")
             raise ValueError(f"{field.name}={mine!r} differs from the checkpoint's {theirs!r}: allowed on --resume is only the checkpoint's value.")
+    spu = env_steps_per_update(saved)  # runs end on whole updates: a num_timesteps rounds up to one
+    if math.ceil(config.num_timesteps / spu) * spu < done_steps:
+        raise ValueError(f"num_timesteps={config.num_timesteps} is below the checkpoint's {done_steps} env steps (the "
+                         f"stored run's num_timesteps is {saved.num_timesteps}): allowed on --resume is "
+                         f"num_timesteps >= {done_steps - spu + 1} (runs end on whole updates of {spu} env steps).")
     if config.num_timesteps != saved.num_timesteps:
         stretched = " The learning-rate schedule is stretched to the new length." if saved.algo.schedule_spans_run else ""
         warnings.warn(f"num_timesteps={config.num_timesteps} differs from the checkpoint's {saved.num_timesteps}: the "

@@ -188,13 +188,27 @@ def test_resume_takes_the_untyped_options_from_the_stored_run(tmp_path, no_compi
 def test_resume_with_fewer_timesteps_than_done_is_refused_and_a_change_is_noted(earlier_run, no_compile):
     before = _snapshot(earlier_run)
     with pytest.raises(ValueError, match=rf"num_timesteps=20480 is below the checkpoint's {SHORT} env steps .* "
-                                         rf"allowed on --resume is num_timesteps >= {SHORT}"):
+                                         rf"allowed on --resume is num_timesteps >= {SHORT - 5120 + 1} \(runs end on "
+                                         r"whole updates of 5120 env steps\)"):
         driver.train(dataclasses.replace(_config(earlier_run, resume=True), num_timesteps=20480))
     assert _snapshot(earlier_run) == before
     saved = _config(earlier_run)
     with pytest.warns(UserWarning, match=rf"num_timesteps=40960 differs from the checkpoint's {SHORT}: .* config.json"):
         merged = merge_resume_config(dataclasses.replace(saved, num_timesteps=40960), saved, done_steps=SHORT)
     assert merged.num_timesteps == 40960
+
+
+def test_a_run_whose_num_timesteps_is_not_whole_updates_resumes_with_its_own_config(earlier_run):
+    """A run of 28,000 env steps ends after 6 updates of 5,120 (30,720 steps): its own num_timesteps is allowed."""
+    saved = dataclasses.replace(_config(earlier_run), num_timesteps=28_000)
+    assert merge_resume_config(saved, saved, done_steps=SHORT).num_timesteps == 28_000
+
+
+def test_a_changed_field_is_named_before_num_timesteps_on_resume(earlier_run):
+    saved = _config(earlier_run)
+    changed = dataclasses.replace(saved, num_timesteps=10240, algo=dataclasses.replace(saved.algo, learning_rate=1e-3))
+    with pytest.raises(ValueError, match=r"algo.learning_rate=0.001 differs from the checkpoint's"):
+        merge_resume_config(changed, saved, done_steps=SHORT)
 
 
 @pytest.mark.parametrize("where, message", [
