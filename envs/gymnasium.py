@@ -93,12 +93,13 @@ class GymVectorEnv(gym.vector.VectorEnv):
     `episode_length`, `state` (the current batched `envs.State`, None before the first reset).
     """
 
-    metadata: dict[str, Any] = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": []}
+    metadata: dict[str, Any] = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": ["rgb_array"]}
 
-    def __init__(self, env: Env, num_envs: int, episode_length: int | None = None):
+    def __init__(self, env: Env, num_envs: int, episode_length: int | None = None, render_mode: str | None = None):
         """Wraps the unwrapped environment `env` (from `envs.make`) in `num_envs` copies.
 
-        `episode_length` defaults to the environment's `config.episode_length`.
+        `episode_length` defaults to the environment's `config.episode_length`; `render_mode` "rgb_array"
+        (arm envs) makes `render()` return an image of each copy.
         """
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
             raise ValueError(f"num_envs={num_envs!r} is invalid: allowed is an integer >= 1.")
@@ -107,7 +108,7 @@ class GymVectorEnv(gym.vector.VectorEnv):
         self.wrapped = wrap(self.env, episode_length=episode_length)
         self.episode_length = self.wrapped.episode_length  # forwarded from the EpisodeWrapper
         self.metadata = dict(type(self).metadata)
-        self.render_mode = None
+        self.render_mode = check_render_mode(self.env, render_mode)
 
         self.single_observation_space = spaces.Box(-np.inf, np.inf, (self.env.observation_size,), np.float32)
         self.single_action_space = spaces.Box(-1.0, 1.0, (self.env.action_size,), np.float32)
@@ -234,9 +235,15 @@ class GymVectorEnv(gym.vector.VectorEnv):
         """Drops the batched state (nothing else holds resources)."""
         self.state = None
 
-    def render(self):
-        raise NotImplementedError("render() is not supported here (render_modes is empty): for pictures use the "
-                                  "envs.render module or eval.py --video.")
+    def render(self) -> tuple[np.ndarray, ...] | None:
+        """With render_mode "rgb_array", one (height, width, 3) image of each copy's current state; else None."""
+        if self.render_mode is None:
+            return None
+        if self.state is None:
+            raise RuntimeError("render() before reset(): call reset() first.")
+        from envs import render  # sets up headless OpenGL on first use; the bridge works without it
+
+        return tuple(render.render_state(self.env, self.state, index=i) for i in range(self.num_envs))
 
     def __repr__(self) -> str:
         return f"GymVectorEnv({type(self.env).__name__}, num_envs={self.num_envs})"
@@ -251,14 +258,14 @@ class GymEnv(gym.Env):
     `step` returns its terminal observation; call `reset()` before stepping again.
     """
 
-    metadata: dict[str, Any] = {"render_modes": []}
+    metadata: dict[str, Any] = {"render_modes": ["rgb_array"]}
 
-    def __init__(self, env: Env, episode_length: int | None = None):
-        """Wraps the unwrapped environment `env`; `episode_length` as in `GymVectorEnv`."""
-        self.vector_env = GymVectorEnv(env, 1, episode_length)
+    def __init__(self, env: Env, episode_length: int | None = None, render_mode: str | None = None):
+        """Wraps the unwrapped environment `env`; `episode_length` and `render_mode` as in `GymVectorEnv`."""
+        self.vector_env = GymVectorEnv(env, 1, episode_length, render_mode)
         self.observation_space = self.vector_env.single_observation_space
         self.action_space = self.vector_env.single_action_space
-        self.render_mode = None
+        self.render_mode = self.vector_env.render_mode
         self._needs_reset = True
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict]:
@@ -293,9 +300,20 @@ class GymEnv(gym.Env):
         """Releases the underlying vector environment."""
         self.vector_env.close()
 
-    def render(self):
-        raise NotImplementedError("render() is not supported here (render_modes is empty): for pictures use the "
-                                  "envs.render module or eval.py --video.")
+    def render(self) -> np.ndarray | None:
+        """With render_mode "rgb_array", a (height, width, 3) image of the current state; else None."""
+        frames = self.vector_env.render()
+        return None if frames is None else frames[0]
+
+
+def check_render_mode(env: Env, render_mode: str | None) -> str | None:
+    """`render_mode` if the env can draw it: None, or "rgb_array" for an arm env (a robot model to render)."""
+    if render_mode not in (None, "rgb_array"):
+        raise ValueError(f"render_mode={render_mode!r} is invalid: allowed are None and 'rgb_array'.")
+    if render_mode and getattr(env, "robot", None) is None:
+        raise ValueError(f"render_mode={render_mode!r} is invalid for {type(env).__name__}: allowed is None (only "
+                         "the arm envs have a model to render).")
+    return render_mode
 
 
 def as_actions(actions, name: str) -> np.ndarray:
@@ -307,17 +325,18 @@ def as_actions(actions, name: str) -> np.ndarray:
     return array
 
 
-def make_vec(name: str, num_envs: int, *, episode_length: int | None = None, **options) -> GymVectorEnv:
+def make_vec(name: str, num_envs: int, *, episode_length: int | None = None, render_mode: str | None = None,
+             **options) -> GymVectorEnv:
     """`GymVectorEnv` of `num_envs` copies of `envs.make(name, **options)`.
 
     Example: `make_vec("ur5e-reach-avoid", 64, obstacle_radius=0.2)`.
     """
-    return GymVectorEnv(registry.make(name, **options), num_envs, episode_length)
+    return GymVectorEnv(registry.make(name, **options), num_envs, episode_length, render_mode)
 
 
-def make(name: str, *, episode_length: int | None = None, **options) -> GymEnv:
+def make(name: str, *, episode_length: int | None = None, render_mode: str | None = None, **options) -> GymEnv:
     """Single `GymEnv` of `envs.make(name, **options)`."""
-    return GymEnv(registry.make(name, **options), episode_length)
+    return GymEnv(registry.make(name, **options), episode_length, render_mode)
 
 
 def to_sb3(env: GymVectorEnv):

@@ -215,9 +215,35 @@ def test_single_env_string_action_is_refused_naming_it():
         env.step(["up", "down"])
 
 
-def test_render_says_what_to_use_instead():
-    with pytest.raises(NotImplementedError, match="eval.py --video"):
-        eg.make_vec("point-mass", 2).render()
+def test_rgb_array_render_draws_each_copy_of_an_arm():
+    vec = eg.make_vec("ur5e-reach", 2, render_mode="rgb_array", substeps=2)
+    vec.reset(seed=0)
+    first, second = vec.render()
+    assert first.shape[2] == 3 and first.dtype == np.uint8
+    assert np.any(first != second)  # two sampled poses and targets, two pictures
+
+
+def test_single_env_rgb_array_render_is_the_picture_of_its_state():
+    env = eg.make("ur5e-reach", render_mode="rgb_array", substeps=2)
+    env.reset(seed=0)
+    frame = env.render()
+    assert frame.ndim == 3 and frame.std() > 0  # not a blank image
+
+
+def test_render_without_a_render_mode_returns_none():
+    vec = eg.make_vec("point-mass", 2)
+    vec.reset(seed=0)
+    assert vec.render() is None
+
+
+def test_rgb_array_is_refused_for_an_env_without_a_model():
+    with pytest.raises(ValueError, match=r"render_mode='rgb_array' is invalid for PointMass"):
+        eg.make_vec("point-mass", 2, render_mode="rgb_array")
+
+
+def test_an_unknown_render_mode_is_refused():
+    with pytest.raises(ValueError, match=r"render_mode='human' is invalid: allowed are None and 'rgb_array'"):
+        eg.make_vec("ur5e-reach", 2, render_mode="human")
 
 
 def test_gymnasium_env_checker_passes_on_the_single_env():

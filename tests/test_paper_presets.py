@@ -1,4 +1,4 @@
-"""The `*-paper` presets carry exactly the settings the paper states, field by field.
+"""The `*-paper` presets hold exactly the settings the paper states, field by field.
 
 Each row of PAPER names a preset, a config field (`env.` or `algo.` or the run's), the value and the paper's
 section that states it. The one value the paper leaves open, the relative action's scale, is read literally:
