@@ -54,14 +54,15 @@ def check(name: str, env) -> None:
                              "target_sampling='reachable'.")
 
 
-def joint_target_action(config, robot, target, qpos):
+def joint_target_action(config, robot, target, base):
     """The action that sets the position servos' target to joint configuration `target` (as far as
-    one step allows in relative mode), inverting `ArmEnv.action_to_ctrl`."""
+    one step allows in relative mode), inverting `ArmEnv.action_to_ctrl`; `base` is what a relative
+    delta is added to (the joint positions, or the last targets with `relative_to="target"`)."""
     low, high = robot.joint_low, robot.joint_high
     if config.action == "absolute":
         action = 2.0 * (target - low) / (high - low) - 1.0
     else:
-        action = (target - qpos) / config.action_scale
+        action = (target - base) / config.action_scale
     return jnp.clip(action, -1.0, 1.0)
 
 
@@ -76,9 +77,10 @@ def make_act(env):
         random = jax.random.uniform(key, shape, minval=-1.0, maxval=1.0)
         if robot is None:  # probe tasks (point mass): velocity control, 0 stands still
             return jnp.where(index == 0, random, jnp.zeros(shape))
-        qpos = state.pipeline_state.qpos
-        still = joint_target_action(base.config, robot, start.pipeline_state.qpos, qpos)
-        ik = joint_target_action(base.config, robot, state.info["target_qpos"], qpos)
+        data = state.pipeline_state
+        delta_base = data.ctrl if base.config.relative_to == "target" else data.qpos
+        still = joint_target_action(base.config, robot, start.pipeline_state.qpos, delta_base)
+        ik = joint_target_action(base.config, robot, state.info["target_qpos"], delta_base)
         return jnp.select([index == 0, index == 1], [random, still], ik)
 
     return act

@@ -32,7 +32,7 @@ def _arm_spec(robot: str, task: str) -> EnvSpec:
     config_cls, env_cls = (ReachConfig, Reach) if task == "reach" else (ReachAvoidConfig, ReachAvoid)
 
     def build(config):
-        return env_cls(ROBOTS[robot](gravity_compensation=config.gravity_compensation), config)
+        return env_cls(ROBOTS[robot](gravity_compensation=config.gravity_compensation, integrator=config.integrator), config)
 
     def check(config):
         config.validate_for_robot(robot, *robot_bounds(ROBOTS[robot]))

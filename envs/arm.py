@@ -142,7 +142,8 @@ class ArmEnv(Env):
         action = jnp.clip(action, -1.0, 1.0)
         # One-step latency applies the action chosen a step earlier (kept in prev_action).
         applied = state.info["prev_action"] if cfg.action_latency else action
-        data = state.pipeline_state.replace(ctrl=self.action_to_ctrl(applied, state.pipeline_state.qpos))
+        data = state.pipeline_state
+        data = data.replace(ctrl=self.action_to_ctrl(applied, data.ctrl if cfg.relative_to == "target" else data.qpos))
         start = state.info["num_steps"] * cfg.substeps  # physics steps of the episode before this one
 
         def distances(geom_xpos, geom_xmat, k):
@@ -231,13 +232,14 @@ class ArmEnv(Env):
             return 2.0 * (qpos - low) / (high - low) - 1.0
         return jnp.zeros_like(qpos)
 
-    def action_to_ctrl(self, action: jax.Array, qpos: jax.Array) -> jax.Array:
-        """Joint position targets from an action in [-1, 1], clipped to the joint range."""
+    def action_to_ctrl(self, action: jax.Array, base: jax.Array) -> jax.Array:
+        """Joint position targets from an action in [-1, 1], clipped to the joint range; a relative
+        action is a delta from `base` (the joint positions or the last targets, `config.relative_to`)."""
         low, high = self.robot.joint_low, self.robot.joint_high
         if self.config.action == "absolute":
             target = low + 0.5 * (action + 1.0) * (high - low)
         else:
-            target = qpos + self.config.action_scale * action
+            target = base + self.config.action_scale * action
         return jnp.clip(target, low, high)
 
     def candidates(self, quantity: str) -> int:

@@ -14,6 +14,8 @@ from envs.obstacles import MAX_OBSTACLES, MOTIONS
 from envs.validation import below, choice, integer, interval, positive
 
 ACTIONS = ("relative", "absolute")
+RELATIVE_BASES = ("position", "target")
+INTEGRATORS = ("model", "implicitfast", "euler")
 REWARDS = ("sparse", "semi_sparse", "dense")
 SUCCESS_MODES = ("reach_and_stay", "reach_and_terminate")
 WORKSPACES = ("full", "front", "upper", "pandagym")
@@ -49,6 +51,10 @@ class ReachConfig:
     """Radians per step commanded by a relative action of magnitude 1 (ignored for absolute). The
     paper does not state it; 0.2 trained the UR5e reach much faster than 0.1 and the UR5e presets
     use 0.3 (results: action-scale study). The joints' damping keeps them within their velocity limits."""
+    relative_to: Literal["position", "target"] = "position"
+    """What a relative action's delta is added to: `position`, the current joint positions (the paper's
+    "deltas that are added to the current joint positions"); `target`, the previous step's joint targets, so
+    a zero action holds the commanded pose exactly (not in the paper; results/fidelity)."""
     observation: tuple[str, ...] = ("joint_pos", "ee_pos", "target_pos", "ee_to_target")
     """Observation parts, concatenated in this order. Reach: joint_pos, joint_vel, joint_acc,
     ee_pos, ee_vel, target_pos, ee_to_target, prev_action, and two not in the paper: joint_sin_cos
@@ -99,6 +105,10 @@ class ReachConfig:
     """Physics steps of 2 ms per environment step."""
     gravity_compensation: bool = False
     """Compensate gravity in the joints as the real arms' controllers do (not in the paper)."""
+    integrator: Literal["model", "implicitfast", "euler"] = "model"
+    """MuJoCo's integrator: `model`, the robot model's own (UR5e implicitfast as Menagerie's, Panda Euler;
+    assets/README.md), or implicitfast or euler (MuJoCo's default, for an `<option>` that names none: the paper
+    lists its solver options but no integrator; results/fidelity)."""
     backend: Literal["auto", "mjx", "mujoco"] = "auto"
     """Physics backend (`envs.physics`): mjx (MuJoCo MJX inside the jitted step: GPU training), mujoco
     (MuJoCo's C library on the CPU cores through a callback: evaluation, notebooks and Gymnasium on a CPU,
@@ -133,6 +143,8 @@ class ReachConfig:
     def validate(self) -> None:
         """Raises `ValueError` on an impossible or unknown value."""
         choice("action", self.action, ACTIONS)
+        choice("relative_to", self.relative_to, RELATIVE_BASES)
+        choice("integrator", self.integrator, INTEGRATORS)
         choice("reward", self.reward, REWARDS)
         choice("success", self.success, SUCCESS_MODES)
         choice("workspace", self.workspace, WORKSPACES)

@@ -22,6 +22,8 @@ from mujoco import mjx
 from envs import collision
 
 ASSETS = Path(__file__).resolve().parents[2] / "assets"
+# `ReachConfig.integrator` -> MuJoCo's enum.
+INTEGRATORS = {"implicitfast": mujoco.mjtIntegrator.mjINT_IMPLICITFAST, "euler": mujoco.mjtIntegrator.mjINT_EULER}
 
 
 class Kinematics(NamedTuple):
@@ -70,8 +72,10 @@ class Robot(abc.ABC):
     def limited_range(self) -> tuple[np.ndarray, np.ndarray]:
         """The reduced joint range of `init_range="limited"` initial poses, (low, high)."""
 
-    def __init__(self, gravity_compensation: bool = False):
+    def __init__(self, gravity_compensation: bool = False, integrator: str = "model"):
         spec = mujoco.MjSpec.from_file(str(ASSETS / self.xml_file))
+        if integrator != "model":
+            spec.option.integrator = INTEGRATORS[integrator]
         if gravity_compensation:
             # Passive gravity compensation of every robot body, as the real arms' controllers do.
             for body in spec.bodies:
@@ -80,6 +84,7 @@ class Robot(abc.ABC):
         model = spec.compile()
         self.mj_model = model
         self.gravity_compensation = gravity_compensation
+        self.integrator = integrator
         self.nq = model.nq
         self.joint_low = model.jnt_range[:, 0].astype(np.float32)
         self.joint_high = model.jnt_range[:, 1].astype(np.float32)
