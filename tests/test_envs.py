@@ -423,6 +423,79 @@ def test_actions_clipped_to_joint_range():
     np.testing.assert_allclose(rel.action_to_ctrl(jnp.full(7, 0.5), q - 0.5), high - 0.55 + 0.1, atol=1e-6)
 
 
+def _two_relative_steps(relative_to):
+    """Start, first and second state of a native UR5e episode under two fixed relative actions."""
+    env = envs.make("ur5e-reach", backend="mujoco", action_scale=0.5, relative_to=relative_to)
+    first = env.reset(jax.random.PRNGKey(3))
+    a1, a2 = jnp.full(6, 0.4), jnp.full(6, -0.1)
+    second = env.step(first, a1)
+    return env, first, second, env.step(second, a2)
+
+
+def test_relative_to_target_adds_deltas_to_the_last_targets():
+    """relative_to="target": two steps of 0.5 * 0.4 and 0.5 * -0.1 rad command start + 0.15 rad, wherever
+    the servos got to in between (clipped to the joint range)."""
+    env, start, _, last = _two_relative_steps("target")
+    expected = np.clip(np.asarray(start.pipeline_state.qpos) + 0.15, env.robot.joint_low, env.robot.joint_high)
+    np.testing.assert_allclose(last.pipeline_state.ctrl, expected, atol=1e-6)
+
+
+def test_relative_to_position_adds_deltas_to_the_joint_positions():
+    """The paper's reading: the second target is the joint positions after the first step - 0.05 rad."""
+    env, _, middle, last = _two_relative_steps("position")
+    expected = np.clip(np.asarray(middle.pipeline_state.qpos) - 0.05, env.robot.joint_low, env.robot.joint_high)
+    np.testing.assert_allclose(last.pipeline_state.ctrl, expected, atol=1e-6)
+
+
+def test_zero_relative_action_holds_the_targets_only_with_relative_to_target():
+    """Gravity sags the arm under a position servo: re-targeting the sagged pose (the paper's reading) lets
+    the targets drift, re-using the last targets keeps them."""
+    drift = {}
+    for relative_to in ("position", "target"):
+        env = envs.make("ur5e-reach", backend="mujoco", relative_to=relative_to)
+        start = state = env.reset(jax.random.PRNGKey(0))
+        for _ in range(5):
+            state = env.step(state, jnp.zeros(6))
+        drift[relative_to] = np.abs(np.asarray(state.pipeline_state.ctrl - start.pipeline_state.qpos)).max()
+    assert drift["target"] == 0.0
+    assert drift["position"] > 1e-3
+
+
+@pytest.mark.parametrize("robot, expected", [("ur5e", mujoco.mjtIntegrator.mjINT_IMPLICITFAST),
+                                             ("panda", mujoco.mjtIntegrator.mjINT_EULER)])
+def test_integrator_model_keeps_the_robot_files_integrator(robot, expected):
+    assert envs.make(f"{robot}-reach").robot.mj_model.opt.integrator == expected
+
+
+def test_integrator_euler_steps_as_mujoco_with_euler():
+    """integrator="euler": 10 native env steps against `mj_step` on the model file with its integrator set
+    to Euler (an independent MjModel), from the same start and with the controls the env applied."""
+    from envs.robots.base import ASSETS
+    env = envs.make("ur5e-reach", backend="mujoco", integrator="euler", action_scale=1.0)
+    reference = mujoco.MjModel.from_xml_path(str(ASSETS / env.robot.xml_file))
+    reference.opt.integrator = mujoco.mjtIntegrator.mjINT_EULER
+    state = env.reset(jax.random.PRNGKey(1))
+    data = mujoco.MjData(reference)
+    data.qpos[:] = np.asarray(state.pipeline_state.qpos, np.float64)
+    for t in range(10):
+        state = env.step(state, jnp.full(6, 0.3 if t < 5 else -0.3))
+        data.ctrl[:] = np.asarray(state.pipeline_state.ctrl, np.float64)
+        mujoco.mj_step(reference, data, nstep=env.config.substeps)
+        np.testing.assert_allclose(state.pipeline_state.qpos, data.qpos, atol=1e-4, err_msg=f"step {t}")
+
+
+def test_integrators_step_differently():
+    """The option reaches the physics: the same 5 steps end in different joint velocities."""
+    qvel = {}
+    for integrator in ("implicitfast", "euler"):
+        env = envs.make("ur5e-reach", backend="mujoco", integrator=integrator, action_scale=1.0)
+        state = env.reset(jax.random.PRNGKey(1))
+        for _ in range(5):
+            state = env.step(state, jnp.full(6, 0.3))
+        qvel[integrator] = np.asarray(state.pipeline_state.qvel)
+    assert np.abs(qvel["implicitfast"] - qvel["euler"]).max() > 1e-3
+
+
 def test_observation_parts_sizes():
     env = envs.make("panda-reach-avoid", observation=("joint_pos", "joint_vel", "joint_acc", "ee_pos", "ee_vel",
                                                       "target_pos", "ee_to_target", "prev_action", "obstacle_pos",
@@ -467,6 +540,8 @@ def test_joint_sin_cos_and_self_distance_observations():
     (dict(workspace="pandagym"), "target_sampling"),
     (dict(obstacle_radius=0.2), "obstacle_radius"),
     (dict(w_dist=float("nan")), "w_dist"),
+    (dict(relative_to="ctrl"), "relative_to"),
+    (dict(integrator="rk4"), "integrator"),
 ])
 def test_bad_options_fail_at_make(options, field):
     with pytest.raises(ValueError, match=field):

@@ -341,6 +341,21 @@ def test_baseline_actions_command_the_right_joint_targets():
             np.testing.assert_allclose(a, 1.0)
 
 
+def test_pseudo_ik_with_relative_to_target_commands_the_target_pose():
+    """relative_to="target": pseudo-IK's deltas are taken from the last targets, so its commanded targets
+    reach the target pose exactly after ceil(max |target - start| / action_scale) steps and stay there."""
+    env = envs.wrap(envs.make("ur5e-reach", backend="mujoco", relative_to="target", action_scale=0.5), autoreset=False)
+    act, step = jax.jit(baselines.make_act(env)), jax.jit(env.step)
+    start = state = env.reset(jax.random.split(jax.random.PRNGKey(2), 2))
+    needed = int(np.ceil(np.abs(np.asarray(start.info["target_qpos"] - start.pipeline_state.qpos)).max() / 0.5))
+    for t in range(needed + 1):
+        before = state.pipeline_state.ctrl
+        state = step(state, act(baselines.index("pseudo_ik"), state, start, jax.random.PRNGKey(t)))
+        if t == needed - 1:
+            assert np.abs(np.asarray(before - start.info["target_qpos"])).max() > 1e-4  # not there a step early
+    np.testing.assert_allclose(state.pipeline_state.ctrl, start.info["target_qpos"], atol=1e-5)
+
+
 def test_cli_baseline_json_csv(baseline_runs):
     """The contract `eval.py --env ur5e-reach --policy standstill --num-envs N --json out.json`."""
     result, out, table = baseline_runs["standstill"]

@@ -99,8 +99,6 @@ def _ee_at_wrist_3(env, value):
 VARIANTS = {  # name -> apply(env, value string); on the command line NAME or NAME=VALUE
     # joint damping x v, or x v_i per joint for a comma-separated list (0: Menagerie's, no damping)
     "damping": lambda env, v: env.robot.mj_model.dof_damping.__imul__(np.array(v.split(","), float)),
-    # MuJoCo's default integrator, for an <option> line that names none (ours and Menagerie's: implicitfast)
-    "euler": lambda env, v: setattr(env.robot.mj_model.opt, "integrator", int(mujoco.mjtIntegrator.mjINT_EULER)),
     "no_base": _no_base, "floor": _floor, "step_end": _step_end, "contacts": _contacts, "ee_wrist_3": _ee_at_wrist_3,
     "target_limited": _target_limited, "elbow_2pi": _elbow_2pi, "ctrl_pi": _ctrl_pi}
 
