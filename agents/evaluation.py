@@ -31,6 +31,7 @@ import numpy as np
 
 import envs
 from agents import baselines, driver, export, registry
+from envs import physics
 from agents.loop import make_evaluate
 from agents.networks import COMPUTE_DTYPES
 
@@ -506,7 +507,6 @@ def markdown(results: list[Result], spread: str = "std_units") -> str:
 
 def _physics_backend(env_config) -> str | None:
     """The backend that stepped the physics (an arm config's `backend` resolved; None for envs without one)."""
-    from envs import physics
     backend = getattr(env_config, "backend", None)
     return physics.resolve(backend) if backend is not None else None
 

@@ -18,6 +18,7 @@ import pytest
 import envs
 from envs import rewards, workspaces
 from envs.arm import METRICS
+from envs.robots.base import ASSETS
 from mujoco_reference import colliding_configuration, colliding_pairs, contact_model, ee_position
 
 ARM_ENVS = ["ur5e-reach", "panda-reach", "ur5e-reach-avoid", "panda-reach-avoid"]
@@ -470,7 +471,6 @@ def test_integrator_model_keeps_the_robot_files_integrator(robot, expected):
 def test_integrator_euler_steps_as_mujoco_with_euler():
     """integrator="euler": 10 native env steps against `mj_step` on the model file with its integrator set
     to Euler (an independent MjModel), from the same start and with the controls the env applied."""
-    from envs.robots.base import ASSETS
     env = envs.make("ur5e-reach", backend="mujoco", integrator="euler", action_scale=1.0)
     reference = mujoco.MjModel.from_xml_path(str(ASSETS / env.robot.xml_file))
     reference.opt.integrator = mujoco.mjtIntegrator.mjINT_EULER

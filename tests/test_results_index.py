@@ -1,12 +1,14 @@
 """tools/results_index.py: the tables it writes from hand-made eval.py JSON files, and its --check on this
 repository (every committed table is the generated one; an edited cell is caught)."""
 
+import dataclasses
 import json
 import os
 import shutil
 
 import pytest
 
+from tools import results_cells as rc
 from tools import results_index as ri
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -25,9 +27,9 @@ def _eval_json(env_name, env_steps, reached, self_c, obstacle, discount):
         "summary": summary}]}
 
 
-TINY = ri.EvalTable(("run", "discount", "env_steps", "reached", "self", "obstacle", "file"), (
-    ri.Run("reach", "study/a_eval.json"),
-    ri.Run("reach-avoid", "study/b_eval.json"),
+TINY = rc.EvalTable(("run", "discount", "env_steps", "reached", "self", "obstacle", "file"), (
+    rc.Run("reach", "study/a_eval.json"),
+    rc.Run("reach-avoid", "study/b_eval.json"),
 ))
 
 README = """# A study
@@ -92,7 +94,7 @@ def test_check_fails_after_a_cell_is_edited(tmp_path):
     shutil.copy(os.path.join(ROOT, "README.md"), root / "README.md")
     path = root / "results" / "headline" / "README.md"
     text = path.read_text()
-    cell = ri.pct(json.loads((root / "results" / "headline" / "ur5e_reach_ppo_eval.json").read_text())
+    cell = rc.pct(json.loads((root / "results" / "headline" / "ur5e_reach_ppo_eval.json").read_text())
                   ["evaluations"][0]["summary"]["target_reached"])
     assert f"| {cell} |" in text
     path.write_text(text.replace(f"| {cell} |", "| 99.9 ± 0.1 % |", 1))
@@ -114,7 +116,7 @@ def test_experiment_rows_for_the_readme_only_when_every_seed_is_evaluated(tmp_pa
     folder = tmp_path / "results" / "experiments" / "x"
     folder.mkdir(parents=True)
     (folder / "table.json").write_text(json.dumps({"rows": rows}))
-    ctx = ri.Context(str(tmp_path))
+    ctx = rc.Context(str(tmp_path))
     assert ri._finished_experiment_row(ctx, "x", "done")["per_seed"]["target_reached"] == [0.96, 0.97]  # not the cross row
     assert ri._finished_experiment_row(ctx, "x", "half") is None
     assert ri._finished_experiment_row(ctx, "x", "absent") is None
@@ -146,7 +148,7 @@ def test_seeds_and_gpus_of_an_experiment_come_from_its_parts(tmp_path):
     for folder, ev in parts.items():
         (tmp_path / "results" / "experiments" / folder).mkdir(parents=True)
         (tmp_path / "results" / "experiments" / folder / "eval.json").write_text(json.dumps(ev))
-    ctx = ri.Context(str(tmp_path))
+    ctx = rc.Context(str(tmp_path))
     assert ri._experiment_seeds_gpu(ctx, "x") == "3/5; NVIDIA H100 80GB HBM3, NVIDIA H200"
     assert ri._experiment_seeds_gpu(ctx, "x", run="b") == "5; NVIDIA H200"
     assert ri._experiment_seeds_gpu(ctx, "not-built") == ""
@@ -176,14 +178,14 @@ def test_every_file_the_index_names_exists():
     assert set(index) - {"about"} <= set(ri.TABLES)
     for name, table in index.items():
         if isinstance(table, dict) and "columns" in table:
-            assert set(table["columns"]) <= set(ri.COLUMNS), name
-            assert all(set(row) <= {f.name for f in ri.dataclasses.fields(ri.Run)} for row in table["rows"]), name
+            assert set(table["columns"]) <= set(rc.COLUMNS), name
+            assert all(set(row) <= {f.name for f in dataclasses.fields(rc.Run)} for row in table["rows"]), name
 
 
 def test_an_index_row_is_read_from_the_file_it_names():
     """The results index's row for the UR5e reach PPO headline: every cell of ours computed by hand from the JSON
     file that results/index.json names for the row, and the committed results/README.md holds that row."""
-    ctx = ri.Context(ROOT)
+    ctx = rc.Context(ROOT)
     row = next(r for r in ctx.index["headline"]["rows"] if r["label"] == "UR5e reach, PPO, 1 cm target")
     assert row["file"] == "headline/ur5e_reach_ppo_eval.json" and row["paper"] == "ur5e-reach-ppo"
     with open(os.path.join(ROOT, "results", row["file"]), encoding="utf-8") as f:
@@ -194,12 +196,12 @@ def test_an_index_row_is_read_from_the_file_it_names():
     assert ev["env_name"] == "ur5e-reach"  # no obstacle: the collisions cell is self collisions only
     assert ev["policy"]["env_steps"] >= 0.98 * train_config["num_timesteps"]  # ran its schedule: no --stop-after-steps
     assert data["device"].startswith("GPU (") and data["device"].endswith(")")
-    paper = ri.PAPER_ROWS[row["paper"]]
+    paper = rc.PAPER_ROWS[row["paper"]]
     expected = [
         "Results: UR5e reach, PPO, 1 cm target",
         f"{100 * paper['target_reached']:.1f} % / {100 * paper['self_collision']:.1f} % self",
-        f"{100 * reached['mean']:.1f} ± {100 * ri.sample_std(reached):.1f} % / "
-        f"{100 * self_c['mean']:.1f} ± {100 * ri.sample_std(self_c):.1f} % self",
+        f"{100 * reached['mean']:.1f} ± {100 * rc.sample_std(reached):.1f} % / "
+        f"{100 * self_c['mean']:.1f} ± {100 * rc.sample_std(self_c):.1f} % self",
         f"{reached['units']}; {data['device'][len('GPU ('):-1]}",
         f"`python train.py {train_config['preset']} --seeds 5`",
         "[ur5e_reach_ppo_eval.json](headline/ur5e_reach_ppo_eval.json)",
@@ -213,4 +215,4 @@ def test_an_index_row_is_read_from_the_file_it_names():
 def test_tables_show_the_sample_std_of_a_population_std():
     """eval.py's `std_units` is the population std over seeds; the tables show the sample std (ddof 1):
     0.0041 over 5 seeds is 0.0041 * sqrt(5 / 4) = 0.004584."""
-    assert ri.sample_std({"std_units": 0.0041, "units": 5}) == pytest.approx(0.0045840, abs=1e-7)
+    assert rc.sample_std({"std_units": 0.0041, "units": 5}) == pytest.approx(0.0045840, abs=1e-7)

@@ -12,8 +12,9 @@ assets/paper_numbers.json, each entry citing the paper's table or section.
 Which results file makes which row is not listed here but in results/index.json, the results' own index: for
 each table its rows, each with its label, its file (relative to results/) and the table's other fields (the
 paper's row beside it, the experiment and run a row is read from, a figure's command), and for a table of
-eval.py runs its columns (keys of COLUMNS). This module holds only the rendering: the cells, the tables built
-from the rows, and the tables computed from one JSON file (baselines, workspaces, throughput, ...). To add a
+eval.py runs its columns (keys of COLUMNS). This module holds the tables (those built from the index's rows and those
+computed from one JSON file: baselines, workspaces, throughput, ...) and the command line; their building blocks (the
+paper's numbers, the reader of results/, the cells) are in tools/results_cells.py. To add a
 row: write its JSON under results/<study>/, add the row to its table in results/index.json, and run
 `python -m tools.results_index`; tests/test_results_index.py checks that every file the index names exists.
 """
@@ -21,10 +22,8 @@ row: write its JSON under results/<study>/, add the row to its table in results/
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import glob
 import json
-import math
 import os
 import re
 import statistics
@@ -32,199 +31,11 @@ import sys
 from typing import Callable
 
 from tools import experiment_registry  # noqa: F401  (registers the experiments in EXPERIMENTS)
-from tools.experiment_spec import EXPERIMENTS, paper_row, paper_table
-
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-INDEX = "index.json"
-"""The results' own index, relative to results/: which file makes which row of each table."""
-
-# ------------------------------------------------------------------------------------------------
-# The paper's numbers (assets/paper_numbers.json; rates in [0, 1]). Nothing of ours is typed in there.
-
-PAPER_ROWS = {r["run"]: r for r in paper_table("reach") + paper_table("reach_avoid")}
-"""The paper's headline rows by name: target_reached, self_collision and (reach-avoid) obstacle_collision."""
-PAPER_BASELINES = {(r["agent"], r["target_radius"]): r for r in paper_table("baselines")}
-PAPER_WORKSPACE = {(r["trained"], r["evaluated"]): r for r in paper_table("workspace")}
-PAPER_OBSTACLE = {(r["trained"], r["evaluated"]): r for r in paper_table("obstacle_size")}
-PAPER_THROUGHPUT = {r["env"]: r["env_steps_per_second"] for r in paper_table("simulation_performance")}
-PAPER_OBSERVATION = {r["task"]: r["parts"] for r in paper_table("observation")}
-WORKSPACE_NAMES = {"pandagym": "PandaGym", "front": "Front", "upper": "Upper", "full": "Full", "full-range": "Full Range"}
-
-
-def paper_action_space() -> str:
-    """'absolute: 0.012 m, 41.5 steps in target, 21.7 exits; relative: 0.005 m, 99.1, 0.05' (the precision table)."""
-    a, r = (paper_row("action_space", control=c) for c in ("absolute", "relative"))
-    return (f"absolute: {a['distance']:g} m, {a['steps_in_target']:g} steps in target, {a['times_left_target']:g} exits; "
-            f"relative: {r['distance']:g} m, {r['steps_in_target']:g}, {r['times_left_target']:g}")
-
-
-# ------------------------------------------------------------------------------------------------
-# Reading the JSON files and formatting cells.
-
-class Context:
-    """Reads JSON files under `<root>/results` once; `md_dir` is the directory of the file being written
-    (links are relative to it)."""
-
-    def __init__(self, root: str):
-        self.root, self.results = root, os.path.join(root, "results")
-        self.md_dir = self.results
-        self._cache: dict[str, dict] = {}
-
-    def json(self, file: str) -> dict:
-        if file not in self._cache:
-            with open(os.path.join(self.results, file), encoding="utf-8") as f:
-                self._cache[file] = json.load(f)
-        return self._cache[file]
-
-    @property
-    def index(self) -> dict:
-        """results/index.json: each table's rows (and a table of eval.py runs its columns) by the table's name."""
-        return self.json(INDEX)
-
-    def evaluation(self, file: str) -> dict:
-        """The first evaluation of an eval.py JSON file."""
-        return self.json(file)["evaluations"][0]
-
-    def link(self, file: str) -> str:
-        path = os.path.relpath(os.path.join(self.results, file), self.md_dir).replace(os.sep, "/")
-        return f"[{os.path.basename(file)}]({path})"
-
-
-def sample_std(stats: dict) -> float:
-    """The sample std over seeds (ddof 1) of an eval.py summary, whose `std_units` is the population std."""
-    n = stats["units"]
-    return stats["std_units"] * math.sqrt(n / (n - 1))
-
-
-def pct(stats: dict | None) -> str:
-    """'95.7 ± 0.4 %' (mean ± sample std over trained seeds); one seed: '95.7 %'."""
-    if not stats:
-        return ""
-    if stats.get("units", 2) < 2:
-        return f"{100 * stats['mean']:.1f} %"
-    return f"{100 * stats['mean']:.1f} ± {100 * sample_std(stats):.1f} %"
-
-
-def rate(mean: float, std: float) -> str:
-    return f"{100 * mean:.1f} ± {100 * std:.1f} %"
-
-
-def millions(steps: int) -> str:
-    return f"{steps / 1e6:.1f}M"
-
-
-def thousands(rate_per_s: float) -> str:
-    return f"{rate_per_s:,.0f}"
-
-
-def paper_pct(value: float | None) -> str:
-    """'96.1 %' from the paper's rate 0.961."""
-    return "" if value is None else f"{100 * value:.1f} %"
-
-
-def has_obstacle(ev: dict) -> bool:
-    return "avoid" in ev["env_name"]
-
-
-def collisions(ev: dict) -> str:
-    s = ev["summary"]
-    out = [pct(s["self_collision"]) + " self"]
-    if has_obstacle(ev):
-        out.append(pct(s["obstacle_collision"]) + " obstacle")
-    return ", ".join(out)
-
-
-def paper_collisions(key: str) -> str:
-    row = PAPER_ROWS[key]
-    return ", ".join([f"{paper_pct(row['self_collision'])} self"]
-                     + ([f"{paper_pct(row['obstacle_collision'])} obstacle"] if "obstacle_collision" in row else []))
-
-
-def added_observation(ev: dict) -> str:
-    parts = ev["env_config"]["observation"]
-    base = PAPER_OBSERVATION["reach-avoid" if has_obstacle(ev) else "reach"]
-    extra = [p for p in parts if p not in base]
-    return "the paper's" if not extra else "+ " + " + ".join(extra)
-
-
-def _train_config(ev: dict) -> dict:
-    return ev["policy"].get("train_config") or {}
-
-
-# ------------------------------------------------------------------------------------------------
-# Tables of eval.py runs: one row per JSON file, columns picked from COLUMNS; results/index.json lists each
-# table's columns and rows.
-
-@dataclasses.dataclass(frozen=True)
-class Run:
-    """One row of a table of eval.py runs (a row of that table in results/index.json)."""
-    label: str
-    """The row's first cell: what this run is."""
-    file: str
-    """eval.py JSON, relative to results/."""
-    paper: str = ""
-    """Key of PAPER_ROWS for the paper's numbers of this row ("" if the paper has none)."""
-    preset: str = ""
-    """The preset that trains it today, where that is not the one its JSON names (trained before it existed)."""
-
-
-Cell = Callable[[dict, Run, Context], str]
-COLUMNS: dict[str, tuple[str, str, Cell]] = {  # key -> (header, alignment, cell)
-    "run": ("run", "---", lambda ev, run, ctx: run.label),
-    "preset": ("preset", "---", lambda ev, run, ctx: f"`{run.preset or _train_config(ev).get('preset', '')}`"),
-    "paper_reached": ("paper: reached", "---:", lambda ev, run, ctx: paper_pct(PAPER_ROWS[run.paper]["target_reached"]) if run.paper else ""),
-    "paper_collisions": ("paper: collisions", "---:", lambda ev, run, ctx: paper_collisions(run.paper) if run.paper else ""),
-    "reached": ("reached", "---:", lambda ev, run, ctx: pct(ev["summary"]["target_reached"])),
-    "self": ("self collision", "---:", lambda ev, run, ctx: pct(ev["summary"]["self_collision"])),
-    "obstacle": ("obstacle collision", "---:",
-                 lambda ev, run, ctx: pct(ev["summary"]["obstacle_collision"]) if has_obstacle(ev) else ""),
-    "collisions": ("collisions", "---:", lambda ev, run, ctx: collisions(ev)),
-    "distance": ("distance (m)", "---:", lambda ev, run, ctx: f"{ev['summary']['distance']['mean']:.3f}"),
-    "steps_in_target": ("steps in target", "---:", lambda ev, run, ctx: f"{ev['summary']['steps_in_target']['mean']:.1f}"),
-    "times_left": ("times left target", "---:", lambda ev, run, ctx: f"{ev['summary']['times_left_target']['mean']:.2f}"),
-    "env_steps": ("env steps per seed", "---:", lambda ev, run, ctx: millions(ev["policy"]["env_steps"])),
-    "schedule": ("schedule (`--num-timesteps`)", "---:", lambda ev, run, ctx: millions(_train_config(ev)["num_timesteps"])),
-    "discount": ("discount", "---:", lambda ev, run, ctx: f"{_train_config(ev)['algo']['discount']:g}"),
-    "action_scale": ("action scale", "---:", lambda ev, run, ctx: f"{ev['env_config']['action_scale']:g}"),
-    "w_joint_limit": ("`w_joint_limit`", "---:", lambda ev, run, ctx: f"{ev['env_config'].get('w_joint_limit', 0.0):g}"),
-    "grad_steps": ("gradient steps per env step", "---:",
-                   lambda ev, run, ctx: str(_train_config(ev)["algo"]["grad_updates_per_step"])),
-    "observation": ("observation", "---", lambda ev, run, ctx: added_observation(ev)),
-    "actions": ("actions", "---", lambda ev, run, ctx: ev.get("actions", "deterministic")),
-    "episodes": ("seeds x episodes", "---:", lambda ev, run, ctx: f"{ev['summary']['target_reached']['units']} x {ev['num_envs']}"),
-    "file": ("file", "---", lambda ev, run, ctx: ctx.link(run.file)),
-}
-
-
-@dataclasses.dataclass(frozen=True)
-class EvalTable:
-    columns: tuple[str, ...]
-    runs: tuple[Run, ...]
-
-    def __call__(self, ctx: Context) -> list[list[str]]:
-        rows = [[COLUMNS[c][0] for c in self.columns], [COLUMNS[c][1] for c in self.columns]]
-        for run in self.runs:
-            ev = ctx.evaluation(run.file)
-            rows.append([COLUMNS[c][2](ev, run, ctx) for c in self.columns])
-        return rows
-
-
-def runs(ctx: Context, table: str) -> tuple[Run, ...]:
-    """The rows of `table` in results/index.json (a row's keys are Run's fields; an unknown key is an error)."""
-    return tuple(Run(**row) for row in ctx.index[table]["rows"])
-
-
-def listed_table(name: str) -> Callable[[Context], list[list[str]]]:
-    """The table of eval.py runs `name` of results/index.json: an EvalTable of its columns and its rows."""
-    def table(ctx: Context) -> list[list[str]]:
-        return EvalTable(tuple(ctx.index[name]["columns"]), runs(ctx, name))(ctx)
-    return table
-
-
-def markdown(rows: list[list[str]]) -> str:
-    """Header, alignment row and body rows as a markdown table."""
-    return "\n".join("| " + " | ".join(r) + " |" if i != 1 else "|" + "|".join(r) + "|" for i, r in enumerate(rows))
-
+from tools.experiment_spec import EXPERIMENTS
+from tools.results_cells import (PAPER_BASELINES, PAPER_OBSTACLE, PAPER_ROWS, PAPER_THROUGHPUT,
+                                 PAPER_WORKSPACE, ROOT, WORKSPACE_NAMES, Context, train_config, collisions,
+                                 listed_table, markdown, millions, paper_action_space, paper_collisions, paper_pct,
+                                 pct, rate, runs, thousands)
 
 # ------------------------------------------------------------------------------------------------
 # The studies: the rows of the tables below are listed in results/index.json.
@@ -484,8 +295,8 @@ def index_table(ctx: Context) -> list[list[str]]:
             ["---", "---:", "---:", "---", "---", "---"]]
     for run in runs(ctx, "headline"):
         ev = ctx.evaluation(run.file)
-        command = f"python train.py {run.preset or _train_config(ev)['preset']} --seeds 5"
-        if ev["policy"]["env_steps"] < 0.98 * _train_config(ev)["num_timesteps"]:  # stopped before its schedule's end
+        command = f"python train.py {run.preset or train_config(ev)['preset']} --seeds 5"
+        if ev["policy"]["env_steps"] < 0.98 * train_config(ev)["num_timesteps"]:  # stopped before its schedule's end
             command += f" --stop-after-steps {ev['policy']['env_steps']}"
         paper = PAPER_ROWS[run.paper]
         rows.append([f"Results: {run.label}", f"{paper_pct(paper['target_reached'])} / {paper_collisions(run.paper)}",
