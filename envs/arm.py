@@ -12,10 +12,12 @@ collision anywhere inside the step ends the episode.
 
 from __future__ import annotations
 
+import functools
+import operator
+
 import jax
 import jax.numpy as jnp
 import numpy as np
-from mujoco import mjx
 
 from envs import fast_mjx, physics, rewards, workspaces
 from envs.base import Env, State, check_action
@@ -61,16 +63,28 @@ class ArmEnv(Env):
         self.physics_dt = float(robot.mj_model.opt.timestep)
         self.dt = self.physics_dt * config.substeps
         self._init_low, self._init_high = robot.joint_range(config.init_range)
-        self._obs_size = sum(self._observation_sizes()[p] for p in config.observation)
         self._backend = physics.resolve(config.backend)
         self.physics = physics.PHYSICS[self._backend](robot, config.substeps)
 
     # ----------------------------------------------------------------------------------------
     # Interface
 
+    @functools.cached_property
+    def observation_part_sizes(self) -> dict[str, int]:
+        """Length of each configured observation part, in order: the size of its value in `observation_parts`
+        on a reset state, traced abstractly (nothing runs), so a part's name, value and size are one entry."""
+        def parts(rng):
+            state = self._reset(rng)
+            data = state.pipeline_state
+            values = self.observation_parts(data, data.xpos, data.site_xpos[self.robot.ee_site], state.info)
+            return {part: jnp.ravel(values[part]()) for part in self.config.observation}
+
+        shapes = jax.eval_shape(parts, jax.random.PRNGKey(0))
+        return {part: int(shapes[part].shape[0]) for part in self.config.observation}
+
     @property
     def observation_size(self) -> int:
-        return self._obs_size
+        return sum(self.observation_part_sizes.values())
 
     @property
     def action_size(self) -> int:
@@ -125,6 +139,7 @@ class ArmEnv(Env):
             "mean_joint_acc": jnp.zeros(()),
             "recent_distances": jnp.full((LAST_DISTANCES,), distance),
             "num_steps": jnp.zeros((), jnp.int32),
+            "reward_sums": {name: jnp.zeros(()) for name in self.reward_term_names()},
             "reset_fallback": fallback,
             **task_info,
         }
@@ -133,7 +148,7 @@ class ArmEnv(Env):
             info["noise_key"] = _raw_key(jax.random.split(rng, 4)[3])
         obs = self.observation(data, kin0.xpos, kin0.ee_pos, info)
         zero = jnp.zeros(())
-        metrics = {name: zero for name in METRICS}
+        metrics = {name: zero for name in METRICS} | {"reward/" + name: zero for name in self.reward_term_names()}
         metrics.update(distance=distance, distance_last10=distance, reset_fallback=fallback)
         return State(pipeline_state=data, obs=obs, reward=zero, done=zero, metrics=metrics, info=info)
 
@@ -174,8 +189,13 @@ class ArmEnv(Env):
         mean_vel = self.running_mean(info["mean_joint_vel"], jnp.linalg.norm(data.qvel), num_steps, nan)
         mean_acc = self.running_mean(info["mean_joint_acc"], jnp.linalg.norm(data.qacc), num_steps, nan)
 
-        reward = self.reward(data, distance, in_target.astype(jnp.float32), info)
-        reward = jnp.where(failed, -cfg.collision_penalty * collided, reward)
+        terms = self.reward_terms(data, distance, in_target.astype(jnp.float32), info)
+        reward = functools.reduce(operator.add, terms.values())
+        collision = -cfg.collision_penalty * collided
+        reward = jnp.where(failed, collision, reward)
+        terms = {name: jnp.where(failed, 0.0, value) for name, value in terms.items()}  # what the step really earned
+        if cfg.collision_penalty > 0:
+            terms["collision"] = jnp.where(failed, collision, 0.0)
         done = failed | ((cfg.success == "reach_and_terminate") & in_target)
 
         info.update(
@@ -189,6 +209,7 @@ class ArmEnv(Env):
             mean_joint_acc=mean_acc,
             recent_distances=recent,
             num_steps=num_steps,
+            reward_sums={name: info["reward_sums"][name] + terms[name] for name in info["reward_sums"]},
         )
         obs = self.observation(data, data.xpos, ee, {**info, "prev_ee_pos": state.info["prev_ee_pos"]})
         obs = jnp.where(nan, state.obs, obs)  # NaN never reaches an observation
@@ -208,6 +229,7 @@ class ArmEnv(Env):
             "reset_fallback": info["reset_fallback"],
             "mean_joint_vel": mean_vel,
             "mean_joint_acc": mean_acc,
+            **{"reward/" + name: value for name, value in info["reward_sums"].items()},
         }
         return state.replace(pipeline_state=data, obs=obs, reward=reward, done=done.astype(jnp.float32),
                              metrics=metrics, info=info)
@@ -287,25 +309,37 @@ class ArmEnv(Env):
         self_min = jnp.min(self.robot.self_distances(geom_xpos, geom_xmat))
         return jnp.stack([self_min, jnp.inf])
 
-    def reward(self, data, distance, in_target, info) -> jax.Array:
-        """Reward of a step that did not collide."""
-        cfg = self.config
-        if cfg.reward == "sparse":
-            return rewards.sparse(in_target, cfg.w_reach)
-        if cfg.reward == "semi_sparse":
-            base = rewards.semi_sparse(in_target, distance, cfg.w_reach, cfg.w_dist, self.d_max)
-        else:
-            base = rewards.dense(distance, cfg.w_dist, cfg.alpha)
-        penalty = rewards.l2_penalty(data.qvel, cfg.w_joint_vel) + rewards.l2_penalty(data.qacc, cfg.w_joint_acc)
-        if cfg.w_joint_limit > 0:  # static: configs without it compile the same program as before the option
-            penalty = penalty + rewards.joint_limit_proximity(data.qpos, self.robot.joint_low, self.robot.joint_high,
-                                                              cfg.w_joint_limit, cfg.joint_limit_margin)
-        return base - penalty
+    def penalties(self) -> dict:
+        """Penalty terms of the reward: name -> (weight, f(data, info) -> the weighted penalty, >= 0). A term
+        of weight 0 is left out of the reward (no cost, no number changed) and of the logs."""
+        cfg, robot = self.config, self.robot
+        return {
+            "joint_vel": (cfg.w_joint_vel, lambda data, info: rewards.l2_penalty(data.qvel, cfg.w_joint_vel)),
+            "joint_acc": (cfg.w_joint_acc, lambda data, info: rewards.l2_penalty(data.qacc, cfg.w_joint_acc)),
+            "joint_limit": (cfg.w_joint_limit, lambda data, info: rewards.joint_limit_proximity(
+                data.qpos, robot.joint_low, robot.joint_high, cfg.w_joint_limit, cfg.joint_limit_margin)),
+        }
 
-    def _observation_sizes(self) -> dict[str, int]:
-        n = self.robot.nq
-        return {"joint_pos": n, "joint_vel": n, "joint_acc": n, "ee_pos": 3, "ee_vel": 3, "target_pos": 3,
-                "ee_to_target": 3, "prev_action": n, "joint_sin_cos": 2 * n, "self_dist": len(self.robot.self_pairs)}
+    def reward_term_names(self) -> tuple[str, ...]:
+        """The terms of `reward_terms` in their order, then "collision" when `collision_penalty` > 0; each is
+        logged per episode as the metric reward/<name> (its sum over the episode's steps)."""
+        cfg = self.config
+        penalties = tuple(name for name, (weight, _) in self.penalties().items() if weight > 0)
+        return (cfg.reward,) + penalties + (("collision",) if cfg.collision_penalty > 0 else ())
+
+    def reward_terms(self, data, distance, in_target, info) -> dict[str, jax.Array]:
+        """The reward of a step that did not collide as named terms: the formulation (paper eqs. 1-2,
+        `rewards.TASK_REWARDS[config.reward]`), then each penalty of non-zero weight, negated."""
+        cfg = self.config
+        terms = {cfg.reward: rewards.TASK_REWARDS[cfg.reward](cfg, distance, in_target, self.d_max)}
+        for name, (weight, penalty) in self.penalties().items():
+            if weight > 0:  # static: a config without the term compiles the program it had before the term existed
+                terms[name] = -penalty(data, info)
+        return terms
+
+    def reward(self, data, distance, in_target, info) -> jax.Array:
+        """Reward of a step that did not collide: the terms summed in their order."""
+        return functools.reduce(operator.add, self.reward_terms(data, distance, in_target, info).values())
 
     def perceived(self, data, info, key):
         """(data, info) as the sensors report them: joint angles with `joint_noise_std` noise; with

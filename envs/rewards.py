@@ -1,8 +1,9 @@
 """Reward terms of the paper (section "Reward formulation"), one small function each.
 
-All take distances in metres and return per-step rewards; the task combines them in
-`envs.arm.ArmEnv.reward`. A step that collides earns nothing (and `collision_penalty` is
-subtracted): collisions are penalised by ending the episode, which forfeits future reward.
+All take distances in metres and return per-step rewards; the task names and combines them in
+`envs.arm.ArmEnv.reward_terms` (its formulation from `TASK_REWARDS`, its penalties from `ArmEnv.penalties`).
+A step that collides earns nothing (and `collision_penalty` is subtracted): collisions are penalised by
+ending the episode, which forfeits future reward.
 """
 
 import jax.numpy as jnp
@@ -46,3 +47,12 @@ def joint_limit_proximity(qpos, low, high, weight, margin):
     """Not in the paper: eq. (3)'s penalty over each joint's distance to the nearer end of its range,
     from 0 at `margin` radians from a limit to `weight` per joint at the limit (subtract it)."""
     return proximity(jnp.minimum(qpos - low, high - qpos), weight, margin)
+
+
+TASK_REWARDS = {
+    "sparse": lambda cfg, distance, in_target, d_max: sparse(in_target, cfg.w_reach),
+    "semi_sparse": lambda cfg, distance, in_target, d_max: semi_sparse(in_target, distance, cfg.w_reach, cfg.w_dist,
+                                                                       d_max),
+    "dense": lambda cfg, distance, in_target, d_max: dense(distance, cfg.w_dist, cfg.alpha),
+}
+"""The task's formulation (`ReachConfig.reward`): name -> f(config, distance, in_target, d_max)."""

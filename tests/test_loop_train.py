@@ -86,6 +86,8 @@ def test_train_cli_on_the_arm_writes_a_checkpoint_that_loads_back(tmp_path):
     np.testing.assert_array_less(np.abs(np.asarray(state.env_state.pipeline_state.qpos)), 2 * np.pi + 1e-3)
     ev = json.loads((logdir / "eval.json").read_text())
     assert set(ev["mean"]) >= {"episode/target_reached", "episode/self_collision", "episode/distance_last10"}
+    header = (logdir / "metrics.csv").read_text().splitlines()[0].split(",")
+    assert "episode/reward/dense" in header  # the reward's one term, logged per episode
 
 
 def _full_state(result):

@@ -49,7 +49,7 @@ def sensing():
 
 def split_obs(env, obs):
     """The observation's parts by name (sizes from the env)."""
-    sizes = env._observation_sizes()
+    sizes = env.observation_part_sizes
     out, at = {}, 0
     for part in env.config.observation:
         out[part] = np.asarray(obs)[..., at:at + sizes[part]]

@@ -99,11 +99,15 @@ class ReachAvoid(Reach):
         return self.per_obstacle(info, lambda c, r: self.robot.link_obstacle_distances(
             xpos, data.geom_xpos, data.geom_xmat, c, r, self.config.link_distance))
 
-    def reward(self, data, distance, in_target, info):
-        """The reach reward minus eq. (3)'s penalty summed over the obstacles."""
+    def penalties(self):
+        """Reach's penalties and eq. (3)'s, summed over the obstacles."""
         cfg = self.config
-        penalty = rewards.obstacle_proximity(self.link_distances(data, data.xpos, info), cfg.w_obst, cfg.obstacle_tau)
-        return super().reward(data, distance, in_target, info) - jnp.sum(penalty)
+
+        def obstacle(data, info):
+            distances = self.link_distances(data, data.xpos, info)
+            return jnp.sum(rewards.obstacle_proximity(distances, cfg.w_obst, cfg.obstacle_tau))
+
+        return {**super().penalties(), "obstacle": (cfg.w_obst, obstacle)}
 
     def perceived(self, data, info, key):
         """Reach's noisy joints, plus obstacle positions with `obstacle_noise_std` noise."""
@@ -113,11 +117,6 @@ class ReachAvoid(Reach):
             noise = std * jax.random.normal(jax.random.fold_in(key, 1), info["obstacle_pos"].shape)
             info = {**info, "obstacle_pos": info["obstacle_pos"] + noise}
         return data, info
-
-    def _observation_sizes(self):
-        n = self.config.num_obstacles
-        return {**super()._observation_sizes(), "obstacle_pos": 3 * n, "obstacle_size": 3 * n, "obstacle_radius": n,
-                "obstacle_vel": 3 * n, "link_obstacle_dist": len(self.robot.link_bodies)}
 
     def observation_parts(self, data, xpos, ee, info):
         parts = super().observation_parts(data, xpos, ee, info)
