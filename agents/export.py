@@ -29,6 +29,7 @@ import jax
 import numpy as np
 
 from agents import normalizer, registry
+from agents.checkpoint import write_atomic
 from agents.config import config_from_json
 
 DIRNAME = "policy"
@@ -76,10 +77,23 @@ def save(directory: str, learner, learner_state, config_json: dict, env_steps: i
         "action_size": int(flat["policy/params/out/bias"].shape[-1] // 2),
         "config": config_json,
     }
+    return _write(directory, flat, meta)
+
+
+def _write(directory: str, flat: dict, meta: dict) -> str:
+    """policy.npz, then policy.json, each through a temporary file and a rename: a reader (or a run killed
+    half way) finds each file whole, the old or the new one, and policy.json only beside its arrays."""
     os.makedirs(directory, exist_ok=True)
-    np.savez(os.path.join(directory, "policy.npz"), **flat)
-    with open(os.path.join(directory, "policy.json"), "w") as f:
-        json.dump(meta, f, indent=2)
+    npz = os.path.join(directory, "policy.npz")
+    tmp = f"{npz}.tmp-{os.getpid()}"
+    try:
+        with open(tmp, "wb") as f:  # a file object: np.savez would append ".npz" to the temporary name
+            np.savez(f, **flat)
+        os.replace(tmp, npz)
+    finally:
+        if os.path.exists(tmp):  # a failed write (a full disk) leaves the old export and no debris
+            os.remove(tmp)
+    write_atomic(os.path.join(directory, "policy.json"), json.dumps(meta, indent=2))
     return directory
 
 
@@ -227,9 +241,5 @@ def select(path: str, directory: str, seeds: list[int] | None = None) -> str:
         flat = {k: np.asarray(data[k])[index] for k in data.files}
     shown = os.path.relpath(source)
     meta = dict(meta, seeds=seeds, selected_from={"path": source if shown.startswith("..") else shown, "seeds": available})
-    os.makedirs(directory, exist_ok=True)
-    np.savez(os.path.join(directory, "policy.npz"), **flat)
-    with open(os.path.join(directory, "policy.json"), "w") as f:
-        json.dump(meta, f, indent=2)
-    return directory
+    return _write(directory, flat, meta)
 

@@ -1,13 +1,16 @@
 """eval.py's output files: refused before any work when writing them would fail or destroy something (a run's or
 an export's own files, an existing file without --force, a directory, a folder that cannot be written, a video
-format whose writer is not installed), and written atomically."""
+format whose writer is not installed), and written atomically; so are policy exports."""
 
 import importlib.util
 import json
+import os
 
+import numpy as np
 import pytest
 
 import eval as eval_cli
+from agents import export
 
 STANDSTILL = ["--env", "ur5e-reach", "--policy", "standstill", "--num-envs", "2", "--env.episode-length", "3",
               "--env.substeps", "2"]
@@ -117,3 +120,32 @@ def test_an_mp4_without_its_writer_is_refused_before_the_evaluation(tmp_path, mo
     monkeypatch.setattr(eval_cli.evaluation, "run", lambda *a, **k: pytest.fail("evaluated before refusing"))
     with pytest.raises(ValueError, match="needs imageio_ffmpeg"):
         eval_cli.main(STANDSTILL + ["--video", str(tmp_path / "x.mp4")])
+
+
+def _export_files(directory):
+    return {name: (directory / name).read_bytes() for name in sorted(os.listdir(directory))}
+
+
+def test_a_failed_export_write_keeps_the_old_export_whole(tmp_path, monkeypatch):
+    """A write that fails half way (here np.savez raising, as on a full disk) leaves the previous policy.npz and
+    policy.json byte for byte and no temporary file."""
+    export._write(str(tmp_path), {"w": np.arange(3.0)}, {"format": 1})
+    before = _export_files(tmp_path)
+
+    def full_disk(file, **arrays):
+        file.write(b"partial")
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(export.np, "savez", full_disk)
+    with pytest.raises(OSError, match="No space left"):
+        export._write(str(tmp_path), {"w": np.arange(5.0)}, {"format": 2})
+    assert _export_files(tmp_path) == before
+
+
+def test_an_export_write_replaces_both_files(tmp_path):
+    export._write(str(tmp_path), {"w": np.arange(3.0)}, {"format": 1})
+    export._write(str(tmp_path), {"w": np.arange(5.0)}, {"format": 2})
+    assert json.loads((tmp_path / "policy.json").read_text()) == {"format": 2}
+    with np.load(tmp_path / "policy.npz") as data:
+        np.testing.assert_array_equal(data["w"], np.arange(5.0))
+    assert sorted(os.listdir(tmp_path)) == ["policy.json", "policy.npz"]
