@@ -70,6 +70,7 @@ import tyro
 import envs
 from agents import baselines, evaluation, provenance
 from agents import logdir as logdirs
+from tools import run_cli
 
 EnvConfigT = TypeVar("EnvConfigT")
 
@@ -328,8 +329,4 @@ def write_video(path: str, policy, env_name: str, env_config, num_envs: int, see
 
 
 if __name__ == "__main__":
-    try:
-        main()
-    except ValueError as error:
-        print(f"error: {error}", file=sys.stderr)
-        raise SystemExit(2)
+    run_cli(main)

@@ -21,9 +21,11 @@ import argparse
 import dataclasses
 import json
 import os
-import sys
 
 import numpy as np
+
+import envs
+from agents import evaluation, provenance
 
 CAP_STEPS = 8
 """Env steps of full commanded steps in `servo_cap`; the displacement of the last half is the cap."""
@@ -114,10 +116,6 @@ def main(argv: list[str] | None = None) -> dict:
     args = parser.parse_args(argv)
     if not args.checkpoint and not args.env:
         parser.error("one of --checkpoint and --env is required")
-    sys.path.insert(0, os.getcwd())
-    import envs
-    from agents import evaluation, provenance
-
     if args.checkpoint:
         policy = evaluation.checkpoint_policy(args.checkpoint)
         env_name = args.env or policy.train_env_name

@@ -17,6 +17,8 @@ import re
 import statistics
 import sys
 
+from tools import run_cli
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DEFAULT_OUT = "results/experiments"
 
@@ -186,6 +188,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    from tools import run_cli
-
     run_cli(lambda: sys.exit(main()))

@@ -25,9 +25,10 @@ from __future__ import annotations
 import argparse
 import collections
 import json
-import os
 
 import numpy as np
+
+from tools import run_cli
 
 MISS_BINS = (0.02, 0.05, 0.10)
 """Upper edges (m) of the final-distance bins of missed episodes; the last bin is open."""
@@ -273,6 +274,4 @@ def main(argv: list[str] | None = None) -> dict:
 
 
 if __name__ == "__main__":
-    from tools import run_cli
-
     run_cli(main)

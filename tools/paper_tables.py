@@ -42,12 +42,14 @@ import sys
 
 import envs
 from agents import evaluation, provenance
+from tools import run_cli
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 TABLES = ("baselines", "action", "workspace", "obstacle")
 WORKSPACE_ROLES = ("pandagym", "front", "upper", "full", "full-range")
 WORKSPACE_NAMES = {"pandagym": "PandaGym", "front": "Front", "upper": "Upper", "full": "Full", "full-range": "Full Range"}
+"""The paper's names of the workspace roles (its workspace table), for every table that shows them."""
 WORKSPACE_DEFAULTS = {
     "pandagym": dict(workspace="pandagym", target_sampling="uniform", init_range="limited"),
     "front": dict(workspace="front", target_sampling="reachable", init_range="limited"),
@@ -352,6 +354,4 @@ def main(argv=None) -> list[str]:
 
 
 if __name__ == "__main__":
-    from tools import run_cli
-
     run_cli(main)

@@ -25,6 +25,8 @@ import sys
 
 import numpy as np
 
+from tools import run_cli
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 CURVE_METRICS = {  # the first four are drawn by default
@@ -263,6 +265,4 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
-    from tools import run_cli
-
     run_cli(main)

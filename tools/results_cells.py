@@ -26,7 +26,6 @@ PAPER_WORKSPACE = {(r["trained"], r["evaluated"]): r for r in paper_table("works
 PAPER_OBSTACLE = {(r["trained"], r["evaluated"]): r for r in paper_table("obstacle_size")}
 PAPER_THROUGHPUT = {r["env"]: r["env_steps_per_second"] for r in paper_table("simulation_performance")}
 PAPER_OBSERVATION = {r["task"]: r["parts"] for r in paper_table("observation")}
-WORKSPACE_NAMES = {"pandagym": "PandaGym", "front": "Front", "upper": "Upper", "full": "Full", "full-range": "Full Range"}
 
 
 def paper_action_space() -> str:

@@ -32,8 +32,9 @@ from typing import Callable
 
 from tools import experiment_registry  # noqa: F401  (registers the experiments in EXPERIMENTS)
 from tools.experiment_spec import EXPERIMENTS
+from tools.paper_tables import WORKSPACE_NAMES
 from tools.results_cells import (PAPER_BASELINES, PAPER_OBSTACLE, PAPER_ROWS, PAPER_THROUGHPUT,
-                                 PAPER_WORKSPACE, ROOT, WORKSPACE_NAMES, Context, train_config, collisions,
+                                 PAPER_WORKSPACE, ROOT, Context, train_config, collisions,
                                  listed_table, markdown, millions, paper_action_space, paper_collisions, paper_pct,
                                  pct, rate, runs, thousands)
 

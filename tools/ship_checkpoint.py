@@ -18,6 +18,7 @@ import json
 import os
 
 from agents import evaluation, export
+from tools import run_cli
 
 
 def _score(metrics: dict) -> tuple[float, float]:
@@ -88,6 +89,4 @@ def main(argv: list[str] | None = None) -> str:
 
 
 if __name__ == "__main__":
-    from tools import run_cli
-
     run_cli(main)
