@@ -30,7 +30,7 @@ import jax
 import numpy as np
 
 import envs
-from agents import baselines, driver, export, registry
+from agents import baselines, driver, export, intervals, registry
 from envs import physics
 from agents.loop import make_evaluate
 from agents.networks import COMPUTE_DTYPES
@@ -430,9 +430,10 @@ def reached_precision(per_env: dict) -> dict:
 
 
 def summarize(per_env: dict) -> dict:
-    """{metric: {mean, std_units, std_episodes, units, episodes}} from (units, envs) arrays: the
-    mean over units of each unit's mean, its standard deviation over units (ddof 0, as over seeds),
-    and the standard deviation over all episodes pooled."""
+    """{metric: {mean, std_units, ci95_units, std_episodes, units, episodes}} from (units, envs) arrays: the
+    mean over units of each unit's mean, its standard deviation over units (ddof 0, as over seeds), the mean's
+    95 % bootstrap confidence interval over units (rliable, `agents.intervals`; None for one unit), and the
+    standard deviation over all episodes pooled."""
     out = {}
     for name, values in per_env.items():
         values = np.asarray(values, np.float64)
@@ -440,8 +441,8 @@ def summarize(per_env: dict) -> dict:
             warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN units (e.g. no collision-free episode)
             unit_means = np.nanmean(values, axis=1)
             out[name] = {"mean": float(np.nanmean(unit_means)), "std_units": float(np.nanstd(unit_means)),
-                         "std_episodes": float(np.nanstd(values)), "units": int(values.shape[0]),
-                         "episodes": int(np.sum(~np.isnan(values)))}
+                         "ci95_units": intervals.mean_ci(unit_means), "std_episodes": float(np.nanstd(values)),
+                         "units": int(values.shape[0]), "episodes": int(np.sum(~np.isnan(values)))}
     return out
 
 
@@ -468,13 +469,17 @@ EXTRA_COLUMNS = [("mean_joint_vel", "mean joint speed (rad/s)", 2),
 """(name, header, decimals) of the `EXTRA_METRICS` a results table may show (tools.experiments), beside `COLUMNS`."""
 
 
-def fmt(stats: dict | None, digits: int, spread: str = "std_units") -> str:
-    """"mean ± std" (the std over units, omitted with a single unit), or "-" if missing."""
+def fmt(stats: dict | None, digits: int, spread: str = "std_units", ci: bool = False) -> str:
+    """"mean ± std" (the std over units, omitted with a single unit), or "-" if missing; with `ci` the mean's 95 %
+    confidence interval over units follows in brackets where there is one."""
     if not stats or not math.isfinite(stats["mean"]):
         return "-"
     text = f"{stats['mean']:.{digits}f}"
     if spread == "std_episodes" or stats["units"] > 1:
         text += f" ± {stats[spread]:.{digits}f}"
+    interval = stats.get("ci95_units") if ci else None
+    if interval:
+        text += f" [{interval[0]:.{digits}f}, {interval[1]:.{digits}f}]"
     return text
 
 
@@ -488,20 +493,21 @@ def label(result: Result) -> str:
 
 def markdown(results: list[Result], spread: str = "std_units") -> str:
     """A markdown table, one row per result (plus a pooled row for several checkpoints on one env
-    config); mean ± standard deviation over units (seeds / checkpoints)."""
+    config); mean ± standard deviation over units (seeds / checkpoints) and the mean's 95 % confidence interval."""
     names = [c for c in COLUMNS if any(c[0] in r.per_env for r in results)]
     head = ["policy", "env", "seeds x envs"] + [c[1] for c in names]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in results:
         s = r.summary()
-        cells = [label(r), r.env_name, f"{len(r.units)} x {r.num_envs}"] + [fmt(s.get(n), d, spread) for n, _, d in names]
+        cells = [label(r), r.env_name, f"{len(r.units)} x {r.num_envs}"] + [fmt(s.get(n), d, spread, ci=True)
+                                                                            for n, _, d in names]
         lines.append("| " + " | ".join(cells) + " |")
     if len(results) > 1 and all(r.policy.export for r in results):
         s = pooled(results)
         if s is not None:
             units = sum(len(r.units) for r in results)
             cells = ["all checkpoints", results[0].env_name, f"{units} x {results[0].num_envs}"]
-            lines.append("| " + " | ".join(cells + [fmt(s.get(n), d, spread) for n, _, d in names]) + " |")
+            lines.append("| " + " | ".join(cells + [fmt(s.get(n), d, spread, ci=True) for n, _, d in names]) + " |")
     return "\n".join(lines)
 
 

@@ -14,10 +14,10 @@ import argparse
 import json
 import os
 import re
-import statistics
 import sys
 
 from tools import run_cli
+from tools.results_cells import seed_stats
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DEFAULT_OUT = "results/experiments"
@@ -51,12 +51,10 @@ def registered() -> dict:
 
 
 def fmt(metric: str, values: list[float]) -> str:
-    """'95.8 ± 0.3 %' for a rate, '0.019 ± 0.001' otherwise (sample std over seeds; one seed: the value)."""
-    digits = COLUMNS[metric][1]
-    scale, unit = (100, " %") if metric in RATES else (1, "")
-    mean = statistics.mean(values)
-    spread = f" ± {scale * statistics.stdev(values):.{digits}f}" if len(values) > 1 else ""
-    return f"{scale * mean:.{digits}f}{spread}{unit}"
+    """'95.8 ± 0.3 % [95.5, 96.0]' for a rate, '0.019 ± 0.001 [0.018, 0.020]' otherwise (`results_cells.seed_stats`:
+    sample std over seeds and the mean's 95 % confidence interval; one seed: the value)."""
+    scale, unit = (100.0, " %") if metric in RATES else (1.0, "")
+    return seed_stats(values, COLUMNS[metric][1], scale, unit)
 
 
 def fmt_paper(metric: str, value: float) -> str:

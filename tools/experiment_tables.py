@@ -1,5 +1,6 @@
 """An experiment's table and figure, built from its runs' evaluations: `table.md` and `table.json` (one row per
-run and per cross-evaluation, the paper's numbers beside ours, mean ± sample std over seeds) and `curves.png` (training
+run and per cross-evaluation, the paper's numbers beside ours, mean ± sample std over seeds and the mean's 95 %
+confidence interval) and `curves.png` (training
 curves from metrics.csv) in `<out>/<experiment>/`. A build first records each finished part's config.json,
 eval.json, metrics.csv and cross-*.json in `<out>/<experiment>/runs/<run>/seeds-*/`: the evidence behind the table.
 """
@@ -17,6 +18,7 @@ from agents.checkpoint import write_atomic
 from agents.evaluation import COLUMNS, EXTRA_COLUMNS
 from agents.provenance import code_version
 from tools.experiment_spec import Cross, Experiment, Run
+from tools.results_cells import seed_stats
 from tools.experiment_state import (
     TIMING_COLUMNS, RunState, cross_path, millions, record_folder, run_state, table_metrics,
 )
@@ -26,14 +28,12 @@ RATE_METRICS = ("target_reached", "self_collision", "obstacle_collision")
 
 
 def fmt_metric(metric: str, values) -> str:
-    """'95.7 ± 0.4 %' for rates, '0.005 ± 0.001' for others (sample std over seeds; one seed: mean only)."""
-    digits = {name: d for name, _, d in COLUMNS + EXTRA_COLUMNS}.get(metric, 3)
-    values = [float(v) for v in ([values] if isinstance(values, (int, float)) else values)]
-    mean = sum(values) / len(values)
-    std = statistics.stdev(values) if len(values) > 1 else None  # the sample std (ddof 1)
+    """'95.7 ± 0.4 % [95.3, 96.0]' for rates, '0.005 ± 0.001 [0.004, 0.006]' for others (sample std over seeds and
+    the mean's 95 % confidence interval, `results_cells.seed_stats`; one seed: its value)."""
+    values = [values] if isinstance(values, (int, float)) else values
     if metric in RATE_METRICS:
-        return f"{100 * mean:.1f}" + (f" ± {100 * std:.1f}" if std is not None else "") + " %"
-    return f"{mean:.{digits}f}" + (f" ± {std:.{digits}f}" if std is not None else "")
+        return seed_stats(values, 1, 100.0, " %")
+    return seed_stats(values, {name: d for name, _, d in COLUMNS + EXTRA_COLUMNS}.get(metric, 3))
 
 
 def header(metric: str) -> str:
@@ -174,7 +174,8 @@ def build_default(experiment: Experiment, states: list[RunState], out_dir: str, 
     shared = [f"{st.run.name} trains in {st.shared}" for st in states if st.shared]
     earlier = [f"{r['run']} from {', '.join(r['sources'])}" for r in table if r.get("sources")]
     lines += ["", "Ours: the deterministic policy's evaluation at the end of training (the runs' eval.json; "
-              "a cross row: the setting its second column names), mean ± sample std over seeds; rates in %, "
+              "a cross row: the setting its second column names), mean ± sample std over seeds and in brackets "
+              "the mean's 95 % stratified-bootstrap confidence interval (rliable); rates in %, "
               "distances in m. Each run's config.json, eval.json and metrics.csv per part (the "
               "seeds trained in one process): `runs/<run>/seeds-<first>-<last>/` beside this table"
               + (f" ({'; '.join(shared)}: the same training config, trained once)" if shared else "") + ".",

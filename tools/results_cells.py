@@ -5,11 +5,14 @@ results/ (`Context`), the cell formatters, and the tables of eval.py runs (a `Ru
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import math
 import os
+import statistics
 from typing import Callable
 
+from agents import intervals
 from tools.experiment_spec import paper_row, paper_table
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -59,8 +62,14 @@ class Context:
         return self.json(INDEX)
 
     def evaluation(self, file: str) -> dict:
-        """The first evaluation of an eval.py JSON file."""
-        return self.json(file)["evaluations"][0]
+        """The first evaluation of an eval.py JSON file; each summary entry gains "unit_values", its per-seed
+        values (for the confidence interval), where every unit reports the metric."""
+        ev = self.json(file)["evaluations"][0]
+        for name, stats in ev["summary"].items():
+            values = [unit["metrics"].get(name) for unit in ev.get("units", [])]
+            if values and None not in values:
+                stats.setdefault("unit_values", values)
+        return ev
 
     def link(self, file: str) -> str:
         path = os.path.relpath(os.path.join(self.results, file), self.md_dir).replace(os.sep, "/")
@@ -73,13 +82,36 @@ def sample_std(stats: dict) -> float:
     return stats["std_units"] * math.sqrt(n / (n - 1))
 
 
+@functools.lru_cache(maxsize=None)
+def _interval(values: tuple[float, ...]) -> list[float] | None:
+    return intervals.mean_ci(values)
+
+
+def ci(values, digits: int = 1, scale: float = 100.0) -> str:
+    """' [95.3, 96.0]': rliable's 95 % bootstrap confidence interval of the mean over seeds (times `scale`: a rate
+    in %); '' for one seed."""
+    interval = _interval(tuple(float(v) for v in values))
+    return f" [{scale * interval[0]:.{digits}f}, {scale * interval[1]:.{digits}f}]" if interval else ""
+
+
+def seed_stats(values, digits: int, scale: float = 1.0, unit: str = "") -> str:
+    """'95.7 ± 0.4 % [95.3, 96.0]': the mean over seeds ± their sample std (ddof 1), the unit, and the mean's 95 %
+    confidence interval; one seed: its value. Every table of per-seed values formats them with this."""
+    values = [float(v) for v in values]
+    mean = statistics.mean(values)
+    if len(values) < 2:
+        return f"{scale * mean:.{digits}f}{unit}"
+    return f"{scale * mean:.{digits}f} ± {scale * statistics.stdev(values):.{digits}f}{unit}" + ci(values, digits, scale)
+
+
 def pct(stats: dict | None) -> str:
-    """'95.7 ± 0.4 %' (mean ± sample std over trained seeds); one seed: '95.7 %'."""
+    """'95.7 ± 0.4 % [95.3, 96.0]' (mean ± sample std over trained seeds, and the mean's 95 % confidence interval
+    where the seeds' values are known); one seed: '95.7 %'."""
     if not stats:
         return ""
     if stats.get("units", 2) < 2:
         return f"{100 * stats['mean']:.1f} %"
-    return f"{100 * stats['mean']:.1f} ± {100 * sample_std(stats):.1f} %"
+    return f"{100 * stats['mean']:.1f} ± {100 * sample_std(stats):.1f} %" + ci(stats.get("unit_values", ()))
 
 
 def rate(mean: float, std: float) -> str:

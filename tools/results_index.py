@@ -26,7 +26,6 @@ import glob
 import json
 import os
 import re
-import statistics
 import sys
 from typing import Callable
 
@@ -34,7 +33,7 @@ from tools import experiment_registry  # noqa: F401  (registers the experiments 
 from tools.experiment_spec import EXPERIMENTS
 from tools.paper_tables import WORKSPACE_NAMES
 from tools.results_cells import (PAPER_BASELINES, PAPER_OBSTACLE, PAPER_ROWS, PAPER_THROUGHPUT,
-                                 PAPER_WORKSPACE, ROOT, Context, train_config, collisions,
+                                 PAPER_WORKSPACE, ROOT, Context, seed_stats, train_config, collisions,
                                  listed_table, markdown, millions, paper_action_space, paper_collisions, paper_pct,
                                  pct, rate, runs, thousands)
 
@@ -64,10 +63,8 @@ def _finished_experiment_row(ctx: Context, experiment: str, run: str) -> dict | 
 
 
 def _seed_rate(values: list[float]) -> str:
-    """Mean ± sample std over seeds; one seed: its value."""
-    if len(values) < 2:
-        return f"{100 * values[0]:.1f} %"
-    return rate(statistics.mean(values), statistics.stdev(values))
+    """Mean ± sample std over seeds and the mean's 95 % confidence interval, in %; one seed: its value."""
+    return seed_stats(values, 1, 100.0, " %")
 
 
 def _paper_settings_cell(ctx: Context, runs_dir: str, paper_key: str) -> str:
