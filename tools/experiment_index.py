@@ -5,7 +5,8 @@ paper's, from the `table.json` its build wrote).
     python -m tools.experiment_index --write    # rewrite the README
     python -m tools.experiment_index --check    # exit 1 if the README differs from what --write would write
 
-Only the standard library at import: the registry (`tools.experiment_registry`) imports no jax.
+The registry (`tools.experiment_registry`) imports no jax; the cells' confidence intervals come from rliable
+(`tools.results_cells.seed_stats`).
 """
 
 from __future__ import annotations
@@ -138,7 +139,7 @@ def section(experiment, table: dict | None, out: str, findings: str = "") -> str
     if anchor:
         links.append(f"[notes](#{anchor})")
     built = f"; built at code {table['code']}, {table['date']}" if table.get("code") else ""
-    lines += [f"Ours: mean ± sample std over seeds, {episodes(table)} a seed{built}. " + ", ".join(links) + ".", ""]
+    lines += [f"Ours: mean ± sample std over seeds [the mean's 95 % confidence interval], {episodes(table)} a seed{built}. " + ", ".join(links) + ".", ""]
     if experiment.note:
         lines += [experiment.note, ""]
     return "\n".join(lines)
