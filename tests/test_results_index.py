@@ -94,8 +94,7 @@ def test_check_fails_after_a_cell_is_edited(tmp_path):
     shutil.copy(os.path.join(ROOT, "README.md"), root / "README.md")
     path = root / "results" / "headline" / "README.md"
     text = path.read_text()
-    cell = rc.pct(json.loads((root / "results" / "headline" / "ur5e_reach_ppo_eval.json").read_text())
-                  ["evaluations"][0]["summary"]["target_reached"])
+    cell = rc.pct(rc.Context(str(root)).evaluation("headline/ur5e_reach_ppo_eval.json")["summary"]["target_reached"])
     assert f"| {cell} |" in text
     path.write_text(text.replace(f"| {cell} |", "| 99.9 ± 0.1 % |", 1))
     assert ri.main(["--check", "--root", str(root)]) == 1
@@ -121,15 +120,16 @@ def test_experiment_rows_for_the_readme_only_when_every_seed_is_evaluated(tmp_pa
     assert ri._finished_experiment_row(ctx, "x", "half") is None
     assert ri._finished_experiment_row(ctx, "x", "absent") is None
     assert ri._finished_experiment_row(ctx, "not-built", "done") is None
-    assert ri._seed_rate([0.96, 0.97]) == "96.5 ± 0.7 %"  # the sample std: 0.01 / sqrt(2)
+    # the sample std 0.01 / sqrt(2); the bootstrap means of 2 seeds are 0.96, 0.965, 0.97: the interval is their range
+    assert ri._seed_rate([0.96, 0.97]) == "96.5 ± 0.7 % [96.0, 97.0]"
     # The index's cell: every run row, and the cross rows that hold numbers.
-    assert ri._experiment_ours(ctx, "x") == ("done: 96.5 ± 0.7 % reached; half: 90.0 % reached (1 of 2 seeds); "
+    assert ri._experiment_ours(ctx, "x") == ("done: 96.5 ± 0.7 % [96.0, 97.0] reached; half: 90.0 % reached (1 of 2 seeds); "
                                              "none: not done; done, sampled: 100.0 % reached (1 of 2 seeds) "
                                              "([table.md](experiments/x/table.md))")
     assert ri._experiment_ours(ctx, "x", precision=True).startswith(
         "done: 0.005 m, 99.0, 0.05; half: 0.005 m, 99.0, 0.05 (1 of 2 seeds); none: not done; ")
     # One run's rows (a paper row that is one run of an experiment): its own row and its cross rows.
-    assert ri._experiment_ours(ctx, "x", run="done") == ("done: 96.5 ± 0.7 % reached; done, sampled: 100.0 % reached "
+    assert ri._experiment_ours(ctx, "x", run="done") == ("done: 96.5 ± 0.7 % [96.0, 97.0] reached; done, sampled: 100.0 % reached "
                                                          "(1 of 2 seeds) ([table.md](experiments/x/table.md))")
 
 
@@ -197,11 +197,12 @@ def test_an_index_row_is_read_from_the_file_it_names():
     assert ev["policy"]["env_steps"] >= 0.98 * train_config["num_timesteps"]  # ran its schedule: no --stop-after-steps
     assert data["device"].startswith("GPU (") and data["device"].endswith(")")
     paper = rc.PAPER_ROWS[row["paper"]]
+    seeds = {name: [unit["metrics"][name] for unit in ev["units"]] for name in ("target_reached", "self_collision")}
     expected = [
         "Results: UR5e reach, PPO, 1 cm target",
         f"{100 * paper['target_reached']:.1f} % / {100 * paper['self_collision']:.1f} % self",
-        f"{100 * reached['mean']:.1f} ± {100 * rc.sample_std(reached):.1f} % / "
-        f"{100 * self_c['mean']:.1f} ± {100 * rc.sample_std(self_c):.1f} % self",
+        f"{100 * reached['mean']:.1f} ± {100 * rc.sample_std(reached):.1f} %{rc.ci(seeds['target_reached'])} / "
+        f"{100 * self_c['mean']:.1f} ± {100 * rc.sample_std(self_c):.1f} %{rc.ci(seeds['self_collision'])} self",
         f"{reached['units']}; {data['device'][len('GPU ('):-1]}",
         f"`python train.py {train_config['preset']} --seeds 5`",
         "[ur5e_reach_ppo_eval.json](headline/ur5e_reach_ppo_eval.json)",
