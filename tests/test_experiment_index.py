@@ -29,7 +29,10 @@ def _out(tmp_path, table=TABLE):
 def test_a_section_shows_its_table_json_numbers(tmp_path):
     text = ei.readme(_out(tmp_path), experiments={"fake": FAKE})
     assert text.startswith("# Findings\n")
-    assert ("| row a | 3 x 150M | 96.0 ± 1.0 % (paper 96.1 %) | 2.5 ± 0.5 % | 0.020 ± 0.001 |" in text.splitlines())
+    # 3 seeds: each extreme mean (all three resamples the same seed) comes up with probability 1/27 > 2.5 %, so the
+    # 95 % interval spans the seeds' range.
+    assert ("| row a | 3 x 150M | 96.0 ± 1.0 % [95.0, 97.0] (paper 96.1 %) | 2.5 ± 0.5 % [2.0, 3.0] | "
+            "0.020 ± 0.001 [0.018, 0.021] |" in text.splitlines())
     assert "| row a on b | not evaluated |  |  |  |" in text.splitlines()
     assert "| run | seeds x env steps | reached | self collision | distance (m) |" in text
     assert "`python -m tools.experiments launch fake`" in text and "`python -m tools.experiments build fake`" in text
