@@ -38,6 +38,12 @@ physics substep's), the norms the joint penalties weigh (paper, "Reward formulat
 penalty's effect on the mean acceleration)."""
 
 
+def _total(terms: dict) -> jax.Array:
+    """The reward terms summed left to right in their order (a + (-p) is a - p exactly: the rewards of the
+    formulation-minus-penalties code before the terms existed)."""
+    return functools.reduce(operator.add, terms.values())
+
+
 def _take(tree, index):
     return jax.tree.map(lambda x: x[index], tree)
 
@@ -190,7 +196,7 @@ class ArmEnv(Env):
         mean_acc = self.running_mean(info["mean_joint_acc"], jnp.linalg.norm(data.qacc), num_steps, nan)
 
         terms = self.reward_terms(data, distance, in_target.astype(jnp.float32), info)
-        reward = functools.reduce(operator.add, terms.values())
+        reward = _total(terms)
         collision = -cfg.collision_penalty * collided
         reward = jnp.where(failed, collision, reward)
         terms = {name: jnp.where(failed, 0.0, value) for name, value in terms.items()}  # what the step really earned
@@ -339,7 +345,7 @@ class ArmEnv(Env):
 
     def reward(self, data, distance, in_target, info) -> jax.Array:
         """Reward of a step that did not collide: the terms summed in their order."""
-        return functools.reduce(operator.add, self.reward_terms(data, distance, in_target, info).values())
+        return _total(self.reward_terms(data, distance, in_target, info))
 
     def perceived(self, data, info, key):
         """(data, info) as the sensors report them: joint angles with `joint_noise_std` noise; with

@@ -139,7 +139,8 @@ def section(experiment, table: dict | None, out: str, findings: str = "") -> str
     if anchor:
         links.append(f"[notes](#{anchor})")
     built = f"; built at code {table['code']}, {table['date']}" if table.get("code") else ""
-    lines += [f"Ours: mean ± sample std over seeds [the mean's 95 % confidence interval], {episodes(table)} a seed{built}. " + ", ".join(links) + ".", ""]
+    lines += [f"Ours: mean ± sample std over seeds [the mean's 95 % confidence interval], {episodes(table)} a seed"
+              f"{built}. " + ", ".join(links) + ".", ""]
     if experiment.note:
         lines += [experiment.note, ""]
     return "\n".join(lines)
@@ -187,4 +188,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    run_cli(lambda: sys.exit(main()))
+    run_cli(main)

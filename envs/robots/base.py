@@ -84,7 +84,6 @@ class Robot(abc.ABC):
         model = spec.compile()
         self.mj_model = model
         self.gravity_compensation = gravity_compensation
-        self.integrator = integrator
         self.nq = model.nq
         self.joint_low = model.jnt_range[:, 0].astype(np.float32)
         self.joint_high = model.jnt_range[:, 1].astype(np.float32)
