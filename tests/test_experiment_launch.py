@@ -144,3 +144,56 @@ def test_a_failing_part_reports_its_error_in_list(tmp_path, monkeypatch):
     text = ex.listing(state.select([DEMO]), os.path.join(runs, "runs"), os.path.join(runs, "out"))
     assert f"seeds-0-0: failed in job {job.job_id}: ValueError: " in text
     assert "move that part away to retrain it" in text
+
+
+class _EndedJob:
+    """A job whose result file is missing (it ended without a word), as `_after_job` sees it."""
+
+    def __init__(self, folder, job_id="7"):
+        self.job_id = job_id
+        self.paths = type("Paths", (), {"result_pickle": folder / "missing_result.pkl"})()
+
+
+def test_a_job_killed_by_the_cluster_is_submitted_again_until_the_requeues_run_out(tmp_path, monkeypatch):
+    logdir = str(tmp_path / "run" / "seeds-0-0")
+    launch.note_job(logdir, status="running", attempts=1, error=None)
+    monkeypatch.setattr(launch, "slurm_state", lambda job_id: "TIMEOUT")
+    said = []
+    config = launch.LaunchConfig(executor="slurm", max_requeues=2)
+    assert launch._after_job(_EndedJob(tmp_path), "e/r", "seeds-0-0", logdir, config, 1, said.append)
+    assert "ended by the cluster (TIMEOUT)" in said[-1]
+    assert launch.read_job(logdir)["status"] == "running"  # left for the next job to take over
+    assert not launch._after_job(_EndedJob(tmp_path), "e/r", "seeds-0-0", logdir, config, 2, said.append)
+    assert launch.read_job(logdir)["status"] == "killed"
+    assert launch.read_job(logdir)["error"] == "job 7 ended without a result (TIMEOUT)"
+
+
+def test_a_job_its_user_cancelled_is_noted_as_killed_not_submitted_again(tmp_path):
+    """A real Slurm job cancelled by `scancel` ends CANCELLED: reported, not resubmitted."""
+    ok, why = ensure_slurm()
+    if not ok:
+        pytest.skip(why)
+    job_id = subprocess.run(["sbatch", "--parsable", "-o", "/dev/null", "--wrap", "sleep 120"], capture_output=True,
+                            text=True, check=True).stdout.strip().split(";")[0]
+    subprocess.run(["scancel", job_id], check=True)
+    for _ in range(60):
+        if launch.slurm_state(job_id) == "CANCELLED":
+            break
+        subprocess.run(["sleep", "1"])
+    assert launch.slurm_state(job_id) == "CANCELLED"
+    logdir = str(tmp_path / "run" / "seeds-0-0")
+    launch.note_job(logdir, status="running", attempts=1, error=None, log="slurm.err")
+    said = []
+    config = launch.LaunchConfig(executor="slurm", max_requeues=5)
+    assert not launch._after_job(_EndedJob(tmp_path, job_id), "e/r", "seeds-0-0", logdir, config, 0, said.append)
+    assert said[-1] == (f"[e/r seeds-0-0] job {job_id} ended: killed (job {job_id} ended without a result "
+                        "(CANCELLED); log slurm.err)")
+
+
+def test_a_finished_job_keeps_the_status_its_code_wrote(tmp_path):
+    logdir = str(tmp_path / "run" / "seeds-0-0")
+    launch.note_job(logdir, status="done", attempts=2, error=None)
+    said = []
+    assert not launch._after_job(_EndedJob(tmp_path), "e/r", "seeds-0-0", logdir,
+                                 launch.LaunchConfig(executor="slurm"), 0, said.append)
+    assert said == ["[e/r seeds-0-0] job 7 ended: done"]

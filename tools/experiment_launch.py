@@ -16,6 +16,7 @@ import datetime
 import fcntl
 import json
 import os
+import re
 import signal
 import socket
 import subprocess
@@ -35,6 +36,12 @@ from tools.experiment_tables import record_parts
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 EXECUTORS = ("slurm", "local")
 """`launch`'s executors: a Slurm cluster, or this machine's GPUs (its CPU where it has none)."""
+CHECKPOINTS_PER_PART = 20
+"""A part saves a checkpoint every 1/20 of its budget, so a job killed before it could save on its warning (a chunk
+longer than the warning, a lost node) loses at most that much."""
+KILLED_STATES = ("TIMEOUT", "PREEMPTED", "NODE_FAIL", "BOOT_FAIL")
+"""Slurm job states of a job ended by the cluster, not by its code or its user: a waiting `launch` submits such a
+part again (it resumes from its newest checkpoint)."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -192,7 +199,8 @@ def train_part(key: str, part: str, runs_dir: str, out: str, log=print) -> str:
             log(f"[{key} {part}] {'resuming at ' + format(state.steps, ',') if resume else 'starting'}; "
                 f"to {state.budget:,} steps x {state.count} seeds")
             config = run.config(logdir, first_seed=span[0], seeds=span[1], resume=resume, overwrite=fresh_over,
-                                stop_after_steps=0, stop_after_seconds=0.0)
+                                stop_after_steps=0, stop_after_seconds=0.0,
+                                checkpoint_every=max(1, state.budget // CHECKPOINTS_PER_PART))
             result = driver.train(config)
             log(f"[{key} {part}] {result.status} at {result.env_steps:,} steps")
             if result.status != "done":
@@ -230,8 +238,7 @@ class PartJob(submitit.helpers.Checkpointable):
     compilation_cache: str | None = None
 
     def __call__(self) -> str:
-        experiment, run = find_run(self.key)
-        logdir = os.path.join(run_state(experiment, run, self.runs_dir, self.out).folder, self.part)
+        logdir = part_folder(self.key, self.part, self.runs_dir, self.out)
         job = read_job(logdir) or {}
         note_job(logdir, job_id=submitit.JobEnvironment().job_id, attempts=job.get("attempts", 0) + 1,
                  started=now(), status="running", error=None)
@@ -318,6 +325,39 @@ def job_ended(job, executor: str) -> bool:
     return listed.returncode == 0 and not listed.stdout.strip()
 
 
+def slurm_state(job_id: str) -> str:
+    """The Slurm state of a job ("TIMEOUT", "COMPLETED", ...): `scontrol show job` (which knows a finished job for
+    the cluster's MinJobAge), else `sacct`; "" where neither knows it."""
+    for argv in (["scontrol", "show", "job", "-o", str(job_id)], ["sacct", "-n", "-X", "-P", "-o", "State", "-j",
+                                                                    str(job_id)]):
+        try:
+            text = subprocess.run(argv, capture_output=True, text=True, timeout=60).stdout
+        except (OSError, subprocess.SubprocessError):
+            continue
+        found = re.search(r"JobState=(\w+)", text) if argv[0] == "scontrol" else re.match(r"\s*([A-Z_]+)", text)
+        if found:
+            return found.group(1)
+    return ""
+
+
+def _after_job(job, key: str, part: str, logdir: str, config: "LaunchConfig", resubmits: int, log) -> bool:
+    """Reports how a part's job ended (its job file's status). A job that ended without a word (its file still says
+    running: killed) is noted as killed; on Slurm, one killed by the cluster (`KILLED_STATES`) is to be submitted
+    again while `config.max_requeues` allows. Returns whether to submit it again."""
+    note = read_job(logdir) or {}
+    if note.get("status") in ("submitted", "running") and not job.paths.result_pickle.exists():
+        state = slurm_state(job.job_id) if config.executor == "slurm" else ""
+        if state in KILLED_STATES and resubmits < config.max_requeues:
+            log(f"[{key} {part}] job {job.job_id} ended by the cluster ({state}) before it could requeue itself; "
+                "submitting the part again (it resumes from its newest checkpoint)")
+            return True
+        note = note_job(logdir, status="killed", ended=now(),
+                        error=f"job {job.job_id} ended without a result ({state or 'its process died'})")
+    log(f"[{key} {part}] job {job.job_id} ended: {note.get('status', 'unknown')}"
+        + (f" ({note['error']}; log {note.get('log')})" if note.get("error") else ""))
+    return False
+
+
 def make_executor(config: LaunchConfig, folder: str):
     """The submitit executor for `config` (Slurm's parameters: time, partition, GPUs, the stop warning)."""
     if config.executor == "local":
@@ -351,7 +391,18 @@ def launch(selection, config: LaunchConfig, runs_dir: str, out: str, max_seeds: 
     os.environ.setdefault(provenance.COMMAND_VARIABLE, provenance.command())
     slots = gpu_slots(config.gpus_per_part) if config.executor == "local" else []
     jobs, running = [], {}
+
+    def submit(key, part, slot=None):
+        logdir = part_folder(key, part, runs_dir, out)
+        note_job(logdir, executor=config.executor, submitted=now(), status="submitted", error=None)
+        job = executor.submit(PartJob(key, part, runs_dir, out, compilation_cache))
+        note_job(logdir, job_id=job.job_id, log=str(job.paths.stderr))
+        log(f"[{key} {part}] job {job.job_id}" + (f" on GPU {','.join(map(str, slots[slot]))}"
+                                                  if slot is not None and slots[slot] else ""))
+        return job
+
     for key, part in items:
+        note_job(part_folder(key, part, runs_dir, out), attempts=0)
         if config.executor == "local":
             while len(running) >= len(slots):  # wait for a free GPU
                 for i, job in list(running.items()):
@@ -360,23 +411,27 @@ def launch(selection, config: LaunchConfig, runs_dir: str, out: str, max_seeds: 
                 time.sleep(1)
             slot = min(set(range(len(slots))) - set(running))
             executor.update_parameters(visible_gpus=slots[slot], gpus_per_node=len(slots[slot]))
-        job = executor.submit(PartJob(key, part, runs_dir, out, compilation_cache))
-        experiment, run = find_run(key)
-        logdir = os.path.join(run_state(experiment, run, runs_dir, out).folder, part)
-        note_job(logdir, job_id=job.job_id, executor=config.executor, submitted=now(), attempts=0, status="submitted",
-                 error=None, log=str(job.paths.stderr))
-        log(f"[{key} {part}] job {job.job_id}" + (f" on GPU {','.join(map(str, slots[slot]))}"
-                                                  if config.executor == "local" and slots[slot] else ""))
-        jobs.append(job)
-        if config.executor == "local":
-            running[slot] = job
+            running[slot] = submit(key, part, slot)
+            jobs.append(running[slot])
+        else:
+            jobs.append(submit(key, part))
     if config.executor == "local" or config.wait:
-        for job, (key, part) in zip(jobs, items):
-            while not job_ended(job, config.executor):
+        waiting = [[job, key, part, 0] for job, (key, part) in zip(jobs, items)]
+        while waiting:
+            entry = waiting[0]
+            job, key, part, resubmits = entry
+            if not job_ended(job, config.executor):
                 time.sleep(2)
-            experiment, run = find_run(key)
-            logdir = os.path.join(run_state(experiment, run, runs_dir, out).folder, part)
-            note = read_job(logdir) or {}
-            log(f"[{key} {part}] job {job.job_id} ended: {note.get('status', 'unknown')}"
-                + (f" ({note['error']}; log {note.get('log')})" if note.get("error") else ""))
+                continue
+            if _after_job(job, key, part, part_folder(key, part, runs_dir, out), config, resubmits, log):
+                entry[0], entry[3] = submit(key, part), resubmits + 1
+                jobs.append(entry[0])
+            else:
+                waiting.pop(0)
     return jobs
+
+
+def part_folder(key: str, part: str, runs_dir: str, out: str) -> str:
+    """The folder of part `part` of run `key` (its job file lies beside it)."""
+    experiment, run = find_run(key)
+    return os.path.join(run_state(experiment, run, runs_dir, out).folder, part)
