@@ -25,7 +25,8 @@ import numpy as np
 import pytest
 
 from mujoco_reference import colliding_configuration, colliding_pairs, contact_model
-from tools import fidelity
+import envs
+from tools import fidelity, fidelity_train
 
 STEPS = 30
 """Episode length of the test env (the pseudo-IK episode below reaches 0.02 m at its 27th step)."""
@@ -297,3 +298,34 @@ def test_command_line_writes_provenance_and_one_row_per_configuration(tmp_path):
     rates = [v["rate"] for v in row.values() if isinstance(v, dict) and "rate" in v]
     assert len(rates) == 5 and all(0 <= p <= 1 for p in rates)
     assert result["env_options"] == {"episode_length": STEPS}
+
+
+def test_wrist_3_variant_resizes_the_capsule_of_that_env_only():
+    built = envs.make("ur5e-reach")
+    g = built.robot.mj_model.geom("wrist_3").id
+    fidelity.apply_variants(built, ["wrist_3=0,0.03"])
+    assert built.robot.geom_half[g] == 0.0
+    assert built.robot.geom_radius[g] == np.float32(0.03)
+    assert envs.make("ur5e-reach").robot.geom_half[g] == np.float32(0.02)  # a new env has the model's size
+
+
+def test_training_with_variants_applies_them_to_every_ur5e_env_built(monkeypatch):
+    monkeypatch.setattr(envs, "make", envs.make)  # restored after the test
+    monkeypatch.setattr(envs, "from_config", envs.from_config)
+    fidelity_train.patch_env_builders(["wrist_3=0"])
+    made = envs.make("ur5e-reach")
+    assert made.robot.geom_half[made.robot.mj_model.geom("wrist_3").id] == 0.0
+    again = envs.from_config("ur5e-reach", envs.make_config("ur5e-reach"))
+    assert again.robot.geom_half[again.robot.mj_model.geom("wrist_3").id] == 0.0
+    panda = envs.make("panda-reach")
+    assert panda.robot.geom_half.tolist() == envs.robots.Panda().geom_half.tolist()  # left as built
+
+
+@pytest.mark.parametrize("argv, named", [
+    (["--variant", "wrist_3=0", "ur5e-reach-ppo"], "train.py's arguments follow `--`"),
+    (["--variant", "wrist_3=0", "--", "panda-reach-ppo"], "env 'panda-reach' is not a UR5e env"),
+    (["--variant", "wrist=0", "--", "ur5e-reach-ppo"], "--variant 'wrist=0' is unknown"),
+])
+def test_training_with_variants_refuses_bad_input_before_training(argv, named):
+    with pytest.raises(ValueError, match=re.escape(named)):
+        fidelity_train.main(argv)

@@ -96,16 +96,32 @@ def _ee_at_wrist_3(env, value):
     env.robot.mj_model.site_pos[env.robot.ee_site] = 0.0  # before the first kinematics call caches the model
 
 
+def _wrist_3(env, value):
+    """wrist_3's collision capsule resized, "HALF[,RADIUS]" in m: Menagerie's end-effector cylinder (r 0.04, half-height
+    0.02) spans 0.06-0.10 m along the flange axis; our capsule of the same size numbers reaches 0.02-0.14 m."""
+    robot, g = env.robot, env.robot.mj_model.geom("wrist_3").id
+    half, *radius = (float(x) for x in value.split(","))
+    robot.geom_half[g] = half  # in place, before the first distance call is traced
+    if radius:
+        robot.geom_radius[g] = radius[0]
+
+
 VARIANTS = {  # name -> apply(env, value string); on the command line NAME or NAME=VALUE
     # joint damping x v, or x v_i per joint for a comma-separated list (0: Menagerie's, no damping)
     "damping": lambda env, v: env.robot.mj_model.dof_damping.__imul__(np.array(v.split(","), float)),
     "no_base": _no_base, "floor": _floor, "step_end": _step_end, "contacts": _contacts, "ee_wrist_3": _ee_at_wrist_3,
-    "target_limited": _target_limited, "elbow_2pi": _elbow_2pi, "ctrl_pi": _ctrl_pi}
+    "target_limited": _target_limited, "elbow_2pi": _elbow_2pi, "ctrl_pi": _ctrl_pi,
+    "wrist_3": _wrist_3}
 
 
 def build(options: dict, variants: list[str]):
     """The unwrapped reach env of `options` with the `variants` applied, in order."""
-    env = envs.make("ur5e-reach", **options)
+    return apply_variants(envs.make("ur5e-reach", **options), variants)
+
+
+def apply_variants(env, variants: list[str]):
+    """`env` with the `variants` ("NAME[=VALUE]") applied in place, in order; ValueError naming an unknown or
+    malformed one."""
     for item in variants:
         name, _, value = item.partition("=")
         if name not in VARIANTS:
