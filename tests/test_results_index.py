@@ -116,10 +116,10 @@ def test_experiment_rows_for_the_readme_only_when_every_seed_is_evaluated(tmp_pa
     folder.mkdir(parents=True)
     (folder / "table.json").write_text(json.dumps({"rows": rows}))
     ctx = rc.Context(str(tmp_path))
-    assert ri._finished_experiment_row(ctx, "x", "done")["per_seed"]["target_reached"] == [0.96, 0.97]  # not the cross row
-    assert ri._finished_experiment_row(ctx, "x", "half") is None
-    assert ri._finished_experiment_row(ctx, "x", "absent") is None
-    assert ri._finished_experiment_row(ctx, "not-built", "done") is None
+    assert ri.finished_experiment_row(ctx, "x", "done")["per_seed"]["target_reached"] == [0.96, 0.97]  # not the cross row
+    assert ri.finished_experiment_row(ctx, "x", "half") is None
+    assert ri.finished_experiment_row(ctx, "x", "absent") is None
+    assert ri.finished_experiment_row(ctx, "not-built", "done") is None
     # the sample std 0.01 / sqrt(2); the bootstrap means of 2 seeds are 0.96, 0.965, 0.97: the interval is their range
     assert ri._seed_rate([0.96, 0.97]) == "96.5 ± 0.7 % [96.0, 97.0]"
     # The index's cell: every run row, and the cross rows that hold numbers.

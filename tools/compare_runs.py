@@ -220,7 +220,7 @@ def plot_aggregate(aggregate: dict, metric: str, path: str) -> str:
     """aggregate.png: rliable's interval-estimates figure, a panel per aggregate, a bar per algorithm."""
     from rliable import plot_utils
 
-    plt = plots._pyplot()
+    plt = plots.pyplot()
     points = {a: np.array([v[n]["estimate"] for n in AGGREGATES]) for a, v in aggregate.items()}
     cis = {a: np.array([[v[n]["ci"][0] for n in AGGREGATES], [v[n]["ci"][1] for n in AGGREGATES]])
            for a, v in aggregate.items()}
@@ -237,7 +237,7 @@ def plot_improvement(improvement: list[dict], metric: str, path: str) -> str:
     """improvement.png: rliable's probability-of-improvement figure, a bar per pair (X left, Y right)."""
     from rliable import plot_utils
 
-    plt = plots._pyplot()
+    plt = plots.pyplot()
     probs = {p["x"] + PAIR_SEPARATOR + p["y"]: p["estimate"] for p in improvement}
     cis = {p["x"] + PAIR_SEPARATOR + p["y"]: np.array(p["ci"]) for p in improvement}
     ax = plot_utils.plot_probability_of_improvement(probs, cis, pair_separator=PAIR_SEPARATOR,

@@ -39,7 +39,7 @@ CURVE_METRICS = {  # the first four are drawn by default
 """Columns of metrics.csv drawn by default, with their axis titles (the paper's figures)."""
 
 
-def _pyplot():
+def pyplot():
     import matplotlib
 
     if not os.environ.get("DISPLAY") and matplotlib.get_backend().lower() not in ("agg", "module://matplotlib_inline.backend_inline"):
@@ -122,7 +122,7 @@ def curve_grid(groups: dict, metrics, axes=("env_steps",), out: str | None = Non
     horizontal axis (X_AXES) in each row: runs that belong together (fast SAC and PPO on one task) share their
     panels, against env steps and against wall-clock side by side. `keep`: logdir -> how many of its seeds to
     draw (`curve`'s)."""
-    plt = _pyplot()
+    plt = pyplot()
     from matplotlib.ticker import EngFormatter
 
     for x in axes:
@@ -148,14 +148,14 @@ def curve_grid(groups: dict, metrics, axes=("env_steps",), out: str | None = Non
     if title:
         fig.suptitle(title)
     fig.tight_layout()
-    return _save(fig, out)
+    return save(fig, out)
 
 
 def _first(logdirs):
     return logdirs if isinstance(logdirs, str) else list(logdirs)[0]
 
 
-def _save(fig, out, dpi: int = 110):
+def save(fig, out, dpi: int = 110):
     if out:
         if os.path.dirname(out):
             os.makedirs(os.path.dirname(out), exist_ok=True)
@@ -174,7 +174,7 @@ def initial_state(setups: dict, seed: int = 0, out: str | None = None, width: in
     import envs
     from envs import render
 
-    plt = _pyplot()
+    plt = pyplot()
     fig, axes = plt.subplots(1, len(setups), figsize=(width / 100 * len(setups), height / 100), squeeze=False)
     for ax, (name, options) in zip(axes[0], setups.items()):
         env = envs.make(name, **options)
@@ -184,7 +184,7 @@ def initial_state(setups: dict, seed: int = 0, out: str | None = None, width: in
         ax.set_title(name + (f" ({extra})" if extra else ""), fontsize=9)
         ax.axis("off")
     fig.tight_layout()
-    return _save(fig, out)
+    return save(fig, out)
 
 
 def sample_targets(env_name: str, workspace: str, num: int = 3000, seed: int = 0, **options) -> np.ndarray:
@@ -209,7 +209,7 @@ def target_scatter(env_name: str = "ur5e-reach", workspaces=("pandagym", "front"
     from the side (x-z); the base is at the origin, the circle is the robot's reach."""
     import envs
 
-    plt = _pyplot()
+    plt = pyplot()
     robot = envs.make(env_name).robot
     center, reach = np.asarray(robot.workspace_center, float), float(robot.reach)
     fig, axes = plt.subplots(2, len(workspaces), figsize=(3.2 * len(workspaces), 6.4), squeeze=False)
@@ -231,7 +231,7 @@ def target_scatter(env_name: str = "ur5e-reach", workspaces=("pandagym", "front"
                 ax.set_title(f"{ws} ({len(pts)} targets)", fontsize=10)
     fig.suptitle(f"{env_name}: sampled targets per workspace, top (x-y) and side (x-z) views; colour = height")
     fig.tight_layout()
-    return _save(fig, out, dpi=90)
+    return save(fig, out, dpi=90)
 
 
 def main(argv=None):

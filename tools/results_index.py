@@ -51,7 +51,7 @@ def sampled_table(ctx: Context) -> list[list[str]]:
     return rows
 
 
-def _finished_experiment_row(ctx: Context, experiment: str, run: str) -> dict | None:
+def finished_experiment_row(ctx: Context, experiment: str, run: str) -> dict | None:
     """The table.json row of `experiment`/`run` if all its seeds are evaluated, else None."""
     file = f"experiments/{experiment}/table.json"
     if not os.path.exists(os.path.join(ctx.results, file)):
@@ -103,7 +103,7 @@ def readme_table(ctx: Context) -> list[list[str]]:
         paper = " / ".join([paper_pct(PAPER_ROWS[run.paper]["target_reached"]), paper_collisions(run.paper)])
         settings = _paper_settings_cell(ctx, paper_settings[run.file], run.paper) if run.file in paper_settings else ""
         label, experiment, name = from_experiments.get(run.file, (run.label, "", ""))
-        row = _finished_experiment_row(ctx, experiment, name) if experiment else None
+        row = finished_experiment_row(ctx, experiment, name) if experiment else None
         if row is not None:
             rows.append([label + ": reached / collisions", paper, settings, _experiment_cell(row, run.paper)])
             continue
@@ -113,7 +113,7 @@ def readme_table(ctx: Context) -> list[list[str]]:
                      f"{ev['summary']['target_reached']['units']} seeds x {millions(ev['policy']['env_steps'])} steps"])
     for listed in readme["experiment_rows"]:
         label, paper_key = listed["label"], listed["paper"]
-        row = _finished_experiment_row(ctx, listed["experiment"], listed["run"])
+        row = finished_experiment_row(ctx, listed["experiment"], listed["run"])
         if row is None:
             continue
         rows.append([label + ": reached / collisions",
