@@ -7,6 +7,7 @@ A run's config is stored with every checkpoint and policy export; `config_from_j
 from __future__ import annotations
 
 import dataclasses
+import importlib.util
 import json
 import math
 import re
@@ -25,6 +26,10 @@ from agents.loop import MULTI_DEVICE_MODES
 EnvConfigT = TypeVar("EnvConfigT")
 AlgoConfigT = TypeVar("AlgoConfigT")
 PRECISIONS = ("default", "high", "highest")
+LOGGERS = ("csv", "wandb")
+WANDB_MODES = ("offline", "online", "disabled")
+WANDB_EXTRA = 'pip install -e ".[wandb]"'
+"""What installs the wandb package that `logger="wandb"` needs (the project's `wandb` extra)."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -95,6 +100,14 @@ class TrainConfig(Generic[EnvConfigT, AlgoConfigT]):
     """Write TensorBoard event files (needs tensorboardX)."""
     progress: bool = True
     """Print a progress line."""
+    logger: Literal["csv", "wandb"] = "csv"
+    """Where metrics go besides metrics.csv (and TensorBoard, see tensorboard): "csv" nowhere else, "wandb" also to
+    Weights & Biases, one W&B run per seed with the config and the final evaluation (needs the wandb extra)."""
+    wandb_mode: Literal["offline", "online", "disabled"] = "offline"
+    """W&B mode with logger="wandb": "offline" writes the runs to logdir/wandb only (upload later with `wandb sync`),
+    "online" uploads while training (needs `wandb login`), "disabled" makes the W&B calls no-ops."""
+    wandb_project: str = "reach-avoid-bench"
+    """W&B project of the runs with logger="wandb"."""
 
     @property
     def algo_name(self) -> str:
@@ -103,7 +116,7 @@ class TrainConfig(Generic[EnvConfigT, AlgoConfigT]):
 
 RUN_FIELDS = ("num_timesteps", "devices", "multi_device", "logdir", "resume", "overwrite", "checkpoint_every", "keep_checkpoints",
               "checkpoint_envs", "log_every", "stop_after_steps", "stop_after_seconds", "eval_envs", "eval_seed", "eval_last_steps",
-              "tensorboard", "progress")
+              "tensorboard", "progress", "logger", "wandb_mode", "wandb_project")
 """Fields that may differ between a checkpoint's config and a resuming command line."""
 
 
@@ -158,11 +171,27 @@ def validate(config: TrainConfig) -> None:
         raise ValueError(f"multi_device={config.multi_device!r} is unknown: allowed are {', '.join(MULTI_DEVICE_MODES)}.")
     if config.matmul_precision not in PRECISIONS:
         raise ValueError(f"matmul_precision={config.matmul_precision!r} is unknown: allowed are {', '.join(PRECISIONS)}.")
+    validate_logging(config)
     if config.resume and not config.logdir:
         raise ValueError("logdir='' is invalid with resume=True: allowed is the directory of the run to continue.")
     if config.resume and config.overwrite:
         raise ValueError("overwrite=True is invalid with resume=True: allowed is one of them (--resume continues the "
                          "run in logdir, --overwrite replaces it with a fresh one).")
+
+
+def validate_logging(config: TrainConfig) -> None:
+    """The logger fields of `validate`; with logger="wandb" also that wandb is installed, so a missing package
+    stops the run before anything compiles."""
+    if config.logger not in LOGGERS:
+        raise ValueError(f"logger={config.logger!r} is unknown: allowed are {', '.join(LOGGERS)}.")
+    if config.wandb_mode not in WANDB_MODES:
+        raise ValueError(f"wandb_mode={config.wandb_mode!r} is unknown: allowed are {', '.join(WANDB_MODES)}.")
+    if not 1 <= len(config.wandb_project) <= 128 or any(c in config.wandb_project for c in "/\\#?%:"):
+        raise ValueError(f"wandb_project={config.wandb_project!r} is invalid: allowed is a name of 1 to 128 "
+                         "characters without / \\ # ? % : (W&B's rule for project names).")
+    if config.logger == "wandb" and importlib.util.find_spec("wandb") is None:
+        raise ValueError("logger='wandb' needs the wandb package, which is not installed: allowed is logger='csv', "
+                         f"or install it with `{WANDB_EXTRA}`.")
 
 
 # ----------------------------------------------------------------------------------------------

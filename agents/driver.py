@@ -1,8 +1,8 @@
 """The training run: compiled programs, the chunk loop, checkpoints and Ctrl-C.
 
 `train(config)` checks the logdir (`agents.logdir`: an earlier run is refused unless `resume` or `overwrite`),
-runs compiled chunks (`agents.loop`) and, between them, logs (`agents.logger`),
-checkpoints (`agents.checkpoint`, plus the policy export of `agents.export`), honours Ctrl-C
+runs compiled chunks (`agents.loop`) and, between them, logs (`agents.logger`; with logger="wandb" also
+`agents.wandb_logger`), checkpoints (`agents.checkpoint`, plus the policy export of `agents.export`), honours Ctrl-C
 (checkpoint, then exit) and stops on a non-finite learner metric (keeping the last good checkpoint;
 a resume skips damaged checkpoints, moving them aside). At the
 end it evaluates the deterministic policy and stores the metrics as JSON next to the final
@@ -37,6 +37,7 @@ from agents.config import (TrainConfig, config_from_json, config_json, env_steps
 from agents import logdir as logdirs
 from agents.logger import Logger, cut_rows_after
 from agents.loop import Programs
+from agents.wandb_logger import WandbLogger
 
 
 class NonFiniteLossError(RuntimeError):
@@ -138,6 +139,7 @@ def _train(config: TrainConfig, learner_cls: type | None = None) -> TrainResult:
             programs = programs_for(config, learner_cls)
             state = programs.init(seed_keys(config))
         write_atomic(os.path.join(logdir, "config.json"), json.dumps(config_json(config), indent=2))
+        sinks = [WandbLogger(config)] if config.logger == "wandb" else []
     except BaseException:
         ckpt.close()
         _undo_start(logdir, prepared)
@@ -153,7 +155,7 @@ def _train(config: TrainConfig, learner_cls: type | None = None) -> TrainResult:
         stop_updates = min(updates_total, math.ceil(config.stop_after_steps / spu))
 
     logger = Logger(logdir, config.seed, config.seeds, config.preset or config.env_name, config.tensorboard,
-                    config.progress)
+                    config.progress, sinks)
     interrupted = {"flag": False}
     previous_handler = _install_sigint(interrupted)
     last_saved = start_step
@@ -221,6 +223,7 @@ def _train(config: TrainConfig, learner_cls: type | None = None) -> TrainResult:
                                "mean": {k: float(np.mean(v)) for k, v in eval_metrics.items()}}, indent=2)
             for path in (os.path.join(ckpt.step_dir(step), "eval.json"), os.path.join(logdir, "eval.json")):
                 write_atomic(path, text)
+            logger.log_eval(step, eval_metrics)
     except NonFiniteLossError:
         if last_saved is None:  # nothing worth keeping: no half-made run, and an overwritten one back in place
             logger.close()

@@ -10,7 +10,7 @@ import os
 import shutil
 import tempfile
 
-RUN_FILES = ("checkpoints", "corrupt_checkpoints", "config.json", "metrics.csv", "eval.json", "tb")
+RUN_FILES = ("checkpoints", "corrupt_checkpoints", "config.json", "metrics.csv", "eval.json", "tb", "wandb")
 """What a run writes into its logdir (`overwrite` replaces these, and only these)."""
 ASIDE_PREFIX = ".replaced-run-"
 """Folder inside the logdir that holds an earlier run's files while the run replacing it has no checkpoint."""

@@ -1,5 +1,5 @@
 """What a run writes while it trains: `metrics.csv`, TensorBoard events, a progress line, and the
-final evaluation's summary in the paper's terms."""
+final evaluation's summary in the paper's terms; other loggers (`agents.wandb_logger`) get the same rows."""
 
 from __future__ import annotations
 
@@ -7,6 +7,7 @@ import csv
 import datetime
 import os
 import sys
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -70,11 +71,13 @@ def si(x: float) -> str:
 
 
 class Logger:
-    """CSV rows (one per seed and log step), TensorBoard scalars per seed, and the progress line."""
+    """CSV rows (one per seed and log step), TensorBoard scalars per seed, and the progress line. `sinks`: other
+    loggers (`agents.wandb_logger.WandbLogger`) that get every `log` call, the final evaluation and `close`."""
 
     def __init__(self, logdir: str, seed: int, seeds: int, label: str, tensorboard: bool = True,
-                 progress: bool = True):
+                 progress: bool = True, sinks: Sequence = ()):
         self.seed, self.seeds, self.label, self.show_progress = seed, seeds, label, progress
+        self.sinks = list(sinks)
         self.csv_path = os.path.join(logdir, "metrics.csv")
         self.columns = None
         self.writers = []
@@ -113,6 +116,13 @@ class Logger:
             for k, v in extra.items():
                 writer.add_scalar("perf/" + k, v, step)
             writer.flush()
+        for sink in self.sinks:
+            sink.log(step, metrics, extra)
+
+    def log_eval(self, step: int, eval_metrics: dict) -> None:
+        """The final evaluation ({name: per-seed values}, eval.json's per_seed) of env step `step`, for the sinks."""
+        for sink in self.sinks:
+            sink.log_eval(step, eval_metrics)
 
     def _existing_header(self) -> list[str] | None:
         """The header row of an existing, non-empty metrics.csv (a resumed run's), else None."""
@@ -149,3 +159,5 @@ class Logger:
             print()
         for w in self.writers:
             w.close()
+        for sink in self.sinks:
+            sink.close()
