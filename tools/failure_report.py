@@ -1,7 +1,8 @@
 """Why a policy fails: which links collide, when, from which start, and how far the misses end.
 
     python -m tools.failure_report --checkpoint results/checkpoints/ur5e-reach-ppo --num-envs 256
-    python -m tools.failure_report --checkpoint RUN --env ur5e-reach-avoid --unit 2 --json report.json
+    python -m tools.failure_report --checkpoint RUN --env ur5e-reach-avoid --unit 2 --json report.json --plot report.png
+    python -m tools.failure_report --from-json report.json --plot report.png      # the picture of a saved report
 
 Runs one episode per env with the deterministic policy of one trained seed (`--unit`, an index into
 the checkpoint's seeds) through `agents.evaluation.rollout` and sorts every episode into one outcome:
@@ -237,18 +238,66 @@ def markdown(summary: dict, title: str) -> str:
     return "\n".join(lines) + "\n"
 
 
+OUTCOME_COLORS = {"reached": "tab:green", "self collision": "tab:red", "obstacle collision": "tab:orange",
+                  "missed": "tab:gray"}
+"""The outcomes in the figure's order, with their colours."""
+
+
+def figure(summary: dict, title: str, out: str | None = None):
+    """The report as a picture: the outcomes' shares, the colliding parts (episodes each) and the outcomes by target
+    height above the mounting plane (share of that height's episodes)."""
+    from tools import plots
+
+    plt = plots.pyplot()
+    fig, (a, b, c) = plt.subplots(1, 3, figsize=(13, 3.6), gridspec_kw={"width_ratios": [1, 1.6, 1.4]})
+    names = [o for o in OUTCOME_COLORS if o in summary["outcomes"]]
+    a.bar(range(len(names)), [100 * summary["outcomes"][o] for o in names], color=[OUTCOME_COLORS[o] for o in names])
+    a.set_xticks(range(len(names)), [o.replace(" ", "\n") for o in names], fontsize=8)
+    a.set_ylabel(f"% of {summary['episodes']} episodes")
+    parts = sorted(summary["collisions"].get("by_part", {}).items(), key=lambda kv: -kv[1])
+    b.barh(range(len(parts)), [n for _, n in parts],
+           color=[OUTCOME_COLORS[p.split(":")[0]] for p, _ in parts])
+    b.set_yticks(range(len(parts)), [p.split(": ", 1)[1] for p, _ in parts], fontsize=8)
+    b.invert_yaxis()
+    b.set_xlabel("collided episodes, by the closest pair")
+    heights = summary.get("by_target_height", {})
+    bottom = np.zeros(len(heights))
+    for o in names:
+        share = np.array([100 * h.get(o, 0.0) for h in heights.values()])
+        c.bar(range(len(heights)), share, bottom=bottom, color=OUTCOME_COLORS[o], label=o)
+        bottom += share
+    c.set_xticks(range(len(heights)), [f"{k}\n({h['episodes']})" for k, h in heights.items()], fontsize=7)
+    c.set_xlabel("target height above the mounting plane (episodes)")
+    c.legend(fontsize=7, loc="lower right")
+    fig.suptitle(title, fontsize=9)
+    fig.tight_layout()
+    return plots.save(fig, out)
+
+
 def main(argv: list[str] | None = None) -> dict:
     import envs
     from agents import evaluation, provenance
 
     p = argparse.ArgumentParser(prog="python -m tools.failure_report", description=__doc__.splitlines()[0])
-    p.add_argument("--checkpoint", required=True, help="train.py logdir, checkpoint step directory or policy export")
+    p.add_argument("--checkpoint", help="train.py logdir, checkpoint step directory or policy export")
+    p.add_argument("--from-json", metavar="PATH", help="draw --plot from a report written earlier with --json")
+    p.add_argument("--plot", metavar="PNG", help="the report as a picture (needs matplotlib: the viz extra)")
     p.add_argument("--env", help="registered env name (default: the checkpoint's)")
     p.add_argument("--num-envs", type=int, default=256)
     p.add_argument("--unit", type=int, default=0, help="index of the trained seed in the checkpoint (default 0)")
     p.add_argument("--seed", type=int, default=7, help="evaluation seed (default 7)")
     p.add_argument("--json", metavar="PATH", help="write the summary and every episode's row")
     args = p.parse_args(argv)
+    if bool(args.checkpoint) == bool(args.from_json):
+        raise ValueError("give exactly one of --checkpoint PATH (run the episodes) and --from-json PATH (a report "
+                         "written earlier).")
+    if args.from_json:
+        if not args.plot:
+            raise ValueError("--from-json needs --plot PNG: allowed is drawing a report written earlier.")
+        with open(args.from_json) as f:
+            report = json.load(f)
+        figure(report["summary"], report.get("note") or args.from_json, args.plot)
+        return report["summary"]
     policy = evaluation.checkpoint_policy(args.checkpoint)
     if not 0 <= args.unit < len(policy.units):
         raise ValueError(f"--unit {args.unit} is invalid: allowed is 0 ... {len(policy.units) - 1} "
@@ -265,7 +314,10 @@ def main(argv: list[str] | None = None) -> dict:
     records = evaluation.rollout(policy, env_name, config, num_envs=args.num_envs, eval_seed=args.seed, unit=args.unit)
     rows = classify(envs.from_config(env_name, config).robot, records, getattr(config, "obstacle_radius", None))
     summary = summarize(rows, getattr(config, "joint_limit_margin", NEAR_LIMIT))
-    print(markdown(summary, f"{args.checkpoint} (seed {policy.units[args.unit]}) on {env_name}, eval seed {args.seed}"))
+    title = f"{args.checkpoint} (seed {policy.units[args.unit]}) on {env_name}, eval seed {args.seed}"
+    print(markdown(summary, title))
+    if args.plot:
+        figure(summary, title, args.plot)
     if args.json:
         with open(args.json, "w") as f:
             made = provenance.stamp(provenance.command(None if argv is None else [__file__] + list(argv)))
