@@ -11,7 +11,7 @@ What runs: `--num-envs` environments per evaluation seed (`--seeds` seeds from `
 the training driver's eval seed, so a run's own env config reproduces its eval.json), one episode
 each, deterministic policy (`agents.loop.make_evaluate`; `--stochastic` samples the actions from the
 policy's distribution instead, as in training). A checkpoint contributes one unit per
-trained seed, a baseline one; the table gives mean ± std over units (seeds / checkpoints); the JSON
+trained seed, a baseline one; the table gives mean ± sample std (ddof 1) over units (seeds / checkpoints); the JSON
 also gives every unit's numbers and the std over all episodes. Metrics (the paper's): target
 reached, self collision, obstacle collision, distance to the target (mean over the episode's last
 10 steps), steps in target, times the target was left.

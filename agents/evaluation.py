@@ -470,13 +470,17 @@ EXTRA_COLUMNS = [("mean_joint_vel", "mean joint speed (rad/s)", 2),
 
 
 def fmt(stats: dict | None, digits: int, spread: str = "std_units", ci: bool = False) -> str:
-    """"mean ± std" (the std over units, omitted with a single unit), or "-" if missing; with `ci` the mean's 95 %
-    confidence interval over units follows in brackets where there is one."""
+    """"mean ± std" (over units the sample std, ddof 1, from the summary's population `std_units`; omitted with a
+    single unit; or `spread="std_episodes"`), or "-" if missing; with `ci` the mean's 95 % confidence interval over
+    units follows in brackets where there is one."""
     if not stats or not math.isfinite(stats["mean"]):
         return "-"
     text = f"{stats['mean']:.{digits}f}"
-    if spread == "std_episodes" or stats["units"] > 1:
+    if spread == "std_episodes":
         text += f" ± {stats[spread]:.{digits}f}"
+    elif stats["units"] > 1:
+        n = stats["units"]
+        text += f" ± {stats[spread] * math.sqrt(n / (n - 1)):.{digits}f}"
     interval = stats.get("ci95_units") if ci else None
     if interval:
         text += f" [{interval[0]:.{digits}f}, {interval[1]:.{digits}f}]"
@@ -493,7 +497,8 @@ def label(result: Result) -> str:
 
 def markdown(results: list[Result], spread: str = "std_units") -> str:
     """A markdown table, one row per result (plus a pooled row for several checkpoints on one env
-    config); mean ± standard deviation over units (seeds / checkpoints) and the mean's 95 % confidence interval."""
+    config); mean ± sample standard deviation over units (seeds / checkpoints) and the mean's 95 % confidence
+    interval."""
     names = [c for c in COLUMNS if any(c[0] in r.per_env for r in results)]
     head = ["policy", "env", "seeds x envs"] + [c[1] for c in names]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]

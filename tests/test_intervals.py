@@ -69,10 +69,15 @@ def test_eval_summaries_carry_the_interval_over_units():
     assert evaluation.summarize({"target_reached": np.array([[0.0, 1.0]])})["target_reached"]["ci95_units"] is None
 
 
-def test_the_eval_table_shows_the_interval():
+def test_the_eval_table_shows_the_sample_std_and_the_interval():
+    """Two units 0.25 and 0.75: population std 0.25 (the summary's), sample std 0.25 * sqrt(2) = 0.354."""
     stats = {"mean": 0.5, "std_units": 0.25, "ci95_units": [0.25, 0.75], "units": 2}
-    assert evaluation.fmt(stats, 3, ci=True) == "0.500 ± 0.250 [0.250, 0.750]"
-    assert evaluation.fmt(stats, 3) == "0.500 ± 0.250"
+    assert evaluation.fmt(stats, 3, ci=True) == "0.500 ± 0.354 [0.250, 0.750]"
+    assert evaluation.fmt(stats, 3) == "0.500 ± 0.354"
+
+
+def test_the_eval_table_leaves_out_the_spread_of_one_unit():
+    assert evaluation.fmt({"mean": 0.5, "std_units": 0.0, "ci95_units": None, "units": 1}, 3, ci=True) == "0.500"
 
 
 @pytest.mark.parametrize("values", [[0.2, 0.3, 0.7], [0.91, 0.93, 0.95, 0.96, 0.99]])
