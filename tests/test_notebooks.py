@@ -35,7 +35,7 @@ LONGEST_FIRST = ["03_evaluate_checkpoints.ipynb", "01_quickstart.ipynb", "04_env
 """Start order (cold: ~130, ~80, ~30, ~25 s alone), so that the short ones fill in beside the long ones."""
 
 
-async def _execute(path: pathlib.Path, slots: asyncio.Semaphore) -> tuple[Exception | None, float]:
+async def _execute(path: pathlib.Path, slots: asyncio.Semaphore) -> tuple[Exception | None, float, nbformat.NotebookNode]:
     async with slots:
         notebook = nbformat.read(path, as_version=4)
         client = NotebookClient(notebook, timeout=CELL_TIMEOUT, kernel_name="python3",
@@ -46,12 +46,12 @@ async def _execute(path: pathlib.Path, slots: asyncio.Semaphore) -> tuple[Except
             error = None
         except Exception as exc:  # a cell's error (CellExecutionError), a timeout, a dead kernel
             error = exc
-        return error, time.perf_counter() - start
+        return error, time.perf_counter() - start, notebook
 
 
 @pytest.fixture(scope="module")
 def executed(tmp_path_factory):
-    """{notebook name: (error or None, seconds)} of every notebook, executed in small settings."""
+    """{notebook name: (error or None, seconds, the executed notebook)} of every notebook, in small settings."""
     env = {"REACH_NOTEBOOK_SMALL": "1", "REACH_NOTEBOOK_RUNS": str(tmp_path_factory.mktemp("notebook_runs")),
            "JAX_COMPILATION_CACHE_DIR": os.environ.get("JAX_COMPILATION_CACHE_DIR", str(ROOT / ".jax_cache"))}
 
@@ -85,10 +85,36 @@ def test_the_four_notebooks_are_there_without_outputs():
 
 @pytest.mark.parametrize("name", [p.name for p in NOTEBOOKS])
 def test_notebook_runs_without_error(executed, name):
-    error, seconds = executed[name]
+    error, seconds, _ = executed[name]
     print(f"{name}: {seconds:.0f} s")
     if error is not None:
         pytest.fail(f"{name} failed after {seconds:.0f} s: {type(error).__name__}:\n{error}", pytrace=False)
+
+
+def _outputs(notebook) -> list:
+    return [out for cell in notebook.cells if cell.cell_type == "code" for out in cell.get("outputs", [])]
+
+
+@pytest.mark.parametrize("name", [p.name for p in NOTEBOOKS])
+def test_notebook_shows_a_picture(executed, name):
+    """Every notebook draws something when run: a plot, a rendered frame or a clip (an image output)."""
+    images = [out for out in _outputs(executed[name][2]) if set(out.get("data", {})) & {"image/png", "image/gif"}]
+    assert images, f"{name} ran without an image output"
+
+
+@pytest.mark.parametrize("name", ["01_quickstart.ipynb", "03_evaluate_checkpoints.ipynb"])
+def test_evaluating_notebook_shows_a_table_with_intervals(executed, name):
+    """The evaluation tables give mean ± std with the mean's interval in brackets over several trained seeds."""
+    tables = [out["data"]["text/markdown"] for out in _outputs(executed[name][2])
+              if "text/markdown" in out.get("data", {}) and "|" in out["data"]["text/markdown"]]
+    assert any(re.search(r"± [0-9.]+ \[[0-9.]+, [0-9.]+\]", t) for t in tables), f"{name}: no table with intervals"
+
+
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.name)
+def test_notebook_opens_with_what_it_shows_and_its_cpu_time(path):
+    first = nbformat.read(path, as_version=4).cells[0]
+    assert first.cell_type == "markdown" and first.source.startswith("# "), path.name
+    assert re.search(r"2-core CPU", first.source), f"{path.name}: the first cell states its time on a CPU"
 
 
 def test_every_committed_cell_has_an_id():
