@@ -20,7 +20,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from envs import fast_mjx, physics, rewards, workspaces
-from envs.base import Env, State, check_action
+from envs.base import Env, State, check_action, check_state
 from envs.config import ReachConfig
 from envs.robots import Robot, first_valid
 
@@ -109,6 +109,7 @@ class ArmEnv(Env):
     def step(self, state: State, action: jax.Array) -> State:
         # GPU-friendly replacements of MJX's Cholesky calls and line-search loop (`envs.fast_mjx`):
         # the same numbers with far fewer kernel and graph launches per step.
+        check_state(state, f"one {self.robot.name} env", self.robot.nq)
         check_action(action, (self.action_size,), f"one {self.robot.name} env (one action per joint)")
         with jax.default_matmul_precision("highest"), fast_mjx.fast_mjx():
             return self._step(state, action)

@@ -38,11 +38,31 @@ class State:
 
 
 def check_action(action, expected: tuple[int, ...], what: str) -> None:
-    """ValueError at trace time unless `action` has shape `expected`: JAX would broadcast a (4,) or
-    () action over every joint, or fail with a broadcasting error naming no argument."""
+    """At trace time: TypeError unless `action` is a numeric array (a list, a string or an object array would fail
+    inside JAX naming no argument), ValueError unless it has shape `expected` (JAX would broadcast a (4,) or ()
+    action over every joint)."""
+    if not hasattr(action, "shape") or not hasattr(action, "dtype"):
+        raise TypeError(f"action of type {type(action).__name__} is invalid for {what}: allowed is a jax or numpy "
+                        f"array of shape {tuple(expected)} (e.g. jnp.asarray(action)).")
+    if not (jnp.issubdtype(action.dtype, jnp.number) or jnp.issubdtype(action.dtype, jnp.bool_)):
+        raise TypeError(f"action of dtype {action.dtype} is invalid for {what}: allowed is a numeric array.")
     shape = tuple(jnp.shape(action))
     if shape != tuple(expected):
         raise ValueError(f"action of shape {shape} is invalid for {what}: allowed is shape {tuple(expected)}.")
+
+
+def check_state(state, what: str, qpos_size: int | None = None) -> None:
+    """At trace time: TypeError unless `state` is a state (`State`'s fields, so Brax's own State class passes too;
+    None or a tuple would fail deep inside the step), and with `qpos_size` ValueError unless its joint positions
+    have that length (another robot's state)."""
+    if not all(hasattr(state, name) for name in ("pipeline_state", "obs", "info")):
+        raise TypeError(f"state of type {type(state).__name__} is invalid for {what}: allowed is the State that "
+                        "reset() or step() returned.")
+    if qpos_size is not None:
+        shape = tuple(jnp.shape(state.pipeline_state.qpos))
+        if shape != (qpos_size,):
+            raise ValueError(f"state with joint positions of shape {shape} is invalid for {what}: allowed is a "
+                             f"state of this env, shape ({qpos_size},) (another robot's or a batch's state?).")
 
 
 class Env(abc.ABC):

@@ -15,7 +15,7 @@ import jax
 import jax.numpy as jnp
 
 from envs import validation
-from envs.base import Env, State, check_action
+from envs.base import Env, State, check_action, check_state
 
 
 @dataclasses.dataclass(frozen=True)
@@ -83,6 +83,7 @@ class PointMass(Env):
 
     def step(self, state: State, action: jax.Array) -> State:
         cfg = self.config
+        check_state(state, "one point-mass env")
         check_action(action, (self.action_size,), "one point-mass env")
         goal = state.info["goal"]
         # A non-finite action ends the episode where the point was (as the arms' physics_nan):

@@ -613,3 +613,24 @@ def test_configs_are_frozen_and_documented():
     assert envs.default_config("ur5e-reach-avoid").target_radius == 0.02
     assert envs.default_config("ur5e-reach-avoid").reward == "semi_sparse"
     assert envs.default_config("ur5e-reach").reward == "dense"
+
+
+@pytest.mark.parametrize("action, error, named", [
+    ([0.0] * 6, TypeError, "action of type list is invalid for one ur5e env"),
+    ("abc", TypeError, "action of type str is invalid"),
+    (np.array([None] * 6, dtype=object), TypeError, "action of dtype object is invalid"),
+])
+def test_step_refuses_an_action_that_is_not_a_numeric_array(action, error, named):
+    env = envs.make("ur5e-reach", backend="mujoco")
+    state = env.reset(jax.random.PRNGKey(0))
+    with pytest.raises(error, match=re.escape(named)):
+        env.step(state, action)
+
+
+def test_step_refuses_a_state_that_is_not_this_envs():
+    ur5e = envs.make("ur5e-reach", backend="mujoco")
+    panda_state = envs.make("panda-reach", backend="mujoco").reset(jax.random.PRNGKey(0))
+    with pytest.raises(ValueError, match=re.escape("state with joint positions of shape (7,) is invalid for one ur5e")):
+        ur5e.step(panda_state, jnp.zeros(6))
+    with pytest.raises(TypeError, match="state of type NoneType is invalid for one ur5e env"):
+        ur5e.step(None, jnp.zeros(6))
