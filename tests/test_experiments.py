@@ -684,3 +684,10 @@ def test_the_docs_recipe_for_an_experiment_registers_and_validates():
     state.validate_experiment(exp)
     assert exp.runs[0].paper == {"target_reached": 0.961, "self_collision": 0.022}  # the paper's UR5e reach PPO row
     assert exp.runs[1].budget() == 100_000_000
+
+
+def test_build_with_nothing_finished_says_so_and_exits_1(tmp_path, capsys):
+    code = ex.main(["build", "action-space", "--runs-dir", str(tmp_path / "none"), "--out", str(tmp_path / "out")])
+    assert code == 1
+    assert "nothing built: no run of action-space has a finished part" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()

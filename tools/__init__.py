@@ -1,6 +1,8 @@
 """User tools around trained policies: the paper's tables (`paper_tables`), why a policy fails
-(`failure_report`), shipping a policy export (`ship_checkpoint`) and figures (`plots`), the results tables
-(`results_index`) and the experiments (`experiments`: registry, state, launching, tables). Each runs as
+(`failure_report`), shipping a policy export (`ship_checkpoint`), figures (`plots`, the README's `readme_media`),
+algorithms compared over tasks with rliable (`compare_runs`), the results tables (`results_index`), the UR5e's
+fidelity to the paper (`fidelity`, `fidelity_train`) and the experiments (`experiments`: registry, state,
+launching, tables). Each runs as
 `python -m tools.<name> --help` from the repository root and imports as `from tools import <name>`."""
 
 import sys

@@ -178,7 +178,11 @@ def main(argv=None) -> int:
     elif args.action == "commands":
         print("\n".join(commands(selection, args.runs_dir, args.all, args.max_seeds, args.out)))
     elif args.action == "build":
-        build(selection, args.runs_dir, args.out)
+        if not build(selection, args.runs_dir, args.out):
+            names = ", ".join(exp.name for exp, _ in selection)
+            print(f"nothing built: no run of {names} has a finished part in --runs-dir {args.runs_dir!r} or "
+                  f"--out {args.out!r} (`list` shows what is done)", file=sys.stderr)
+            return 1
     elif args.action == "record":
         if not os.path.isdir(args.runs_dir):
             raise ValueError(f"--runs-dir={args.runs_dir!r} is not a folder: allowed is a runs folder to record from.")
