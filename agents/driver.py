@@ -31,6 +31,7 @@ import numpy as np
 
 import envs
 from agents import export, provenance, registry
+from envs import validation
 from agents.checkpoint import Checkpointer, write_atomic
 from agents.config import (TrainConfig, config_from_json, config_json, env_steps_per_update, merge_resume_config,
                            num_devices, total_updates, validate)
@@ -138,6 +139,10 @@ def _train(config: TrainConfig, learner_cls: type | None = None) -> TrainResult:
         else:
             programs = programs_for(config, learner_cls)
             state = programs.init(seed_keys(config))
+            fallback = getattr(state.env_state, "metrics", {}).get("reset_fallback")
+            if fallback is not None:  # options whose samplers cannot succeed: refused before any training
+                validation.resets_succeed(config.env_name, config.env, envs.default_config(config.env_name),
+                                          np.asarray(jax.device_get(fallback)))
         write_atomic(os.path.join(logdir, "config.json"), json.dumps(config_json(config), indent=2))
         sinks = [WandbLogger(config)] if config.logger == "wandb" else []
     except BaseException:

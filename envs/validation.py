@@ -74,3 +74,31 @@ def below(name: str, value, bound: float, why: str, inclusive: bool = False) -> 
     if not (_is_real(value) and 0 < float(value) and (float(value) <= bound if inclusive else float(value) < bound)):
         raise ValueError(f"{name}={value!r} is invalid: allowed is a number in (0, {bound:g}{']' if inclusive else ')'} "
                          f"({why}).")
+
+
+RESET_FALLBACK_LIMIT = 0.25
+"""Share of a run's first resets without a valid start, target or obstacle above which its configuration is refused:
+the samplers' expected rate is about 1e-6 (a few % with 2 candidates), a fallback start may collide on its first
+step, and a quarter stays clear of the sampling noise of 16 resets."""
+
+
+def resets_succeed(env_name: str, config, default, fallback) -> None:
+    """ValueError naming the options that differ from the env's `default` config when more than
+    `RESET_FALLBACK_LIMIT` of the resets' `fallback` values (their reset_fallback metric) found no valid start,
+    target or obstacle: options that leave the rejection samplers almost no room."""
+    values = [float(v) for v in _flat(fallback)]
+    rate = sum(values) / max(len(values), 1)
+    if rate <= RESET_FALLBACK_LIMIT:
+        return
+    changed = [f"{name}={getattr(config, name)!r}" for name in vars(config)
+               if hasattr(default, name) and getattr(config, name) != getattr(default, name)]
+    raise ValueError(f"env {env_name!r} with {', '.join(changed) or 'its defaults'}: {rate:.0%} of {len(values)} resets "
+                     "found no valid start, target or obstacle (reset_fallback): allowed are options whose resets "
+                     "succeed (e.g. a smaller obstacle_radius, fewer obstacles or a larger workspace).")
+
+
+def _flat(values):
+    """The numbers of a nested list or array (NumPy or JAX, after device_get)."""
+    if hasattr(values, "ravel"):
+        return list(values.ravel())
+    return [values]

@@ -16,7 +16,8 @@ import numpy as np
 import pytest
 
 import envs
-from envs import rewards, workspaces
+from agents import driver, presets
+from envs import rewards, validation, workspaces
 from envs.arm import METRICS
 from envs.robots.base import ASSETS
 from mujoco_reference import colliding_configuration, colliding_pairs, contact_model, ee_position
@@ -634,3 +635,25 @@ def test_step_refuses_a_state_that_is_not_this_envs():
         ur5e.step(panda_state, jnp.zeros(6))
     with pytest.raises(TypeError, match="state of type NoneType is invalid for one ur5e env"):
         ur5e.step(None, jnp.zeros(6))
+
+
+def test_resets_that_mostly_fall_back_are_refused_naming_the_changed_options():
+    config, default = envs.make_config("ur5e-reach-avoid", obstacle_radius=0.7), envs.default_config("ur5e-reach-avoid")
+    fallback = np.array([1.0] * 5 + [0.0] * 11)  # 5 of 16: 31 %
+    with pytest.raises(ValueError, match=re.escape("with obstacle_radius=0.7: 31% of 16 resets found no valid start")):
+        validation.resets_succeed("ur5e-reach-avoid", config, default, fallback)
+
+
+def test_resets_that_fall_back_at_most_a_quarter_of_the_time_pass():
+    config = envs.make_config("ur5e-reach-avoid", obstacle_radius=0.7)
+    validation.resets_succeed("ur5e-reach-avoid", config, config, np.array([1.0] * 4 + [0.0] * 12))  # 25 %: no error
+
+
+def test_training_with_options_whose_resets_fail_is_refused_before_anything_is_kept(tmp_path):
+    cfg = presets.make_config("ur5e-reach-ppo-cpu", num_timesteps=1280, eval_envs=0, tensorboard=False, progress=False)
+    env = envs.make_config("ur5e-reach-avoid", cfg.env, obstacle_radius=0.8, substeps=2, sampling_candidates=4,
+                           episode_length=20)
+    cfg = dataclasses.replace(cfg, env_name="ur5e-reach-avoid", env=env, logdir=str(tmp_path / "run"))
+    with pytest.raises(ValueError, match=r"obstacle_radius=0.8: \d+% of 16 resets found no valid start"):
+        driver.train(cfg)
+    assert not (tmp_path / "run").exists()
