@@ -30,10 +30,11 @@ import jax
 import numpy as np
 
 import envs
-from agents import baselines, driver, export, intervals, registry
+from agents import baselines, driver, export, registry
 from envs import physics
 from agents.loop import make_evaluate
 from agents.networks import COMPUTE_DTYPES
+from agents.eval_stats import collided_distances, fmt, pooled, reached_precision, summarize  # noqa: F401 (evaluation.fmt, ...)
 
 PAPER_METRICS = {
     "target_reached": "episode/target_reached",
@@ -403,60 +404,6 @@ def _seed_line(k: int, n: int, eval_seed: int, units: list, seconds: float) -> s
     return f"eval seed {k + 1} of {n} ({eval_seed}): {', '.join(parts)}{over}; {seconds:.0f} s elapsed"
 
 
-def collided_distances(per_env: dict) -> dict:
-    """Two readings of the final distance for comparing with other evaluators (not in our tables'
-    main columns): `distance_collided_as_0` counts an episode that ended in a collision as 0, which
-    is what summing per-step metrics over an episode's *active* steps gives when the distance is
-    only recorded over the last steps (Brax's evaluator); `distance_not_collided` is the mean over
-    collision-free episodes only (NaN if there are none)."""
-    if "distance" not in per_env or "self_collision" not in per_env:
-        return {}
-    collided = per_env["self_collision"] > 0
-    if "obstacle_collision" in per_env:
-        collided |= per_env["obstacle_collision"] > 0
-    return {"distance_collided_as_0": np.where(collided, 0.0, per_env["distance"]),
-            "distance_not_collided": np.where(collided, np.nan, per_env["distance"])}
-
-
-def reached_precision(per_env: dict) -> dict:
-    """Precision of the episodes that reached the target (NaN for the others): `distance_reached`, the final
-    distance, and `steps_in_target_reached`. The main columns average over every episode, where the few that
-    never reach (tens of centimetres away) dominate a mean distance of millimetres."""
-    if "target_reached" not in per_env:
-        return {}
-    reached = per_env["target_reached"] > 0
-    return {f"{name}_reached": np.where(reached, per_env[name], np.nan)
-            for name in ("distance", "steps_in_target") if name in per_env}
-
-
-def summarize(per_env: dict) -> dict:
-    """{metric: {mean, std_units, ci95_units, std_episodes, units, episodes}} from (units, envs) arrays: the
-    mean over units of each unit's mean, its standard deviation over units (ddof 0, as over seeds), the mean's
-    95 % bootstrap confidence interval over units (rliable, `agents.intervals`; None for one unit), and the
-    standard deviation over all episodes pooled."""
-    out = {}
-    for name, values in per_env.items():
-        values = np.asarray(values, np.float64)
-        with np.errstate(invalid="ignore"), warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN units (e.g. no collision-free episode)
-            unit_means = np.nanmean(values, axis=1)
-            out[name] = {"mean": float(np.nanmean(unit_means)), "std_units": float(np.nanstd(unit_means)),
-                         "ci95_units": intervals.mean_ci(unit_means), "std_episodes": float(np.nanstd(values)),
-                         "units": int(values.shape[0]), "episodes": int(np.sum(~np.isnan(values)))}
-    return out
-
-
-def pooled(results: list[Result]) -> dict | None:
-    """The summary over the units of several results (e.g. one checkpoint per seed), or None if
-    their env configs differ."""
-    if len({(r.env_name, r.env_config) for r in results}) != 1:
-        return None
-    names = set.intersection(*(set(r.per_env) for r in results))
-    if len({r.num_envs for r in results}) != 1:
-        return None
-    return summarize({n: np.concatenate([r.per_env[n] for r in results]) for n in sorted(names)})
-
-
 # ------------------------------------------------------------------------------------------------
 # Reporting
 
@@ -467,24 +414,6 @@ COLUMNS = [("target_reached", "target reached", 3), ("self_collision", "self col
 EXTRA_COLUMNS = [("mean_joint_vel", "mean joint speed (rad/s)", 2),
                  ("mean_joint_acc", "mean joint acceleration (rad/s²)", 1)]
 """(name, header, decimals) of the `EXTRA_METRICS` a results table may show (tools.experiments), beside `COLUMNS`."""
-
-
-def fmt(stats: dict | None, digits: int, spread: str = "std_units", ci: bool = False) -> str:
-    """"mean ± std" (over units the sample std, ddof 1, from the summary's population `std_units`; omitted with a
-    single unit; or `spread="std_episodes"`), or "-" if missing; with `ci` the mean's 95 % confidence interval over
-    units follows in brackets where there is one."""
-    if not stats or not math.isfinite(stats["mean"]):
-        return "-"
-    text = f"{stats['mean']:.{digits}f}"
-    if spread == "std_episodes":
-        text += f" ± {stats[spread]:.{digits}f}"
-    elif stats["units"] > 1:
-        n = stats["units"]
-        text += f" ± {stats[spread] * math.sqrt(n / (n - 1)):.{digits}f}"
-    interval = stats.get("ci95_units") if ci else None
-    if interval:
-        text += f" [{interval[0]:.{digits}f}, {interval[1]:.{digits}f}]"
-    return text
 
 
 def label(result: Result) -> str:
