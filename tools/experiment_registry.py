@@ -319,7 +319,7 @@ register(Experiment(
          "observed, so each agent can be evaluated on the other motion (the cross rows). The UR5e preset has "
          "ur5e-reach-avoid-ppo-plus's options (joint sin/cos and self-collision distances observed, no joint-limit "
          "penalty); ur5e-moving and ur5e-static have the Panda's observation parts and ur5e-reach-avoid-ppo's "
-         "joint-limit penalty, the options the preset had first. panda-static-vel observed the velocity (0 in "
+         "joint-limit penalty (a comparison of the two option sets). panda-static-vel observed the velocity (0 in "
          "every episode): its normaliser then scales any motion to the clip, so it is not cross-evaluated "
          "(agents.evaluation.unseen_constants; results/experiments/README.md)."))
 
