@@ -80,8 +80,13 @@ def make_config(name: str, base=None, /, **options):
 
 def check_config(name: str, config) -> None:
     """ValueError naming the field, the value and what is allowed, for `config` as the config of env
-    `name` (its `validate` plus the env's own `check`); nothing is built or traced."""
+    `name` (its `validate` plus the env's own `check`); nothing is built or traced. TypeError for a config of
+    another class (a reach-avoid config for a reach env would fail at reset, missing the obstacle)."""
     entry = spec(name)
+    expected = type(default_config(name))
+    if type(config) is not expected:
+        raise TypeError(f"config of type {type(config).__name__} is invalid for env {name!r}: allowed is "
+                        f"{expected.__name__} (envs.make_config({name!r}, config) converts the fields both have).")
     if entry.check is None:
         config.validate()
     else:

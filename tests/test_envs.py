@@ -74,7 +74,8 @@ def test_jit_vmap_determinism_and_sizes(compiled, name):
     reward_terms = {"reward/" + term for term in c.env.reward_term_names()}
     assert set(after.metrics) == set(state.metrics) == set(METRICS) | reward_terms
     assert jax.tree.structure(after) == jax.tree.structure(state)
-    assert np.isfinite(after.obs).all() and np.isfinite(after.reward).all()
+    assert np.isfinite(after.obs).all()
+    assert np.isfinite(after.reward).all()
     assert not np.allclose(after.obs, state.obs)
 
 
@@ -113,7 +114,8 @@ def test_initial_poses_collision_free_and_in_range(compiled, name):
     state = c.raw_reset(jax.random.split(jax.random.PRNGKey(3), 64))
     model = contact_model(c.env.robot)
     qpos = np.asarray(state.pipeline_state.qpos)
-    assert (qpos >= c.env.robot.joint_low - 1e-6).all() and (qpos <= c.env.robot.joint_high + 1e-6).all()
+    assert (qpos >= c.env.robot.joint_low - 1e-6).all()
+    assert (qpos <= c.env.robot.joint_high + 1e-6).all()
     assert float(state.metrics["reset_fallback"].max()) == 0.0
     for q in qpos:
         assert not colliding_pairs(model, q)
@@ -148,7 +150,8 @@ def test_reachable_targets_inside_workspace_and_reached_by_their_pose(compiled, 
 def test_uniform_pandagym_targets_fill_the_cube(compiled):
     c = compiled("panda-reach", workspace="pandagym", target_sampling="uniform")
     targets = np.asarray(c.raw_reset(jax.random.split(jax.random.PRNGKey(6), 256)).info["target_pos"])
-    assert (targets >= workspaces.PANDAGYM_LOW).all() and (targets <= workspaces.PANDAGYM_HIGH).all()
+    assert (targets >= workspaces.PANDAGYM_LOW).all()
+    assert (targets <= workspaces.PANDAGYM_HIGH).all()
     # Uniform in a 30 cm cube: mean at the centre, std 0.3 / sqrt(12) = 0.0866 per axis.
     np.testing.assert_allclose(targets.mean(0), (workspaces.PANDAGYM_LOW + workspaces.PANDAGYM_HIGH) / 2, atol=0.02)
     np.testing.assert_allclose(targets.std(0), 0.3 / np.sqrt(12), atol=0.012)
@@ -195,7 +198,8 @@ def test_reward_formulas_hand_computed():
     # Semi-sparse, eq. (1): in target, w_reach 1, w_dist 0.5, d_max 0.85, d 0.01 -> 1 + 0.5 * 1.69.
     assert np.isclose(rewards.semi_sparse(1.0, 0.01, 1.0, 0.5, 0.85), 1.845)
     assert np.isclose(rewards.semi_sparse(0.0, 0.7, 1.0, 1.0, 0.85), 1.0)
-    assert np.isclose(rewards.sparse(1.0, 3.0), 3.0) and rewards.sparse(0.0) == 0.0
+    assert np.isclose(rewards.sparse(1.0, 3.0), 3.0)
+    assert rewards.sparse(0.0) == 0.0
     # Obstacle proximity, eq. (3): tau 0.1; distances 0.05, 0.2, -0.01 -> 0.5 + 0 + 1.1; w 0.1.
     assert np.isclose(rewards.obstacle_proximity(jnp.array([0.05, 0.2, -0.01]), 0.1, 0.1), 0.16, atol=1e-6)
     # L2 penalty: ||(3, 4)|| = 5.
@@ -335,9 +339,11 @@ def test_collision_terminates_without_truncation_and_hand_built_metrics(compiled
     still = standstill(c.env)
     s0 = c.start(seed=14)
     s1 = c.step(_with_target(s0, _next_ee(c, s0)), still)  # step 1 ends in the target
-    assert (s1.metrics["in_target"] == 1).all() and (s1.metrics["target_reached"] == 1).all()
+    assert (s1.metrics["in_target"] == 1).all()
+    assert (s1.metrics["target_reached"] == 1).all()
     s2 = c.step(_with_target(s1, _next_ee(c, s1) + np.array([0.1, 0, 0])), still)  # 10 cm off: left once
-    assert (s2.metrics["in_target"] == 0).all() and (s2.metrics["times_left_target"] == 1).all()
+    assert (s2.metrics["in_target"] == 0).all()
+    assert (s2.metrics["times_left_target"] == 1).all()
     np.testing.assert_allclose(s2.metrics["distance"], 0.1, atol=1e-4)
     assert (s2.metrics["target_reached"] == 1).all()  # reached once stays reached
     s3 = c.step(_with_target(s2, _next_ee(c, s2)), still)  # back in
@@ -371,7 +377,8 @@ def test_joint_speed_and_acceleration_metrics_are_episode_means_restarted_by_a_r
         assert float(state.done.max()) == 0.0
         np.testing.assert_allclose(state.metrics["mean_joint_vel"], sum(vel) / (k + 1), rtol=1e-4)
         np.testing.assert_allclose(state.metrics["mean_joint_acc"], sum(acc) / (k + 1), rtol=1e-4)
-    assert (acc[-1] > 1.0).all() and not np.allclose(acc[0], acc[-1])  # moving: the means are not trivially 0
+    assert (acc[-1] > 1.0).all()
+    assert not np.allclose(acc[0], acc[-1])  # moving: the means are not trivially 0
     q = colliding_configuration(c.env.robot, seed=15)
     data = state.pipeline_state.replace(qpos=jnp.tile(q, (N, 1)), qvel=jnp.zeros_like(state.pipeline_state.qvel))
     ended = c.step(state.replace(pipeline_state=data), standstill(c.env))
@@ -421,9 +428,11 @@ def test_nan_physics_ends_episode_and_never_reaches_obs(compiled):
     state = c.start(seed=18)
     qvel = state.pipeline_state.qvel.at[0, 1].set(jnp.nan)
     after = c.step(state.replace(pipeline_state=state.pipeline_state.replace(qvel=qvel)), standstill(c.env))
-    assert float(after.metrics["physics_nan"][0]) == 1 and float(after.done[0]) == 1
+    assert float(after.metrics["physics_nan"][0]) == 1
+    assert float(after.done[0]) == 1
     assert float(after.metrics["physics_nan"][1:].max()) == 0
-    assert np.isfinite(after.obs).all() and np.isfinite(after.info["final_obs"]).all()
+    assert np.isfinite(after.obs).all()
+    assert np.isfinite(after.info["final_obs"]).all()
     assert np.isfinite(after.pipeline_state.qpos).all()  # auto-reset replaced the broken state
 
 
@@ -433,10 +442,12 @@ def test_nan_action_ends_episode_with_the_last_finite_distance(compiled):
     state = c.start(seed=18)
     actions = standstill(c.env).at[0].set(jnp.nan)
     after = c.step(state, actions)
-    assert float(after.metrics["physics_nan"][0]) == 1 and float(after.done[0]) == 1
+    assert float(after.metrics["physics_nan"][0]) == 1
+    assert float(after.done[0]) == 1
     np.testing.assert_allclose(after.metrics["distance"][0], state.metrics["distance"][0])  # the last finite value
     np.testing.assert_allclose(after.metrics["distance_last10"][0], state.metrics["distance"][0], rtol=1e-6)
-    assert np.isfinite(after.reward).all() and np.isfinite(after.info["final_obs"]).all()
+    assert np.isfinite(after.reward).all()
+    assert np.isfinite(after.info["final_obs"]).all()
 
 
 @pytest.mark.parametrize("name", ["ur5e-reach", "point-mass"])
@@ -557,7 +568,8 @@ def test_joint_sin_cos_and_self_distance_observations():
     """The two parts that are not in the paper, against numpy and CPU MuJoCo's geom distances."""
     env = envs.make("ur5e-reach", observation=("joint_pos", "joint_sin_cos", "self_dist"))
     pairs = env.robot.self_pairs
-    assert env.observation_size == 6 + 12 + len(pairs) and len(pairs) == 18
+    assert env.observation_size == 6 + 12 + len(pairs)
+    assert len(pairs) == 18
     state = env.reset(jax.random.PRNGKey(3))
     obs, q = np.asarray(state.obs), np.asarray(state.pipeline_state.qpos)
     np.testing.assert_allclose(obs[:6], q)
@@ -657,3 +669,9 @@ def test_training_with_options_whose_resets_fail_is_refused_before_anything_is_k
     with pytest.raises(ValueError, match=r"obstacle_radius=0.8: \d+% of 16 resets found no valid start"):
         driver.train(cfg)
     assert not (tmp_path / "run").exists()
+
+
+def test_from_config_refuses_another_envs_config_class():
+    with pytest.raises(TypeError, match=re.escape("config of type ReachAvoidConfig is invalid for env 'ur5e-reach': "
+                                                  "allowed is ReachConfig")):
+        envs.from_config("ur5e-reach", envs.make_config("ur5e-reach-avoid"))
