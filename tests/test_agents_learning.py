@@ -50,7 +50,8 @@ def _solve(preset, tmp_path):
 @pytest.mark.parametrize("preset", ["point-mass-ppo", "point-mass-sac"])
 def test_learner_solves_point_mass_probe(preset, tmp_path, random_baseline):
     random_return, random_reached = random_baseline
-    assert random_return < 5 and random_reached < 0.3  # the task is not trivial
+    assert random_return < 5
+    assert random_reached < 0.3  # the task is not trivial
     ev = _solve(preset, tmp_path)
     assert ev["episode/target_reached"] >= 0.95
     assert ev["episode/return"] > max(30.0, 5 * random_return)
@@ -101,7 +102,8 @@ def test_loop_keeps_terminal_obs_and_separates_truncation_from_termination():
     np.testing.assert_allclose(b.obs[1:][done[:-1] == 0], b.next_obs[:-1][done[:-1] == 0])
     outside = (np.abs(next_pos) > 1.05).any(-1)
     np.testing.assert_array_equal(b.termination, outside.astype(np.float32))  # real terminations only
-    assert b.truncation.sum() > 5 and b.termination.sum() > 5  # both kinds occur in this batch
+    assert b.truncation.sum() > 5
+    assert b.termination.sum() > 5  # both kinds occur in this batch
 
 
 def test_vmapped_seeds_are_independent_and_match_single_seed_runs(tmp_path):

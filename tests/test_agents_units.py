@@ -1,6 +1,5 @@
 """The formulas of the learners on hand-computed numbers (no training)."""
 
-import dataclasses
 import math
 
 import jax
@@ -179,7 +178,8 @@ def test_progress_note_for_runs_stopped_before_their_schedule_ends():
 
     ppo = PPO(PPOConfig(), 7, 3, 916)
     note = ppo.progress_note(160)
-    assert note.startswith("the learning rate is at 84% of its start") and "916 updates (160 done)" in note
+    assert note.startswith("the learning rate is at 84% of its start")
+    assert "916 updates (160 done)" in note
     assert ppo.progress_note(916) is None  # the schedule's last update is done
     assert PPO(PPOConfig(lr_schedule="constant"), 7, 3, 916).progress_note(160) is None
     assert SAC(SACConfig(), 7, 3).progress_note(10) is None

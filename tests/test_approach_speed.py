@@ -49,4 +49,5 @@ def test_full_step_moves_match_a_plain_mujoco_loop():
         np.testing.assert_allclose(moves[i], np.array(expected), atol=2e-4)
     # The servo's time constant, (kv + damping) / kp, is several env steps long: a joint covers only a fraction
     # of each commanded step.
-    assert np.all(moves[:, -1] > 0.1 * config.action_scale) and np.all(moves[:, -1] < 0.25 * config.action_scale)
+    assert np.all(moves[:, -1] > 0.1 * config.action_scale)
+    assert np.all(moves[:, -1] < 0.25 * config.action_scale)

@@ -103,10 +103,12 @@ def test_options(robot):
 
 def test_geometry_is_capsules_and_spheres(robot):
     m = load(robot)
-    assert m.nmesh == 0 and m.nhfield == 0
+    assert m.nmesh == 0
+    assert m.nhfield == 0
     allowed = {mujoco.mjtGeom.mjGEOM_CAPSULE, mujoco.mjtGeom.mjGEOM_SPHERE}
     assert {mujoco.mjtGeom(t) for t in m.geom_type} <= allowed
-    assert not m.geom_contype.any() and not m.geom_conaffinity.any()
+    assert not m.geom_contype.any()
+    assert not m.geom_conaffinity.any()
     names = [m.geom(g).name for g in range(m.ngeom)]
     assert sorted(names) == sorted(SPEC[robot]["geoms"] + ["target", "obstacle"])
     # every body of the arm carries geometry, and the robot geoms are visible (group 2)
@@ -130,7 +132,8 @@ def test_joints_and_actuators(robot):
                                                                 -np.array(s["kv"])])
     np.testing.assert_allclose(m.actuator_ctrlrange, m.jnt_range, atol=1e-5)
     np.testing.assert_allclose(m.actuator_forcerange, np.c_[-np.array(s["torque"]), s["torque"]])
-    assert m.actuator_forcelimited.all() and m.actuator_ctrllimited.all()
+    assert m.actuator_forcelimited.all()
+    assert m.actuator_ctrllimited.all()
     assert (m.dof_damping > 0).all()
 
 
@@ -156,7 +159,8 @@ def test_markers(robot):
     m = load(robot)
     for name, radius, colour in (("target", 0.01, 1), ("obstacle", 0.1, 0)):
         g = m.geom(name)
-        assert g.type[0] == mujoco.mjtGeom.mjGEOM_SPHERE and g.size[0] == radius
+        assert g.type[0] == mujoco.mjtGeom.mjGEOM_SPHERE
+        assert g.size[0] == radius
         assert m.body_mocapid[g.bodyid[0]] >= 0
         assert np.argmax(g.rgba[:3]) == colour          # green target, red obstacle
         assert m.body_pos[g.bodyid[0]][2] == -5
@@ -259,8 +263,10 @@ def test_random_ctrl_is_stable(robot):
             if k % 20 == 0:
                 d.ctrl[:] = rng.uniform(lo, hi)
             mujoco.mj_step(m, d)
-        assert np.isfinite(d.qpos).all() and np.isfinite(d.qvel).all()
-        assert (d.qpos >= lo - 1e-3).all() and (d.qpos <= hi + 1e-3).all()
+        assert np.isfinite(d.qpos).all()
+        assert np.isfinite(d.qvel).all()
+        assert (d.qpos >= lo - 1e-3).all()
+        assert (d.qpos <= hi + 1e-3).all()
         assert all(w.number == 0 for w in d.warning)
 
 

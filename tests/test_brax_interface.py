@@ -31,10 +31,13 @@ def test_brax_ppo_trains_on_our_env(monkeypatch):
     policy = make_policy(params, deterministic=True)
     state = env.reset(jax.random.PRNGKey(1))
     action, _ = policy(state.obs, jax.random.PRNGKey(2))
-    assert action.shape == (env.action_size,) and np.all(np.abs(action) <= 1.0)
-    assert progress and progress[-1][0] >= 160
+    assert action.shape == (env.action_size,)
+    assert np.all(np.abs(action) <= 1.0)
+    assert progress
+    assert progress[-1][0] >= 160
     # Brax's evaluator reports our env's metrics, so `step` kept every key of `reset`.
-    assert "eval/episode_target_reached" in metrics and np.isfinite(metrics["eval/episode_reward"])
+    assert "eval/episode_target_reached" in metrics
+    assert np.isfinite(metrics["eval/episode_reward"])
 
 
 def test_brax_sac_comparison_takes_brax_settings_or_refuses():
@@ -43,8 +46,10 @@ def test_brax_sac_comparison_takes_brax_settings_or_refuses():
 
     paper = presets.make_config("ur5e-reach-sac")
     same = brax_comparable(paper, "sac", action_size=6)
-    assert same.algo.target_entropy == -3.0 and paper.algo.target_entropy is None  # Brax's -|A|/2
-    assert same.algo.obs_clip == 0.0 and paper.algo.obs_clip == 10.0  # Brax's SAC does not clip
+    assert same.algo.target_entropy == -3.0
+    assert paper.algo.target_entropy is None  # Brax's -|A|/2
+    assert same.algo.obs_clip == 0.0
+    assert paper.algo.obs_clip == 10.0  # Brax's SAC does not clip
     assert dataclasses.replace(same.algo, target_entropy=None, obs_clip=10.0) == paper.algo
     with pytest.raises(ValueError, match=r"algo.n_step=3.*algo.distributional=True.*q_hidden_sizes=\(512, 512, 256\)"):
         brax_comparable(presets.make_config("ur5e-reach-sac-fast"), "sac", action_size=6)
@@ -89,12 +94,15 @@ def test_brax_sac_epochs_leave_out_the_prefill_and_the_trace_holds_one_epoch_alo
             trace.progress(1)                                   # step 0
             acting.Evaluator.run_evaluation(None, "params", 1)  # after epoch 1 (it compiled)
             trace.progress(2)
-            assert events == [("start", "dir")] and trace.on
+            assert events == [("start", "dir")]
+            assert trace.on
             acting.Evaluator.run_evaluation(None, "params", 2)  # after epoch 2: the trace ends here
-            assert events == [("start", "dir"), "stop"] and not trace.on
+            assert events == [("start", "dir"), "stop"]
+            assert not trace.on
             trace.progress(3)
             trace.stop()                                        # ours, later: nothing more to stop
-        assert events == [("start", "dir"), "stop"] and calls == [("params", 1), ("params", 2)]
+        assert events == [("start", "dir"), "stop"]
+        assert calls == [("params", 1), ("params", 2)]
         assert acting.Evaluator.run_evaluation is stand_in  # what was there before the context is back
     finally:
         acting.Evaluator.run_evaluation = original

@@ -84,7 +84,9 @@ def test_episode_metrics_on_a_hand_built_rollout():
     np.testing.assert_allclose(out["episode/distance_last3"], [(0.1 + 0.004 + 0.3) / 3, distance[-3:, 1].mean()], rtol=1e-6)
     # Summaries: mean and std over units and over episodes.
     s = evaluation.summarize({"x": np.array([[1.0, 0.0, 0.0, 1.0], [1.0, 1.0, 1.0, 1.0]])})["x"]
-    assert s["mean"] == 0.75 and s["std_units"] == 0.25 and np.isclose(s["std_episodes"], np.sqrt(3) / 4)
+    assert s["mean"] == 0.75
+    assert s["std_units"] == 0.25
+    assert np.isclose(s["std_episodes"], np.sqrt(3) / 4)
 
 
 def _with_target(state, target):
@@ -142,10 +144,12 @@ def point_run(tmp_path_factory):
 def test_driver_writes_policy_exports_that_reproduce_its_evaluation(point_run):
     for step in (5120, 10240):
         directory = point_run / "checkpoints" / str(step) / "policy"
-        assert (directory / "policy.json").is_file() and (directory / "policy.npz").is_file()
+        assert (directory / "policy.json").is_file()
+        assert (directory / "policy.npz").is_file()
         assert sum(f.stat().st_size for f in directory.iterdir()) < 200_000  # params + statistics only
     policy = evaluation.checkpoint_policy(str(point_run))  # a logdir: its newest checkpoint
-    assert policy.export.env_steps == 10240 and policy.units == [0, 1]
+    assert policy.export.env_steps == 10240
+    assert policy.units == [0, 1]
     assert policy.train_env_name == "point-mass"
     # The export acts exactly as the trained learner: same numbers as the driver's eval.json.
     result = evaluation.run(policy, "point-mass", policy.train_env_config, num_envs=64)
@@ -183,7 +187,8 @@ def test_export_of_one_seed_acts_as_that_seed_of_the_run(point_run, tmp_path):
     best = int(np.argmax(reached))
     out = ship_checkpoint.main([str(point_run), str(tmp_path / "best"), "--best-from", str(tmp_path / "eval.json")])
     one = evaluation.checkpoint_policy(out)
-    assert one.units == [best] and one.export.env_steps == 10240
+    assert one.units == [best]
+    assert one.export.env_steps == 10240
     assert json.loads((tmp_path / "best" / "policy.json").read_text())["selected_from"]["seeds"] == [0, 1]
     for a, b in zip(jax.tree.leaves(one.export.state), jax.tree.leaves(full.export.state)):
         np.testing.assert_array_equal(a[0], b[best])
@@ -197,7 +202,8 @@ def test_export_of_one_seed_acts_as_that_seed_of_the_run(point_run, tmp_path):
     # The run's own eval.json (the training driver's, per seed): its best seed, by hand from its lists.
     own = json.loads((point_run / "eval.json").read_text())["per_seed"]
     reached = own["episode/target_reached"]  # the point mass reports no collisions
-    assert "episode/self_collision" not in own and reached[0] != reached[1]
+    assert "episode/self_collision" not in own
+    assert reached[0] != reached[1]
     scores = list(reached)
     out = ship_checkpoint.main([str(point_run), str(tmp_path / "best_own"), "--best-from",
                                 str(point_run / "eval.json")])
@@ -241,8 +247,10 @@ def test_stochastic_evaluation_samples_the_policy(point_run):
     det = evaluation.run(policy, "point-mass", config, num_envs=32)
     sto = evaluation.run(policy, "point-mass", config, num_envs=32, stochastic=True)
     again = evaluation.run(policy, "point-mass", config, num_envs=32, stochastic=True)
-    assert sto.units == again.units and sto.units != det.units
-    assert sto.to_json()["actions"] == "stochastic" and det.to_json()["actions"] == "deterministic"
+    assert sto.units == again.units
+    assert sto.units != det.units
+    assert sto.to_json()["actions"] == "stochastic"
+    assert det.to_json()["actions"] == "deterministic"
     assert evaluation.markdown([sto]).count(", stochastic)") == 1
     # A video's rollout shows the evaluated episodes: sampled actions with --stochastic, the mode without.
     for result, stochastic in ((sto, True), (det, False)):
@@ -294,7 +302,8 @@ def baseline_results(baseline_runs):
 def test_baselines_behave_as_in_the_paper(baseline_results):
     s = {name: r.summary() for name, r in baseline_results.items()}
     # Standstill: holds its initial pose, never reaches, never collides.
-    assert s["standstill"]["target_reached"]["mean"] == 0 and s["standstill"]["self_collision"]["mean"] == 0
+    assert s["standstill"]["target_reached"]["mean"] == 0
+    assert s["standstill"]["self_collision"]["mean"] == 0
     assert s["standstill"]["steps_in_target"]["mean"] == 0
     # Random (absolute control): flails and self-collides often (paper 30 %, ours 22 % at 4096 envs).
     assert s["random"]["target_reached"]["mean"] == 0
@@ -361,18 +370,24 @@ def test_cli_baseline_json_csv(baseline_runs):
     result, out, table = baseline_runs["standstill"]
     report = json.loads(out.read_text())
     ev = report["evaluations"][0]
-    assert report["env_name"] == "ur5e-reach" and report["num_envs"] == 16 and report["eval_seeds"] == [1_000_000]
+    assert report["env_name"] == "ur5e-reach"
+    assert report["num_envs"] == 16
+    assert report["eval_seeds"] == [1_000_000]
     assert report["command"].startswith("python eval.py --env ur5e-reach --num-envs 16")
     assert report["date"] == datetime.date.today().isoformat()  # with command, code, device: agents/provenance.py
     assert ev["policy"] == {"kind": "baseline", "name": "standstill"}
-    assert ev["env_config"]["action"] == "absolute" and ev["env_config"]["episode_length"] == 100
+    assert ev["env_config"]["action"] == "absolute"
+    assert ev["env_config"]["episode_length"] == 100
     assert ev["env_config"]["substeps"] == 20  # untouched fields: the env's defaults
     assert set(ev["summary"]) >= {"target_reached", "self_collision", "obstacle_collision", "distance",
                                   "steps_in_target", "times_left_target"}
     assert ev["summary"]["distance"]["mean"] == pytest.approx(result.summary()["distance"]["mean"])
-    assert len(ev["units"]) == 1 and ev["units"][0]["metrics"]["target_reached"] == 0
+    assert len(ev["units"]) == 1
+    assert ev["units"][0]["metrics"]["target_reached"] == 0
     rows = table.read_text().splitlines()
-    assert len(rows) == 2 and "target_reached" in rows[0] and rows[1].startswith("standstill,ur5e-reach,")
+    assert len(rows) == 2
+    assert "target_reached" in rows[0]
+    assert rows[1].startswith("standstill,ur5e-reach,")
 
 
 # ------------------------------------------------------------------------------------------------
@@ -402,14 +417,18 @@ def test_checkpoint_evaluated_on_another_workspace(arm_export):
     policy = evaluation.checkpoint_policy(str(arm_export))
     assert policy.train_env_config.workspace == "full"
     config = envs.make_config("ur5e-reach", policy.train_env_config, workspace="front")
-    assert config.substeps == 2 and config.episode_length == 20  # the checkpoint's, not the defaults
+    assert config.substeps == 2
+    assert config.episode_length == 20  # the checkpoint's, not the defaults
     result = evaluation.run(policy, "ur5e-reach", config, num_envs=4)
     report = result.to_json()
-    assert report["env_config"]["workspace"] == "front" and report["policy"]["train_env_name"] == "ur5e-reach"
+    assert report["env_config"]["workspace"] == "front"
+    assert report["policy"]["train_env_name"] == "ur5e-reach"
     assert report["policy"]["train_config"]["env"]["workspace"] == "full"
     s = result.summary()
-    assert 0 <= s["self_collision"]["mean"] <= 1 and 0 < s["distance"]["mean"] < 2.5
-    assert s["distance"]["units"] == 1 and s["distance"]["episodes"] == 4
+    assert 0 <= s["self_collision"]["mean"] <= 1
+    assert 0 < s["distance"]["mean"] < 2.5
+    assert s["distance"]["units"] == 1
+    assert s["distance"]["episodes"] == 4
 
 
 @pytest.fixture(scope="module")
@@ -460,7 +479,8 @@ def test_rendered_frames_show_robot_and_target(arm_rollout):
     policy, config, records = arm_rollout
     env = envs.make("ur5e-reach", **{**ARM_ENV, "workspace": "front"})
     frames = render.rollout_frames(env, records, width=160, height=120, hold=2)
-    assert frames.shape == (config.episode_length + 1 + 2, 2 * 120, 2 * 160, 3) and frames.dtype == np.uint8
+    assert frames.shape == (config.episode_length + 1 + 2, 2 * 120, 2 * 160, 3)
+    assert frames.dtype == np.uint8
     assert frames.std() > 10  # not blank
     assert not np.array_equal(frames[0], frames[-1])  # the arm moved
     with render.Scene(env, 160, 120) as scene:
@@ -483,12 +503,15 @@ def test_cli_checkpoint_on_other_workspace_with_video(arm_export, arm_rollout, t
     report = json.loads(out.read_text())
     ev = report["evaluations"][0]
     assert report["env_overrides"] == {"workspace": "front"}
-    assert ev["env_config"]["workspace"] == "front" and ev["env_config"]["substeps"] == 2
-    assert ev["policy"]["env_steps"] == 1280 and ev["policy"]["export"].endswith(os.path.join("1280", "policy"))
+    assert ev["env_config"]["workspace"] == "front"
+    assert ev["env_config"]["substeps"] == 2
+    assert ev["policy"]["env_steps"] == 1280
+    assert ev["policy"]["export"].endswith(os.path.join("1280", "policy"))
     from PIL import Image
 
     with Image.open(video) as gif:
-        assert gif.n_frames >= 10 and gif.size == (320, 240)
+        assert gif.n_frames >= 10
+        assert gif.size == (320, 240)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -621,7 +644,9 @@ def test_help_lists_the_env_options_once_the_env_is_known(arm_export, capsys):
         with pytest.raises(SystemExit) as info:
             eval_cli.main(args)
         out = capsys.readouterr().out
-        assert info.value.code == 0 and "--num-envs" in out and "--checkpoint" in out
+        assert info.value.code == 0
+        assert "--num-envs" in out
+        assert "--checkpoint" in out
         assert ("--env.episode-length" in out) == (env_option is not None)
         assert env_option is None or env_option in out
 
@@ -635,8 +660,10 @@ def test_bad_option_values_exit_2():
 def test_cli_error_is_one_line_with_exit_code_2(tmp_path):
     proc = _eval_cli("--checkpoint", str(tmp_path / "missing"), "--json", str(tmp_path / "o.json"))
     assert proc.returncode == 2
-    assert proc.stderr.strip().count("\n") == 0 and proc.stderr.startswith("error: checkpoint ")
-    assert "Traceback" not in proc.stderr and not (tmp_path / "o.json").exists()
+    assert proc.stderr.strip().count("\n") == 0
+    assert proc.stderr.startswith("error: checkpoint ")
+    assert "Traceback" not in proc.stderr
+    assert not (tmp_path / "o.json").exists()
 
 
 # ------------------------------------------------------------------------------------------------
@@ -648,13 +675,15 @@ def test_training_curves_from_train_logs(point_run, tmp_path):
 
     steps, mean, std, seeds = plots.curve([str(point_run)], "episode/target_reached")
     rows = plots.read_metrics(str(point_run))
-    assert seeds == 2 and list(steps) == [5120, 10240]
+    assert seeds == 2
+    assert list(steps) == [5120, 10240]
     at_end = rows["episode/target_reached"][rows["env_steps"] == 10240]
     np.testing.assert_allclose(mean[-1], at_end.mean())
     np.testing.assert_allclose(std[-1], at_end.std())
     out = tmp_path / "curves.png"
     fig = plots.training_curves({"ppo": str(point_run)}, out=str(out))
-    assert out.stat().st_size > 10_000 and len(fig.axes) == 2  # target reached and return (point mass has no collisions)
+    assert out.stat().st_size > 10_000
+    assert len(fig.axes) == 2  # target reached and return (point mass has no collisions)
     with pytest.raises(ValueError, match="metrics.csv"):
         plots.read_metrics(str(tmp_path))
 
@@ -676,7 +705,8 @@ def test_training_curves_against_wall_clock(tmp_path):
                                             keep={str(tmp_path): 1})
     np.testing.assert_allclose(seconds, [2.0, 3.0, 6.0])
     np.testing.assert_allclose(mean, [0.1, 0.5, 0.9])
-    assert seeds == 1 and not std.any()
+    assert seeds == 1
+    assert not std.any()
     fig = plots.training_curves({"run": str(tmp_path)}, ["episode/target_reached"], x="wall_clock")
     assert fig.axes[0].get_xlabel() == plots.X_AXES["wall_clock"]
     with pytest.raises(ValueError, match="x='minutes'.*env_steps, wall_clock"):
@@ -696,13 +726,18 @@ def test_paper_tables_from_given_checkpoints_and_skips_the_rest(point_run, tmp_p
                                  "--num-envs", "16", "--action", f"relative={point_run}"])
     assert [os.path.basename(p) for p in written] == ["action_space.md"]
     err = capsys.readouterr().err
-    assert "skipped table 'workspace'" in err and "skipped table 'obstacle'" in err
+    assert "skipped table 'workspace'" in err
+    assert "skipped table 'obstacle'" in err
     assert "no 'absolute' checkpoint given, row skipped" in err
     text = (tmp_path / "action_space.md").read_text()
-    assert "| Relative | 2 x 16 |" in text and "Position" not in text
-    assert str(point_run) in text and "device: CPU" in text and "--action relative=" in text
+    assert "| Relative | 2 x 16 |" in text
+    assert "Position" not in text
+    assert str(point_run) in text
+    assert "device: CPU" in text
+    assert "--action relative=" in text
     data = json.loads((tmp_path / "action_space.json").read_text())
-    assert data["rows"][0]["role"] == "relative" and data["rows"][0]["policy"]["env_steps"] == 10240
+    assert data["rows"][0]["role"] == "relative"
+    assert data["rows"][0]["policy"]["env_steps"] == 10240
     with pytest.raises(ValueError, match="role 'diagonal' is unknown"):
         paper_tables.main(["--tables", "workspace", "--workspace", f"diagonal={point_run}", "--out", str(tmp_path)])
 
@@ -731,7 +766,8 @@ def test_paper_tables_evaluate_each_pair_on_the_right_env_config(arm_export, tmp
         ("full", "upper", "reachable", "limited"), ("full", "full", "reachable", "full"),  # -> "Full Range"
     ]
     table = (tmp_path / "workspace_generalization.md").read_text()
-    assert "| Front | Full | 1 x 2 |" in table and "| Full | Full Range | 1 x 2 |" in table
+    assert "| Front | Full | 1 x 2 |" in table
+    assert "| Full | Full Range | 1 x 2 |" in table
 
     calls.clear()
     avoid = _untrained_export(tmp_path / "avoid", "ur5e-reach-avoid", obstacle_radius=0.1, target_radius=0.02)
@@ -763,7 +799,9 @@ def test_sac_export_acts_as_the_learner(tmp_path):
     state = state.replace(obs_stats=stats)
     export.save(str(tmp_path / "policy"), learner, state, config_json(config), 640)
     loaded = export.load(str(tmp_path))
-    assert loaded.config.algo_name == "sac" and loaded.seeds == [0, 1] and loaded.env_steps == 640
+    assert loaded.config.algo_name == "sac"
+    assert loaded.seeds == [0, 1]
+    assert loaded.env_steps == 640
     assert sum(f.stat().st_size for f in (tmp_path / "policy").iterdir()) < 100_000  # no replay buffer
     obs = jax.random.normal(jax.random.PRNGKey(1), (5, env.observation_size))
     ours = jax.vmap(loaded.learner.policy, in_axes=(0, None))(loaded.state, obs)
@@ -789,7 +827,8 @@ def test_sac_export_evaluated_in_bfloat16(tmp_path):
     with pytest.raises(ValueError, match=r"compute_dtype='float16' is invalid: allowed are 'float32', 'bfloat16'"):
         evaluation.with_compute_dtype(policy, "float16")
     bf16 = evaluation.with_compute_dtype(policy, "bfloat16")
-    assert policy.algo_config.compute_dtype == "float32" and bf16.algo_config.compute_dtype == "bfloat16"
+    assert policy.algo_config.compute_dtype == "float32"
+    assert bf16.algo_config.compute_dtype == "bfloat16"
     bf16_learner = registry.make_learner(bf16.algo_config, env.observation_size, env.action_size, 1)
     acted = np.asarray(jax.vmap(bf16_learner.policy, in_axes=(0, None))(loaded.state, obs))
     assert not np.array_equal(acted, ours)  # close to float32's actions, not equal
@@ -800,7 +839,8 @@ def test_sac_export_evaluated_in_bfloat16(tmp_path):
     assert evaluation._program(evaluation.with_compute_dtype(policy, "float32"), "point-mass", cfg, 4, 10, False) is \
         evaluation._program(policy, "point-mass", cfg, 4, 10, False)
     result = evaluation.run(bf16, "point-mass", cfg, num_envs=4, eval_seeds=(5,))
-    assert result.to_json()["policy"]["compute_dtype"] == "bfloat16" and "compute_dtype" not in policy.describe()
+    assert result.to_json()["policy"]["compute_dtype"] == "bfloat16"
+    assert "compute_dtype" not in policy.describe()
     assert evaluation.label(result).endswith(", bfloat16)")
 
 
@@ -830,7 +870,8 @@ def test_failure_report_names_the_colliding_pair_and_bins_the_misses(monkeypatch
     records = {"qpos": qpos, "length": np.array([6, 3, 6, 6]), "metrics": metrics}
     rows = failure_report.classify(robot, records)
     assert [r["outcome"] for r in rows] == ["reached", "self collision", "missed", "missed"]
-    assert " / ".join(sorted(rows[1]["what"].split(" / "))) in expected and rows[1]["step"] == 3
+    assert " / ".join(sorted(rows[1]["what"].split(" / "))) in expected
+    assert rows[1]["step"] == 3
     assert rows[0]["start_clearance"] > 0
     summary = failure_report.summarize(rows)
     assert summary["outcomes"] == {"missed": 0.5, "reached": 0.25, "self collision": 0.25}
@@ -847,7 +888,8 @@ def test_failure_report_names_the_colliding_pair_and_bins_the_misses(monkeypatch
     assert rows[0]["joint_margin"] > failure_report.NEAR_LIMIT
     moved = np.linalg.norm(ee_position(robot.mj_model, hit) - ee_position(robot.mj_model, free))
     np.testing.assert_allclose([rows[1]["end_motion"], rows[2]["end_motion"]], [moved, 0.0], atol=1e-5)
-    assert summary["end"]["missed"]["near_limit"] == 1.0 and summary["end"]["reached"]["near_limit"] == 0.0
+    assert summary["end"]["missed"]["near_limit"] == 1.0
+    assert summary["end"]["reached"]["near_limit"] == 0.0
     assert failure_report.summarize(rows, near_limit=0.1)["end"]["missed"]["near_limit"] == 0.5  # 0.01 only
 
 

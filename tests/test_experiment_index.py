@@ -35,17 +35,21 @@ def test_a_section_shows_its_table_json_numbers(tmp_path):
             "0.020 ± 0.001 [0.018, 0.021] |" in text.splitlines())
     assert "| row a on b | not evaluated |  |  |  |" in text.splitlines()
     assert "| run | seeds x env steps | reached | self collision | distance (m) |" in text
-    assert "`python -m tools.experiments launch fake`" in text and "`python -m tools.experiments build fake`" in text
-    assert "[table.md](fake/table.md)" in text and "[notes](#fake)" in text
+    assert "`python -m tools.experiments launch fake`" in text
+    assert "`python -m tools.experiments build fake`" in text
+    assert "[table.md](fake/table.md)" in text
+    assert "[notes](#fake)" in text
     assert "curves.png" not in text  # no figure was built
-    assert "built at code abc1234, 2026-01-02" in text and "A note on the runs." in text
+    assert "built at code abc1234, 2026-01-02" in text
+    assert "A note on the runs." in text
 
 
 def test_an_unbuilt_experiment_says_so(tmp_path):
     out = _out(tmp_path)
     text = ei.readme(out, experiments={"fake": FAKE, "other": Experiment("other", "Other", "not in the paper",
                                                                          (Run("x", "ur5e-reach-ppo"),))})
-    assert "### `other`: Other" in text and "Not built yet." in text
+    assert "### `other`: Other" in text
+    assert "Not built yet." in text
 
 
 def test_every_registered_experiment_and_its_commands_are_named():

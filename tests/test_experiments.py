@@ -206,7 +206,8 @@ def test_read_timing_takes_the_speed_after_the_first_chunk(tmp_path):
             "10240,0,-5,1.0", "12800,0,1000,2.56", "15360,0,500,5.12"]
     _write(str(tmp_path / "a" / "metrics.csv"), "\n".join(rows) + "\n")
     rate, wall = state.read_timing(str(tmp_path / "a"), 1)
-    assert rate == 750.0 and wall == pytest.approx(20.24)
+    assert rate == 750.0
+    assert wall == pytest.approx(20.24)
     _write(str(tmp_path / "b" / "metrics.csv"), "\n".join(rows[:2]) + "\n")
     assert state.read_timing(str(tmp_path / "b"), 1) == (None, 12.56)
     assert state.read_timing(str(tmp_path / "c"), 1) == (None, 0.0)
@@ -228,14 +229,17 @@ def test_listing_and_commands_on_a_hand_made_runs_folder(tmp_path):
 
     states = {r.name: state.run_state(exp, r, runs_dir) for r in exp.runs}
     assert {n: s.status for n, s in states.items()} == {"a": "done", "b": "partial", "c": "missing", "d": "changed"}
-    assert states["b"].steps == 5120 and states["b"].seeds_done == 1
+    assert states["b"].steps == 5120
+    assert states["b"].seeds_done == 1
     part = states["b"].parts[1]
     assert (part.first, part.count, part.status, part.rate) == (1, 1, "partial", 1000.0)
     assert part.wall_seconds == pytest.approx(15.12)
-    assert "dt" in states["d"].reason and "seeds-0-0" in states["d"].reason
+    assert "dt" in states["d"].reason
+    assert "seeds-0-0" in states["d"].reason
     text = ex.listing([(exp, list(exp.runs))], runs_dir, out)
     assert "1 done, 1 partial, 1 missing, 1 changed; table not built" in text
-    assert "partial 1/2 seeds done, 0.00512M/0.01024M" in text and "total: 61,440 env steps" in text
+    assert "partial 1/2 seeds done, 0.00512M/0.01024M" in text
+    assert "total: 61,440 env steps" in text
     assert "35,840 trained" in text  # a: 2 x 10,240, b: 10,240 + 5,120, d: nothing (changed)
     # A part whose job failed says so, with the job's error and log.
     launch.note_job(b1, job_id="42", executor="slurm", attempts=2, status="failed", error="ValueError: boom",
@@ -252,7 +256,8 @@ def test_listing_and_commands_on_a_hand_made_runs_folder(tmp_path):
         f"python train.py point-mass-ppo --logdir {os.path.join(runs_dir, 'toy', 'c', 'seeds-0-0')} --seeds 1 "
         "--num-timesteps 10240 --eval-envs 16 --no-tensorboard --no-progress --seed 20"]
     fresh = ex.commands([(exp, list(exp.runs))], runs_dir, everything=True, max_seeds=1)
-    assert len(fresh) == 6 and all("--resume" not in line for line in fresh)  # a and b as 2 x 1 seed, c, d
+    assert len(fresh) == 6
+    assert all("--resume" not in line for line in fresh)  # a and b as 2 x 1 seed, c, d
     # `run` records the finished parts of an experiment whose table cannot be built yet.
     recorded = tables.record([(exp, list(exp.runs))], runs_dir, out)
     assert sorted(os.path.relpath(p, out) for p in recorded) == [
@@ -273,7 +278,8 @@ def test_a_cross_row_holds_the_parts_evaluated(tmp_path):
     st = state.run_state(exp, b, runs_dir)
     assert tables.cross_files(st, exp.cross[0], None) == {"seeds-1-1": os.path.join(late, "cross-sampled.json")}
     merged = tables.merged_evaluation(st, tables.cross_files(st, exp.cross[0], None))
-    assert merged["seeds"] == 1 and merged["per_seed"]["episode/target_reached"] == [0.75]
+    assert merged["seeds"] == 1
+    assert merged["per_seed"]["episode/target_reached"] == [0.75]
     assert tables.merged_evaluation(st)["per_seed"]["episode/target_reached"] == [0.0, 0.1]  # the eval.json of both
     assert ("cross sampled: b with sampled actions: 1 of 2 parts evaluated; 1 to evaluate here (`launch` or `run`), 0 without "
             "checkpoints here") in ex.listing([(exp, [b])], runs_dir, "")
@@ -315,8 +321,10 @@ def test_a_table_shows_the_joint_speed_and_acceleration_means_where_evaluated(tm
     assert cells["| b"][4:6] == ["", ""]
     with open(os.path.join(out, "toy", "table.json")) as f:
         rows = {r["run"]: r for r in json.load(f)["rows"]}
-    assert rows["a"]["mean"]["mean_joint_acc"] == pytest.approx(12.0) and "mean_joint_acc" not in rows["b"]["mean"]
-    assert rows["a"]["sources"] == ["results/a_eval.json"] and "sources" not in rows["b"]
+    assert rows["a"]["mean"]["mean_joint_acc"] == pytest.approx(12.0)
+    assert "mean_joint_acc" not in rows["b"]["mean"]
+    assert rows["a"]["sources"] == ["results/a_eval.json"]
+    assert "sources" not in rows["b"]
 
 
 def test_a_partial_run_builds_a_row_of_its_done_seeds(tmp_path):
@@ -339,10 +347,12 @@ def test_a_partial_run_builds_a_row_of_its_done_seeds(tmp_path):
     assert (row["status"], row["seeds_evaluated"], row["per_seed"]["target_reached"]) == ("partial", 1, [0.1])
     assert row["wall_seconds"] == pytest.approx(39.0)
     assert (cross["status"], cross["seeds_evaluated"], cross["per_seed"]["target_reached"]) == ("partly evaluated", 1, [0.25])
-    assert empty["status"] == "missing" and "per_seed" not in empty
+    assert empty["status"] == "missing"
+    assert "per_seed" not in empty
     with open(os.path.join(out, "toy", "table.md")) as f:
         table = f.read()
-    assert table.count("| 1 x 16 (2 planned) |") == 2 and "| not done (missing) | 2 x - |" in table
+    assert table.count("| 1 x 16 (2 planned) |") == 2
+    assert "| not done (missing) | 2 x - |" in table
     assert "device" not in table  # no eval.json names one: no device column
     # A device named by one part's eval.json: the row says which (and for how many of its seeds); a cross row,
     # evaluated elsewhere, has no training device.
@@ -393,7 +403,8 @@ def test_the_figure_draws_each_group_of_runs_on_its_own_row_against_both_axes(tm
     monkeypatch.setattr(plots, "curve_grid", spy)
     path = tables.training_figure(exp, states, os.path.join(out, "curves.png"))
     monkeypatch.undo()
-    assert path and os.path.isfile(path)
+    assert path
+    assert os.path.isfile(path)
     assert drawn["first: " + plots.CURVE_METRICS["episode/target_reached"]]["c (1 seed)"] == pytest.approx([0.2, 0.3])
 
     groups = {"first": {"a": [p.logdir for p in states[0].done_parts], "c": [states[2].done_parts[0].logdir]},
@@ -403,10 +414,12 @@ def test_the_figure_draws_each_group_of_runs_on_its_own_row_against_both_axes(tm
         "second: " + plots.CURVE_METRICS["episode/target_reached"]] * 2
     assert [ax.get_xlabel() for ax in fig.axes] == [plots.X_AXES["env_steps"], plots.X_AXES["wall_clock"]] * 2
     line_a, line_c = fig.axes[0].get_lines()
-    assert list(line_a.get_xdata()) == [5120, 10240] and list(line_a.get_ydata()) == pytest.approx([0.4, 0.5])
+    assert list(line_a.get_xdata()) == [5120, 10240]
+    assert list(line_a.get_ydata()) == pytest.approx([0.4, 0.5])
     assert line_a.get_label() == "a (2 seeds)"
     # Without `keep`, curve_grid draws every seed its logs hold: c's shared part's seed 1 too.
-    assert list(line_c.get_ydata()) == pytest.approx([0.55, 0.6]) and line_c.get_label() == "c (2 seeds)"
+    assert list(line_c.get_ydata()) == pytest.approx([0.55, 0.6])
+    assert line_c.get_label() == "c (2 seeds)"
     assert list(fig.axes[1].get_lines()[0].get_xdata()) == pytest.approx([51.2, 102.4])
     with pytest.raises(ValueError, match=r"holds 'minutes': allowed are env_steps, wall_clock"):
         plots.curve_grid(groups, ["episode/target_reached"], ("minutes",))
@@ -425,7 +438,9 @@ def test_pending_parts_split_the_missing_seeds():
     assert [(p.first, p.count) for p in state.pending_parts(st)] == [(0, 1), (2, 3)]
     assert [(p.first, p.count) for p in state.pending_parts(st, max_seeds=2)] == [(0, 1), (2, 2), (4, 1)]
     assert state.pending_parts(st, max_seeds=2)[1].logdir == os.path.join("f", "seeds-2-3")
-    assert state.parse_part("seeds-2-3") == (2, 2) and state.parse_part("seeds-3-2") is None and state.parse_part("ckpt") is None
+    assert state.parse_part("seeds-2-3") == (2, 2)
+    assert state.parse_part("seeds-3-2") is None
+    assert state.parse_part("ckpt") is None
     with pytest.raises(ValueError, match="--max-seeds=0"):
         ex.main(["list", "--max-seeds", "0"])
 
@@ -444,14 +459,19 @@ def test_equal_runs_train_once_and_the_record_keeps_finished_parts(tmp_path):
     _part(base, runs_dir, "first", "base", 0, 2, steps=[10240], evaluated=10240)
 
     st = state.run_state(second, same, runs_dir, out, registry)
-    assert st.shared == "first/base" and st.folder == os.path.join(runs_dir, "first", "base")
-    assert st.status == "partial" and st.seeds_done == 2
+    assert st.shared == "first/base"
+    assert st.folder == os.path.join(runs_dir, "first", "base")
+    assert st.status == "partial"
+    assert st.seeds_done == 2
     assert [p.logdir for p in state.pending_parts(st)] == [os.path.join(runs_dir, "first", "base", "seeds-2-2")]
     selection = state.select(None, registry)
     text = ex.listing(selection, runs_dir, out, registry)
-    assert "[trains in first/base]" in text and "total: 40,960 env steps" in text  # 3 x 10,240 once + 1 x 10,240
+    assert "[trains in first/base]" in text
+    assert "total: 40,960 env steps" in text  # 3 x 10,240 once + 1 x 10,240
     lines = ex.commands(selection, runs_dir, registry=registry)
-    assert len(lines) == 2 and "seeds-2-2 --seeds 1" in lines[0] and "--seed 2" in lines[0]
+    assert len(lines) == 2
+    assert "seeds-2-2 --seeds 1" in lines[0]
+    assert "--seed 2" in lines[0]
     # On an empty folder the run needing the most seeds plans the shared folder's parts: no seed twice.
     fresh = ex.commands(selection, str(tmp_path / "none"), max_seeds=2, registry=registry)
     assert [line.split("--logdir ")[1].split()[0].rsplit("/", 1)[1] for line in fresh] == [
@@ -468,17 +488,20 @@ def test_equal_runs_train_once_and_the_record_keeps_finished_parts(tmp_path):
     assert len(both) == len(set(both)) == 4  # base's seeds-0-1 and seeds-2-2, recorded once though same shares them
     files = tables.build(state.select(["second"], registry), runs_dir, out, log=lambda s: None, registry=registry)
     record = os.path.join(out, "first", "runs", "base", "seeds-0-1")
-    assert os.path.join(record, "eval.json") in files and os.path.join(record, "config.json") in files
+    assert os.path.join(record, "eval.json") in files
+    assert os.path.join(record, "config.json") in files
     assert not os.path.exists(os.path.join(out, "second", "runs"))
     with open(os.path.join(out, "second", "table.json")) as f:
         row = json.load(f)["rows"][0]
-    assert row["per_seed"]["target_reached"] == pytest.approx([0.0, 0.1, 0.2]) and row["shared"] == "first/base"
+    assert row["per_seed"]["target_reached"] == pytest.approx([0.0, 0.1, 0.2])
+    assert row["shared"] == "first/base"
     assert [p["seeds"] for p in row["parts"]] == ["seeds-0-1", "seeds-2-2"]
     # The owner's own table takes its 2 seeds, not the third one trained for the sharing run.
     tables.build(state.select(["first"], registry), runs_dir, out, log=lambda s: None, registry=registry)
     with open(os.path.join(out, "first", "table.json")) as f:
         row = json.load(f)["rows"][0]
-    assert row["per_seed"]["target_reached"] == pytest.approx([0.0, 0.1]) and row["seeds_evaluated"] == 2
+    assert row["per_seed"]["target_reached"] == pytest.approx([0.0, 0.1])
+    assert row["seeds_evaluated"] == 2
     elsewhere = str(tmp_path / "empty")
     assert state.run_state(first, base, elsewhere, out, registry).status == "done"
     assert state.run_state(first, base, elsewhere, None, registry).status == "missing"
@@ -488,7 +511,8 @@ def test_equal_runs_train_once_and_the_record_keeps_finished_parts(tmp_path):
     os.remove(os.path.join(runs_dir, "first", "base", "seeds-0-1", "eval.json"))
     os.makedirs(os.path.join(runs_dir, "first", "base", "seeds-0-1", "checkpoints", "5120"))
     st = state.run_state(first, base, runs_dir, out, registry)
-    assert st.status == "done" and st.done_parts[0].logdir == record
+    assert st.status == "done"
+    assert st.done_parts[0].logdir == record
     old = spec.apply_overrides(base.config(), {"env.dt": 0.2})
     _part(base, str(tmp_path / "rec"), "x", "y", 0, 2, evaluated=10240, config=old)
     os.makedirs(os.path.join(out, "first", "runs", "base", "seeds-0-0"))
@@ -563,7 +587,9 @@ def test_a_part_another_process_holds_is_left_alone_until_that_process_ends(tmp_
     assert os.path.isfile(lock)  # left behind by the killed process, holding nothing
     log = []
     assert not launch.run_parts(selection, runs_dir, out, log=log.append)  # stopped short of the budget
-    assert len(calls) == 1 and calls[0].startswith("another process (pid ") and f"pid {os.getpid()} on " in calls[0]
+    assert len(calls) == 1
+    assert calls[0].startswith("another process (pid ")
+    assert f"pid {os.getpid()} on " in calls[0]
     assert "resuming at 5,120" in log[0], log
     with launch.part_lock(logdir) as free:  # released after training
         assert free is None
@@ -622,12 +648,14 @@ def test_toy_experiment_trains_resumes_and_builds(tmp_path, monkeypatch):
     assert any("[toy/b seeds-0-1] resuming at 5,120" in line for line in log)
     for run in TOY.runs:
         st = state.run_state(TOY, run, runs_dir)
-        assert st.status == "done" and st.steps == 10_240
+        assert st.status == "done"
+        assert st.steps == 10_240
     with open(os.path.join(logdir, "eval.json")) as f:
         written = json.load(f)
     from agents.provenance import device_description
 
-    assert written["env_steps"] == 10_240 and written["device"] == device_description() == f"CPU, {os.cpu_count()} cores"
+    assert written["env_steps"] == 10_240
+    assert written["device"] == device_description() == f"CPU, {os.cpu_count()} cores"
     assert written["provenance"]["device"] == written["device"]
     assert written["provenance"]["command"].startswith("python ")
 
@@ -649,7 +677,8 @@ def test_toy_experiment_trains_resumes_and_builds(tmp_path, monkeypatch):
         sampled = json.load(f)
     direct = evaluation.run(evaluation.checkpoint_policy(a_part.logdir), "point-mass", TOY.runs[0].config().env,
                             num_envs=16, eval_seeds=(1_000_000,), stochastic=True)
-    assert sampled["actions"] == "stochastic" and cross["actions"] == "deterministic"
+    assert sampled["actions"] == "stochastic"
+    assert cross["actions"] == "deterministic"
     assert sampled["per_seed"]["episode/distance_last10"] == pytest.approx([u["metrics"]["distance"] for u in direct.units])
     with open(os.path.join(a_part.logdir, "eval.json")) as f:  # the mode's distances differ from the samples'
         assert sampled["per_seed"]["episode/distance_last10"] != pytest.approx(json.load(f)["per_seed"]["episode/distance_last10"])
@@ -663,10 +692,12 @@ def test_toy_experiment_trains_resumes_and_builds(tmp_path, monkeypatch):
         data = json.load(f)
     assert [r["label"] for r in data["rows"]] == ["a", "b", "a on wide-goal", "a on sampled"]
     assert data["rows"][2]["per_seed"]["target_reached"] == pytest.approx(cross["per_seed"]["episode/target_reached"])
-    assert len(data["rows"][0]["per_seed"]["target_reached"]) == 2 and data["rows"][0]["wall_seconds"] > 0
+    assert len(data["rows"][0]["per_seed"]["target_reached"]) == 2
+    assert data["rows"][0]["wall_seconds"] > 0
     with open(os.path.join(out, "toy", "table.md")) as f:
         text = f.read()
-    assert "| paper: target reached | target reached |" in text and "| 50.0 % |" in text
+    assert "| paper: target reached | target reached |" in text
+    assert "| 50.0 % |" in text
     assert ex.listing(selection, runs_dir, out).splitlines()[1] == "  2 done; table built"
     assert ex.commands(selection, runs_dir) == []
 

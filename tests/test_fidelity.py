@@ -296,7 +296,8 @@ def test_command_line_writes_provenance_and_one_row_per_configuration(tmp_path):
     row = result["baselines"][0]
     assert row["self_collision"]["rate"] == 0.0  # holding a collision-free start pose
     rates = [v["rate"] for v in row.values() if isinstance(v, dict) and "rate" in v]
-    assert len(rates) == 5 and all(0 <= p <= 1 for p in rates)
+    assert len(rates) == 5
+    assert all(0 <= p <= 1 for p in rates)
     assert result["env_options"] == {"episode_length": STEPS}
 
 

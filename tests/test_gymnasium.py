@@ -27,14 +27,20 @@ def _pm_reward(obs):
 
 def test_spaces_metadata_and_reset():
     vec = eg.make_vec("point-mass", 3)
-    assert isinstance(vec, gym.vector.VectorEnv) and vec.num_envs == 3 and vec.episode_length == LIMIT
+    assert isinstance(vec, gym.vector.VectorEnv)
+    assert vec.num_envs == 3
+    assert vec.episode_length == LIMIT
     assert vec.metadata["autoreset_mode"] is gym.vector.AutoresetMode.SAME_STEP
     assert vec.single_observation_space == gym.spaces.Box(-np.inf, np.inf, (6,), np.float32)
     assert vec.single_action_space == gym.spaces.Box(-1.0, 1.0, (2,), np.float32)
-    assert vec.observation_space.shape == (3, 6) and vec.action_space.shape == (3, 2)
-    assert np.all(vec.action_space.low == -1) and np.all(vec.action_space.high == 1)
+    assert vec.observation_space.shape == (3, 6)
+    assert vec.action_space.shape == (3, 2)
+    assert np.all(vec.action_space.low == -1)
+    assert np.all(vec.action_space.high == 1)
     obs, infos = vec.reset(seed=0)
-    assert obs.dtype == np.float32 and obs in vec.observation_space and infos == {}
+    assert obs.dtype == np.float32
+    assert obs in vec.observation_space
+    assert infos == {}
     np.testing.assert_allclose(obs[:, 4:6], obs[:, 2:4] - obs[:, 0:2], atol=1e-6)  # goal - position
     assert np.all(np.abs(obs[:, :4]) <= 1.0)  # start and goal sampled in [-1, 1]^2
     assert np.unique(obs[:, 0]).size == 3  # independent episodes
@@ -46,7 +52,9 @@ def test_truncation_at_time_limit_delivers_final_obs_and_restarts():
     zeros = np.zeros((3, 2), np.float32)
     for t in range(1, LIMIT):
         obs, rewards, terminations, truncations, infos = vec.step(zeros)
-        assert not terminations.any() and not truncations.any() and "final_obs" not in infos
+        assert not terminations.any()
+        assert not truncations.any()
+        assert "final_obs" not in infos
         np.testing.assert_array_equal(obs, obs0)  # a zero action keeps the point where it is
         assert rewards.dtype == np.float32
         np.testing.assert_allclose(rewards, _pm_reward(obs0), rtol=1e-5)
@@ -54,20 +62,25 @@ def test_truncation_at_time_limit_delivers_final_obs_and_restarts():
         np.testing.assert_allclose(infos["distance"], np.linalg.norm(obs0[:, 4:6], axis=1), rtol=1e-5)
 
     obs, rewards, terminations, truncations, infos = vec.step(zeros)  # step 50: time limit
-    assert truncations.all() and not terminations.any()
+    assert truncations.all()
+    assert not terminations.any()
     assert terminations.dtype == truncations.dtype == np.bool_
-    assert infos["_final_obs"].all() and infos["_final_info"].all()
+    assert infos["_final_obs"].all()
+    assert infos["_final_info"].all()
     assert infos["final_obs"].dtype == object
     np.testing.assert_array_equal(np.stack(infos["final_obs"]), obs0)  # the terminal observation
     np.testing.assert_allclose(rewards, _pm_reward(obs0), rtol=1e-5)  # reward of the ended step
     np.testing.assert_allclose(infos["final_info"]["distance"], np.linalg.norm(obs0[:, 4:6], axis=1), rtol=1e-5)
     assert infos["final_info"]["_distance"].all()
-    assert not infos["_distance"].any() and not infos["distance"].any()  # reset info is empty
+    assert not infos["_distance"].any()
+    assert not infos["distance"].any()  # reset info is empty
     assert not np.any(np.all(obs == obs0, axis=1))  # fresh episodes already started (SAME_STEP)
 
     for t in range(1, LIMIT + 1):  # the new episodes run their full length again
         _, _, terminations, truncations, _ = vec.step(zeros)
-        assert not terminations.any() and truncations.all() == (t == LIMIT) and truncations.any() == (t == LIMIT)
+        assert not terminations.any()
+        assert truncations.all() == (t == LIMIT)
+        assert truncations.any() == (t == LIMIT)
     assert vec._step_fn._cache_size() == 1  # one compilation for all steps (no retracing)
 
 
@@ -87,10 +100,13 @@ def test_leaving_the_arena_terminates_not_truncates():
                     final = infos["final_obs"][i]
                     assert final[0] > ARENA >= prev[i, 0]  # it left in this very step
                     np.testing.assert_allclose(final[0], prev[i, 0] + DT, atol=1e-5)
-                    assert rewards[i] == 0.0 and infos["final_info"]["_distance"][i]
-                    assert not infos["_distance"][i] and np.all(np.abs(obs[i, :4]) <= 1.0)
+                    assert rewards[i] == 0.0
+                    assert infos["final_info"]["_distance"][i]
+                    assert not infos["_distance"][i]
+                    assert np.all(np.abs(obs[i, :4]) <= 1.0)
                 elif not terminations[i]:
-                    assert infos["final_obs"][i] is None and infos["_distance"][i]
+                    assert infos["final_obs"][i] is None
+                    assert infos["_distance"][i]
                     assert not infos["final_info"]["_distance"][i]
         ended |= terminations
     assert ended.all()
@@ -219,7 +235,8 @@ def test_rgb_array_render_draws_each_copy_of_an_arm():
     vec = eg.make_vec("ur5e-reach", 2, render_mode="rgb_array", substeps=2)
     vec.reset(seed=0)
     first, second = vec.render()
-    assert first.shape[2] == 3 and first.dtype == np.uint8
+    assert first.shape[2] == 3
+    assert first.dtype == np.uint8
     assert np.any(first != second)  # two sampled poses and targets, two pictures
 
 
@@ -227,7 +244,8 @@ def test_single_env_rgb_array_render_is_the_picture_of_its_state():
     env = eg.make("ur5e-reach", render_mode="rgb_array", substeps=2)
     env.reset(seed=0)
     frame = env.render()
-    assert frame.ndim == 3 and frame.std() > 0  # not a blank image
+    assert frame.ndim == 3
+    assert frame.std() > 0  # not a blank image
 
 
 def test_render_without_a_render_mode_returns_none():
@@ -256,11 +274,16 @@ def test_gymnasium_env_checker_passes_on_the_single_env():
     assert remarks == []
 
     obs, info = env.reset(seed=0)
-    assert obs.shape == (6,) and obs.dtype == np.float32 and info == {}
+    assert obs.shape == (6,)
+    assert obs.dtype == np.float32
+    assert info == {}
     for t in range(1, LIMIT + 1):
         next_obs, reward, terminated, truncated, info = env.step(np.zeros(2))
-        assert type(reward) is float and type(terminated) is bool and type(truncated) is bool
-        assert truncated == (t == LIMIT) and not terminated
+        assert type(reward) is float
+        assert type(terminated) is bool
+        assert type(truncated) is bool
+        assert truncated == (t == LIMIT)
+        assert not terminated
     np.testing.assert_array_equal(next_obs, obs)  # the terminal observation, not the next episode's
     assert set(info) == {"distance", "in_target", "target_reached", "physics_nan"}
     with pytest.raises(RuntimeError, match="reset"):
@@ -290,7 +313,8 @@ def test_gymnasium_vector_wrappers_read_the_autoreset_mode():
     for _ in range(LIMIT):
         _, rewards, _, truncations, infos = vec.step(np.zeros((2, 2), np.float32))
         returns += rewards
-    assert truncations.all() and infos["_episode"].all()
+    assert truncations.all()
+    assert infos["_episode"].all()
     np.testing.assert_array_equal(infos["episode"]["l"], [LIMIT, LIMIT])
     np.testing.assert_allclose(infos["episode"]["r"], returns, rtol=1e-5)
 
@@ -301,14 +325,18 @@ def test_ur5e_reach_avoid_through_the_bridge():
     ee, target, to_target = slice(nq, nq + 3), slice(nq + 3, nq + 6), slice(nq + 6, nq + 9)
     obs, _ = vec.reset(seed=0)
     vec.action_space.seed(0)
-    assert obs.shape == (2, vec.env.observation_size) and obs.dtype == np.float32 and np.isfinite(obs).all()
+    assert obs.shape == (2, vec.env.observation_size)
+    assert obs.dtype == np.float32
+    assert np.isfinite(obs).all()
     np.testing.assert_allclose(obs[:, to_target], obs[:, target] - obs[:, ee], atol=1e-5)
     ended = np.zeros(2, bool)
     for t in range(1, 4):
         prev = obs
         obs, rewards, terminations, truncations, infos = vec.step(vec.action_space.sample())
         done = terminations | truncations
-        assert np.isfinite(obs).all() and np.isfinite(rewards).all() and not (terminations & truncations).any()
+        assert np.isfinite(obs).all()
+        assert np.isfinite(rewards).all()
+        assert not (terminations & truncations).any()
         assert {"target_reached", "obstacle_collision", "self_collision", "distance_last10"} <= set(infos)
         assert truncations.tolist() == [t == 3 and not ended[i] for i in range(2)]  # 3-step limit
         for i in range(2):
@@ -325,10 +353,12 @@ def test_ur5e_reach_avoid_through_the_bridge():
     assert ended.all()
     # A NaN action ends the episodes with finite metrics (issue 27: averages over episodes were NaN).
     obs, rewards, terminations, _, infos = vec.step(np.full((2, nq), np.nan, np.float32))
-    assert terminations.all() and (infos["final_info"]["physics_nan"] == 1).all()
+    assert terminations.all()
+    assert (infos["final_info"]["physics_nan"] == 1).all()
     for key in ("distance", "distance_last10"):
         assert np.isfinite(infos["final_info"][key]).all() and (infos["final_info"][key] > 0).all(), key
-    assert np.isfinite(obs).all() and np.isfinite(rewards).all()
+    assert np.isfinite(obs).all()
+    assert np.isfinite(rewards).all()
 
 
 def test_nan_action_ends_the_point_mass_episode_like_the_arms():
@@ -337,11 +367,15 @@ def test_nan_action_ends_the_point_mass_episode_like_the_arms():
     actions = np.zeros((3, 2), np.float32)
     actions[1, 0] = np.nan
     new, rewards, terminations, truncations, infos = vec.step(actions)
-    assert terminations.tolist() == [False, True, False] and not truncations.any()
+    assert terminations.tolist() == [False, True, False]
+    assert not truncations.any()
     final = {k: v[1] for k, v in infos["final_info"].items()}
-    assert final["physics_nan"] == 1 and np.isfinite(final["distance"]) and rewards[1] == 0
+    assert final["physics_nan"] == 1
+    assert np.isfinite(final["distance"])
+    assert rewards[1] == 0
     np.testing.assert_array_equal(infos["final_obs"][1], obs[1])  # the point stayed where it was
-    assert np.isfinite(new).all() and (infos["physics_nan"] == 0).all()
+    assert np.isfinite(new).all()
+    assert (infos["physics_nan"] == 0).all()
 
 
 def test_sb3_vec_env_adapter_reports_terminal_obs_and_time_limits():
@@ -364,10 +398,12 @@ def test_sb3_vec_env_adapter_reports_terminal_obs_and_time_limits():
     for _ in range(26):  # every point leaves the arena within 26 steps
         _, _, dones, infos = sb3.step(right)
         for i in np.flatnonzero(dones):
-            assert infos[i]["TimeLimit.truncated"] is False and infos[i]["terminal_observation"][0] > ARENA
+            assert infos[i]["TimeLimit.truncated"] is False
+            assert infos[i]["terminal_observation"][0] > ARENA
             terminated.add(i)
     assert terminated == {0, 1}
-    assert sb3.get_attr("render_mode") == [None, None] and sb3.env_is_wrapped(gym.Wrapper) == [False, False]
+    assert sb3.get_attr("render_mode") == [None, None]
+    assert sb3.env_is_wrapped(gym.Wrapper) == [False, False]
 
 
 def test_sb3_ppo_trains_through_the_bridge():
@@ -381,6 +417,8 @@ def test_sb3_ppo_trains_through_the_bridge():
     model.learn(total_timesteps=512)
     assert model.num_timesteps >= 512
     episodes = list(model.ep_info_buffer)
-    assert episodes and all(0 < e["l"] <= LIMIT and e["target_reached"] in (0.0, 1.0) for e in episodes)
+    assert episodes
+    assert all(0 < e["l"] <= LIMIT and e["target_reached"] in (0.0, 1.0) for e in episodes)
     actions, _ = model.predict(venv.reset(), deterministic=True)
-    assert actions.shape == (4, 2) and np.all(np.abs(actions) <= 1.0)
+    assert actions.shape == (4, 2)
+    assert np.all(np.abs(actions) <= 1.0)

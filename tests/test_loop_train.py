@@ -42,7 +42,8 @@ def test_train_cli_writes_checkpoints_logs_and_eval_that_load_back(tmp_path):
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert "done after 10,240 env steps" in proc.stdout
     # The closing summary names the paper's metrics and says what to run next.
-    assert "\n  target reached: " in proc.stdout and "episode return: " in proc.stdout
+    assert "\n  target reached: " in proc.stdout
+    assert "episode return: " in proc.stdout
     assert f"next: python eval.py --checkpoint {logdir}" in proc.stdout
 
     saved = json.loads((logdir / "config.json").read_text())
@@ -59,7 +60,8 @@ def test_train_cli_writes_checkpoints_logs_and_eval_that_load_back(tmp_path):
     assert all(np.all(np.isfinite(np.asarray(x))) for x in jax.tree.leaves(state.learner.params))
     assert float(state.learner.obs_stats.count[0]) == 2 * 5120  # normaliser statistics were saved
     ev = json.loads((logdir / "checkpoints" / "10240" / "eval.json").read_text())
-    assert ev["eval_envs"] == 32 and 0 <= ev["mean"]["episode/target_reached"] <= 1
+    assert ev["eval_envs"] == 32
+    assert 0 <= ev["mean"]["episode/target_reached"] <= 1
 
     rows = (logdir / "metrics.csv").read_text().splitlines()
     header = rows[0].split(",")
@@ -78,7 +80,8 @@ def test_train_cli_on_the_arm_writes_a_checkpoint_that_loads_back(tmp_path):
     proc = subprocess.run(cmd, cwd=ROOT, env=_subprocess_env(), capture_output=True, text=True, timeout=HANG_GUARD_S)
     assert proc.returncode == 0, proc.stderr[-3000:]
     config = config_from_json(json.loads((logdir / "config.json").read_text()))
-    assert config.env_name == "ur5e-reach" and config.env.substeps == 2
+    assert config.env_name == "ur5e-reach"
+    assert config.env.substeps == 2
     ckpt = Checkpointer(str(logdir / "checkpoints"))
     state, _ = ckpt.restore(1280, driver.programs_for(config).abstract_state)
     assert int(state.updates[0]) == 1
@@ -98,14 +101,17 @@ def test_resume_reproduces_an_unbroken_run_bit_for_bit(tmp_path):
     base = dict(num_timesteps=SHORT, eval_envs=0, log_every=5120, **QUIET)
     unbroken = driver.train(presets.make_config("point-mass-ppo", logdir=str(tmp_path / "a"), **base))
     first = driver.train(presets.make_config("point-mass-ppo", logdir=str(tmp_path / "b"), stop_after_steps=15_360, **base))
-    assert first.status == "stopped" and first.env_steps == 15_360
+    assert first.status == "stopped"
+    assert first.env_steps == 15_360
     resumed = driver.train(presets.make_config("point-mass-ppo", logdir=str(tmp_path / "b"), resume=True, **base))
-    assert resumed.status == "done" and resumed.env_steps == SHORT
+    assert resumed.status == "done"
+    assert resumed.env_steps == SHORT
     for a, b in zip(_full_state(unbroken), _full_state(resumed)):
         np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
     # A time limit shorter than one chunk: the first chunk (one log interval) runs, then the run stops in time.
     timed = driver.train(presets.make_config("point-mass-ppo", logdir=str(tmp_path / "c"), stop_after_seconds=1e-3, **base))
-    assert timed.status == "stopped" and timed.env_steps == 5120
+    assert timed.status == "stopped"
+    assert timed.env_steps == 5120
     resumed = driver.train(presets.make_config("point-mass-ppo", logdir=str(tmp_path / "c"), resume=True, **base))
     for a, b in zip(_full_state(unbroken), _full_state(resumed)):
         np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
@@ -172,7 +178,8 @@ def test_a_time_limit_judges_the_next_chunk_by_its_speed_not_the_compilation(tmp
     config = presets.make_config("point-mass-ppo", logdir=str(tmp_path / "t"), num_timesteps=25 * 5120, eval_envs=0,
                                  log_every=5120, stop_after_seconds=60.5, **QUIET)
     result = driver.train(config)
-    assert result.status == "stopped" and result.env_steps == 10 * 5120
+    assert result.status == "stopped"
+    assert result.env_steps == 10 * 5120
     with open(tmp_path / "t" / "metrics.csv") as f:
         seconds = [float(row["wall_seconds"]) for row in csv.DictReader(f)]
     assert seconds == [51.0] + [1.0] * 9
@@ -210,7 +217,8 @@ def test_checkpoint_without_envs_resumes_the_learner_with_fresh_episodes(tmp_pat
     n_env_leaves = len(jax.tree.leaves(programs.abstract_state.env_state))
     n_learner_leaves = len(jax.tree.leaves(programs.abstract_state.learner))
     assert any("learner" in name for name in stored)
-    assert n_env_leaves > 0 and not any("env_state" in name for name in stored)  # no env state on disk
+    assert n_env_leaves > 0
+    assert not any("env_state" in name for name in stored)  # no env state on disk
     saved = driver.restore_state(ckpt, 15_360, programs, first.config, with_envs=False)
     assert len(jax.tree.leaves(saved.learner)) == n_learner_leaves
     for a, b in zip(jax.tree.leaves(jax.device_get(first.state.learner)), jax.tree.leaves(jax.device_get(saved.learner))):
@@ -219,7 +227,8 @@ def test_checkpoint_without_envs_resumes_the_learner_with_fresh_episodes(tmp_pat
     np.testing.assert_array_equal(np.asarray(saved.episode_length), 0)  # ...with fresh episodes
     assert not np.allclose(np.asarray(saved.env_state.obs), np.asarray(first.state.env_state.obs))
     resumed = driver.train(presets.make_config("point-mass-ppo", logdir=logdir, resume=True, **base))
-    assert resumed.status == "done" and resumed.env_steps == SHORT
+    assert resumed.status == "done"
+    assert resumed.env_steps == SHORT
 
 
 def test_learner_only_checkpoint_of_sac_leaves_out_the_replay_buffer_and_refills_it(tmp_path):
@@ -241,7 +250,8 @@ def test_learner_only_checkpoint_of_sac_leaves_out_the_replay_buffer_and_refills
                         jax.tree.leaves(jax.device_get(getattr(saved.learner, name)))):
             np.testing.assert_array_equal(np.asarray(a), np.asarray(b))  # everything else comes back exactly
     resumed = driver.train(presets.make_config("point-mass-sac", logdir=logdir, resume=True, **base))
-    assert resumed.status == "done" and resumed.env_steps == 3_200
+    assert resumed.status == "done"
+    assert resumed.env_steps == 3_200
     assert int(resumed.state.learner.replay.rows[0]) == 100  # refilled after the resume only
     assert np.any(np.asarray(resumed.state.learner.replay.data["obs"][0, :100]) != 0)
 
@@ -295,12 +305,16 @@ def test_presets_set_their_env_options_and_the_command_line_overrides_them():
                       "ur5e-reach-ppo-plus": (0.0, 0.5), "panda-reach-ppo": (0.0, 0.5)}
     assert train_cli.parse(["ur5e-reach-ppo", "--env.w-joint-limit", "0"]).env.w_joint_limit == 0.0
     absolute = train_cli.parse(["ur5e-reach-absolute-ppo"])
-    assert absolute.env.action == "absolute" and absolute.env.observation[-1] == "prev_action"
-    assert absolute.algo.updates_per_batch == 7 and absolute.algo.policy_hidden_sizes == (256,) * 4
+    assert absolute.env.action == "absolute"
+    assert absolute.env.observation[-1] == "prev_action"
+    assert absolute.algo.updates_per_batch == 7
+    assert absolute.algo.policy_hidden_sizes == (256,) * 4
     for name in ("ur5e-reach-sac", "ur5e-reach-sac-plus", "panda-reach-sac"):  # not stated in the paper; Brax's is 1
         assert train_cli.parse([name]).algo.grad_updates_per_step == 8, name
     plus = train_cli.parse(["panda-reach-ppo-plus"]).env.observation
-    assert plus == train_cli.parse(["ur5e-reach-ppo-plus"]).env.observation and plus[1] == "joint_sin_cos" and plus[-1] == "self_dist"
+    assert plus == train_cli.parse(["ur5e-reach-ppo-plus"]).env.observation
+    assert plus[1] == "joint_sin_cos"
+    assert plus[-1] == "self_dist"
 
 
 def test_learner_cls_is_part_of_the_program_cache_key():
@@ -309,10 +323,12 @@ def test_learner_cls_is_part_of_the_program_cache_key():
     programs only (nothing is compiled); the NaN test above trains with a replaced class."""
     config = presets.make_config("point-mass-ppo", num_timesteps=SHORT, eval_envs=0, **QUIET)
     default = driver.programs_for(config)
-    assert type(default.learner) is PPO and driver.programs_for(config, PPO) is default
+    assert type(default.learner) is PPO
+    assert driver.programs_for(config, PPO) is default
     first, second = _ppo_subclass(), _ppo_subclass()
     programs = driver.programs_for(config, first)
-    assert type(programs.learner) is first and programs is not default
+    assert type(programs.learner) is first
+    assert programs is not default
     assert driver.programs_for(config, first) is programs
     assert type(driver.programs_for(config, second).learner) is second
     assert programs.learner.total_updates == total_updates(config)  # PPO's constructor arguments
@@ -420,7 +436,8 @@ def test_two_devices_match_one_device(tmp_path):
     result = json.loads(proc.stdout.split("RESULT", 1)[1])
     arms = [result.pop("arm shard_map"), result.pop("arm gspmd")]
     for arm in arms:
-        assert arm["env_shards"] == 2 and arm["losses_finite"]
+        assert arm["env_shards"] == 2
+        assert arm["losses_finite"]
     np.testing.assert_allclose(arms[0]["policy"], arms[1]["policy"], rtol=1e-3, atol=1e-5)  # the same update
     assert sorted(result) == ["point-mass-ppo gspmd", "point-mass-ppo shard_map", "point-mass-sac gspmd",
                               "point-mass-sac shard_map"]
@@ -478,4 +495,5 @@ def test_progress_gives_the_eta_of_the_remaining_steps(tmp_path, capsys):
 
 def test_progress_after_a_chunk_that_compiled_gives_no_eta(tmp_path, capsys):
     line = _progress_line(tmp_path, capsys, compiled=True)
-    assert "incl. compiling" in line and "ETA after the next chunk" in line
+    assert "incl. compiling" in line
+    assert "ETA after the next chunk" in line

@@ -1,7 +1,6 @@
 """Nothing a run, an export or a config file holds is run as code: loading an export whose arrays carry a pickled
 object refuses it without unpickling, and no module of the product calls a code-loading function on data."""
 
-import os
 import pathlib
 import re
 import shutil

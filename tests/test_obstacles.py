@@ -203,14 +203,17 @@ def test_sampled_obstacles_clear_of_start_pose_and_target(moving):
     vel = np.asarray(state.info["obstacle_vel"]).reshape(16, 3, 3)
     assert float(state.metrics["reset_fallback"].max()) == 0.0
     assert (np.abs(pos) <= cfg.obstacle_region).all()
-    assert (radii >= 0.05).all() and (radii <= 0.15).all() and np.ptp(radii) > 0.05
+    assert (radii >= 0.05).all()
+    assert (radii <= 0.15).all()
+    assert np.ptp(radii) > 0.05
     assert np.all((np.linalg.norm(vel, axis=-1) >= 0.05 - 1e-6) & (np.linalg.norm(vel, axis=-1) <= 0.2 + 1e-6))
     assert len({tuple(np.round(p, 4)) for p in pos.reshape(-1, 3)}) == 48  # every obstacle its own
     target = np.asarray(state.info["target_pos"])
     assert (np.linalg.norm(pos - target[:, None], axis=-1) > radii + cfg.target_radius).all()
     for q, p, r in zip(np.asarray(state.pipeline_state.qpos), pos, radii):
         contacts, distances, _ = obstacle_contacts(obstacles_model(env.robot, r), q, p)
-        assert not contacts and distances.min() > 0
+        assert not contacts
+        assert distances.min() > 0
 
 
 @pytest.mark.parametrize("name", ["ur5e-reach-avoid", "panda-reach-avoid"])
@@ -329,7 +332,8 @@ def test_observations_and_penalty_of_several_moving_obstacles(moving):
         np.testing.assert_allclose(parts["link_obstacle_dist"], d.min(axis=1), atol=1e-5)
     # Radii and velocities vary between episodes here, so no part is constant (what evaluation checks use).
     assert cfg.constant_observations() == {}
-    assert np.ptp(parts["obstacle_radius"]) > 0.01 and np.ptp(parts["obstacle_vel"]) > 0.01
+    assert np.ptp(parts["obstacle_radius"]) > 0.01
+    assert np.ptp(parts["obstacle_vel"]) > 0.01
     # The obstacles after one step: the closed form at 2 physics steps, a straight line from the centre here.
     motion = jax.tree.map(np.asarray, state.info["obstacle_motion"])
     free = motion["center"] + motion["velocity"] * 2 * env.physics_dt
@@ -368,8 +372,10 @@ def test_noise_is_seeded_fresh_each_step_and_only_in_the_observation(sensing):
                 parts["obstacle_pos"] - np.asarray(s.info["obstacle_pos"]))
 
     joint, obstacle = noise(state)
-    assert 0.007 < joint.std() < 0.013 and abs(joint.mean()) < 0.005
-    assert 0.013 < obstacle.std() < 0.027 and abs(obstacle.mean()) < 0.01
+    assert 0.007 < joint.std() < 0.013
+    assert abs(joint.mean()) < 0.005
+    assert 0.013 < obstacle.std() < 0.027
+    assert abs(obstacle.mean()) < 0.01
     assert not np.allclose(noise(other)[0], joint)  # another key, other noise
     # The link distances are those of the perceived (noisy) obstacle; the state keeps the true one.
     parts = split_obs(env, state.obs)
@@ -382,7 +388,8 @@ def test_noise_is_seeded_fresh_each_step_and_only_in_the_observation(sensing):
     np.testing.assert_array_equal(after.info["obstacle_pos"], state.info["obstacle_pos"])  # truth untouched
     step_joint, step_obstacle = noise(after)
     assert 0.007 < step_joint.std() < 0.013
-    assert not np.allclose(step_joint, joint) and not np.allclose(step_obstacle, obstacle)  # fresh every step
+    assert not np.allclose(step_joint, joint)
+    assert not np.allclose(step_obstacle, obstacle)  # fresh every step
 
 
 ENCODER_PARTS = ("joint_pos", "ee_pos", "target_pos", "ee_to_target", "self_dist", "obstacle_pos", "link_obstacle_dist")

@@ -173,7 +173,8 @@ def test_every_file_the_index_names_exists():
     with open(os.path.join(ROOT, "results", "index.json"), encoding="utf-8") as f:
         index = json.load(f)
     files = list(_named_files(index))
-    assert len(files) > 100 and "headline/ur5e_reach_ppo_eval.json" in files
+    assert len(files) > 100
+    assert "headline/ur5e_reach_ppo_eval.json" in files
     assert [f for f in files if not os.path.isfile(os.path.join(ROOT, "results", f))] == []
     assert set(index) - {"about"} <= set(ri.TABLES)
     for name, table in index.items():
@@ -187,7 +188,8 @@ def test_an_index_row_is_read_from_the_file_it_names():
     file that results/index.json names for the row, and the committed results/README.md holds that row."""
     ctx = rc.Context(ROOT)
     row = next(r for r in ctx.index["headline"]["rows"] if r["label"] == "UR5e reach, PPO, 1 cm target")
-    assert row["file"] == "headline/ur5e_reach_ppo_eval.json" and row["paper"] == "ur5e-reach-ppo"
+    assert row["file"] == "headline/ur5e_reach_ppo_eval.json"
+    assert row["paper"] == "ur5e-reach-ppo"
     with open(os.path.join(ROOT, "results", row["file"]), encoding="utf-8") as f:
         data = json.load(f)
     ev = data["evaluations"][0]
@@ -195,7 +197,8 @@ def test_an_index_row_is_read_from_the_file_it_names():
     train_config = ev["policy"]["train_config"]
     assert ev["env_name"] == "ur5e-reach"  # no obstacle: the collisions cell is self collisions only
     assert ev["policy"]["env_steps"] >= 0.98 * train_config["num_timesteps"]  # ran its schedule: no --stop-after-steps
-    assert data["device"].startswith("GPU (") and data["device"].endswith(")")
+    assert data["device"].startswith("GPU (")
+    assert data["device"].endswith(")")
     paper = rc.PAPER_ROWS[row["paper"]]
     seeds = {name: [unit["metrics"][name] for unit in ev["units"]] for name in ("target_reached", "self_collision")}
     expected = [

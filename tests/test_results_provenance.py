@@ -55,10 +55,12 @@ CHECKS = [(path, key) for path in FILES for key in KEYS
 
 
 def test_the_scan_finds_the_results_and_skips_what_is_not_one():
-    assert len(FILES) > 300 and "results/headline/ur5e_reach_ppo_eval.json" in FILES
+    assert len(FILES) > 300
+    assert "results/headline/ur5e_reach_ppo_eval.json" in FILES
     assert not any(p == "results/index.json" or p.endswith(("/config.json", "/job.json")) for p in FILES)
     assert not any(p.startswith("results/checkpoints/") for p in FILES)
-    assert is_results_file("results/runs/some-run/eval.json") and not is_results_file("results/runs/some-run/x.json")
+    assert is_results_file("results/runs/some-run/eval.json")
+    assert not is_results_file("results/runs/some-run/x.json")
 
 
 @pytest.mark.parametrize("path,key", CHECKS, ids=[f"{p}:{k}" for p, k in CHECKS])

@@ -170,12 +170,14 @@ def test_resume_takes_the_untyped_options_from_the_stored_run(tmp_path, no_compi
     assert merge_resume_config(resumed, stored, done_steps=20480) == resumed
     # A typed option is kept, so that the driver refuses it when it differs from the stored run ...
     typed = train_cli.parse(["point-mass-ppo", "--logdir", str(tmp_path), "--resume", "--algo.learning-rate", "0.003"])
-    assert typed.algo.learning_rate == 0.003 and typed.env.goal_radius == 0.07
+    assert typed.algo.learning_rate == 0.003
+    assert typed.env.goal_radius == 0.07
     with pytest.raises(ValueError, match=r"algo.learning_rate=0.003 differs from the checkpoint's 0.01"):
         merge_resume_config(typed, stored, done_steps=20480)
     # ... except num_timesteps, which a resume may raise.
     longer = train_cli.parse(["point-mass-ppo", "--logdir", str(tmp_path), "--resume", "--num-timesteps", "61440"])
-    assert longer.num_timesteps == 61440 and longer.algo.learning_rate == 1e-2
+    assert longer.num_timesteps == 61440
+    assert longer.algo.learning_rate == 1e-2
     # Another preset's run is refused, before anything compiles.
     with pytest.raises(ValueError, match=r"preset='point-mass-sac' differs from the resumed run's 'point-mass-ppo': "
                                          r"allowed on --resume is the run's own preset"):
@@ -248,7 +250,8 @@ def test_resume_falls_back_to_the_newest_intact_checkpoint(earlier_run, tmp_path
     _damage(logdir / "checkpoints" / "20480", how)
     with pytest.warns(UserWarning, match=rf"checkpoint .*checkpoints/{SHORT} is damaged .* moved to .*corrupt_checkpoints"):
         result = driver.train(_config(logdir, resume=True, checkpoint_every=2 * 5120, log_every=5120))
-    assert result.status == "done" and result.env_steps == SHORT
+    assert result.status == "done"
+    assert result.env_steps == SHORT
     assert sorted(os.listdir(logdir / "corrupt_checkpoints")) == ["20480", str(SHORT)]
     assert Checkpointer(str(logdir / "checkpoints")).manager.all_steps() == [10240, 20480, SHORT]  # saved again
 
@@ -285,7 +288,8 @@ def test_a_checkpoint_whose_env_states_another_env_wrote_resumes_its_learner(ear
     with pytest.warns(UserWarning, match=rf"checkpoint .*checkpoints/{SHORT}: its env states do not fit this env's"):
         result = driver.train(presets.make_config("point-mass-ppo", num_timesteps=SHORT + 10240, logdir=str(logdir),
                                                   resume=True, log_every=5120, **QUIET))
-    assert result.status == "done" and result.env_steps == SHORT + 10240
+    assert result.status == "done"
+    assert result.env_steps == SHORT + 10240
     assert not (logdir / "corrupt_checkpoints").exists()
     assert len((logdir / "metrics.csv").read_text().splitlines()) == rows_before + 2  # 2 rows after SHORT
 
@@ -299,7 +303,9 @@ def test_resume_with_no_intact_checkpoint_names_them(earlier_run, tmp_path, caps
                           "--no-progress", "--no-tensorboard"])
     err = capsys.readouterr().err
     assert code == 2 and err.count("\n") == 1 and err.startswith("error: "), err
-    assert "holds no intact checkpoint" in err and f"checkpoints/{SHORT}: " in err and "checkpoints/10240: " in err
+    assert "holds no intact checkpoint" in err
+    assert f"checkpoints/{SHORT}: " in err
+    assert "checkpoints/10240: " in err
 
 
 # ------------------------------------------------------------------------------------------------
@@ -370,4 +376,5 @@ def test_run_files_are_replaced_whole(tmp_path):
     with open(path) as reader:
         write_atomic(str(path), "new")
         assert reader.read() == "old " * 1000  # written in place, this handle would see the truncated new text
-    assert path.read_text() == "new" and os.listdir(tmp_path) == ["eval.json"]
+    assert path.read_text() == "new"
+    assert os.listdir(tmp_path) == ["eval.json"]

@@ -89,9 +89,11 @@ def test_fast_sac_saves_without_its_buffer_and_resumes(tmp_path):
     config = presets.make_config("point-mass-sac-fast", stop_after_steps=3_200, **base)
     assert config.checkpoint_envs is False
     first = driver.train(config)
-    assert first.status == "stopped" and first.env_steps == 3_200
+    assert first.status == "stopped"
+    assert first.env_steps == 3_200
     resumed = driver.train(presets.make_config("point-mass-sac-fast", resume=True, **base))
-    assert resumed.status == "done" and resumed.env_steps == 6_400
+    assert resumed.status == "done"
+    assert resumed.env_steps == 6_400
     # The resumed learner continued from the saved one (same temperature trajectory start), and the
     # buffer was refilled: the last chunk trained (losses non-zero).
     assert np.all(np.asarray(resumed.last_metrics["loss/critic"]) != 0)
@@ -124,7 +126,8 @@ def test_bfloat16_networks_compute_in_bf16_and_keep_float32_parameters_and_outpu
     for net32, net16, params, args in ((f32.q_net, bf16.q_net, q_params, (obs, act)),
                                        (f32.policy_net, bf16.policy_net, f32.policy_net.init(jax.random.PRNGKey(3), obs), (obs,))):
         a, b = net32.apply(params, *args), net16.apply(params, *args)
-        assert a.dtype == b.dtype == jnp.float32 and a.shape == b.shape
+        assert a.dtype == b.dtype == jnp.float32
+        assert a.shape == b.shape
         scale = float(jnp.abs(a).max())
         assert float(jnp.abs(a - b).max()) < 0.03 * scale
         assert float(jnp.abs(a - b).max()) > 1e-4 * scale

@@ -40,16 +40,20 @@ def _first_seed(policy: evaluation.Policy) -> evaluation.Policy:
 
 def test_shipped_ur5e_reach_checkpoint_far_above_the_baselines():
     policy = evaluation.checkpoint_policy(UR5E_REACH)
-    assert policy.export.env_name == "ur5e-reach" and policy.export.env_steps == 150_077_440
+    assert policy.export.env_name == "ur5e-reach"
+    assert policy.export.env_steps == 150_077_440
     assert policy.units == [0, 1, 2, 3, 4]
     config = policy.train_env_config
     assert (config.workspace, config.init_range, config.target_radius, config.substeps) == ("full", "full", 0.01, 20)
-    assert (config.action, config.action_scale) == ("relative", 0.3) and policy.export.config.algo.discount == 0.99
+    assert (config.action, config.action_scale) == ("relative", 0.3)
+    assert policy.export.config.algo.discount == 0.99
     assert (config.w_joint_limit, config.joint_limit_margin) == (0.05, 0.5)
 
     result = evaluation.run(_first_seed(policy), "ur5e-reach", config, num_envs=16).summary()
     baselines = _baseline_reached("ur5e", 0.01)
-    assert baselines["random"] < 0.001 and baselines["standstill"] == 0.0 and 0.3 < baselines["pseudo_ik"] < 0.5
+    assert baselines["random"] < 0.001
+    assert baselines["standstill"] == 0.0
+    assert 0.3 < baselines["pseudo_ik"] < 0.5
     # GPU, this seed: 0.962 reached, 0.025 self collision, 0.018 m over 4,096 episodes.
     assert result["target_reached"]["mean"] >= 0.5 > baselines["pseudo_ik"] + 0.05
     assert result["distance"]["mean"] < 0.25
@@ -75,7 +79,8 @@ def test_shipped_moving_obstacle_policy_reaches_between_moving_obstacles(robot):
     result = evaluation.run(policy, env_name, config, num_envs=16).summary()
     still = evaluation.run(evaluation.baseline_policy("standstill"), env_name, config, num_envs=16).summary()
     assert still["target_reached"]["mean"] == 0.0
-    assert result["target_reached"]["mean"] >= least and result["distance"]["mean"] < still["distance"]["mean"] - 0.2
+    assert result["target_reached"]["mean"] >= least
+    assert result["distance"]["mean"] < still["distance"]["mean"] - 0.2
 
 
 SHIPPED = sorted(os.listdir(os.path.join(ROOT, "results", "checkpoints")))
@@ -110,10 +115,12 @@ def _check_best_of_run(policy, run: str) -> None:
     for path, seeds in _run_parts(run).items():
         with open(path) as f:
             evaluated = json.load(f)
-        assert evaluated["env_steps"] == policy.export.env_steps and evaluated["eval_envs"] == 4096
+        assert evaluated["env_steps"] == policy.export.env_steps
+        assert evaluated["eval_envs"] == 4096
         seed = ship_checkpoint.best_seed(path, policy.export.env_steps, seeds)
         best[seed] = evaluated["per_seed"]["episode/target_reached"][seeds.index(seed)]
-    assert policy.units == [max(best, key=best.get)] and len(best) > 1
+    assert policy.units == [max(best, key=best.get)]
+    assert len(best) > 1
 
 
 # Exports trained before their preset existed, with the options that the preset now sets (the test below checks
@@ -129,7 +136,8 @@ def test_shipped_checkpoint_loads_and_is_the_evaluated_run(name):
     # each export is named after the preset it was trained with
     assert TRAINED_AS.get(name, name) == policy.export.config.preset
     preset = presets.PRESETS[name]
-    assert policy.train_env_name == preset.env_name and policy.export.config.algo == preset.algo
+    assert policy.train_env_name == preset.env_name
+    assert policy.export.config.algo == preset.algo
     assert all(getattr(policy.train_env_config, k) == v for k, v in preset.env.items())
     env = envs.from_config(policy.train_env_name, policy.train_env_config)
     evaluation.check_compatible(policy, policy.train_env_name, env)
@@ -140,7 +148,8 @@ def test_shipped_checkpoint_loads_and_is_the_evaluated_run(name):
     with open(eval_json) as f:
         evaluated = json.load(f)["evaluations"][0]
     assert evaluated["policy"]["env_steps"] == policy.export.env_steps
-    assert evaluated["num_envs"] == 4096 and evaluated["env_config"]["substeps"] == 20
+    assert evaluated["num_envs"] == 4096
+    assert evaluated["env_config"]["substeps"] == 20
     if len(policy.units) == 1:
         assert policy.units == [ship_checkpoint.best_seed(eval_json, policy.export.env_steps)]
 

@@ -49,14 +49,17 @@ def test_summary_of_a_known_trace(tmp_path):
     summary = ts.summarize(events, names, ts.DEFAULT_SCOPES, top=10, hlo_names=hlo_names)
     assert list(summary) == ["/device:GPU:0"]
     d = summary["/device:GPU:0"]
-    assert d["span_us"] == 52.0 and d["busy_us"] == 27.0 and d["kernels"] == 5
+    assert d["span_us"] == 52.0
+    assert d["busy_us"] == 27.0
+    assert d["kernels"] == 5
     assert d["scopes"] == {"env_step": {"us": 24.0, "kernels": 3}, "sgd_step": {"us": 6.0, "kernels": 1},
                            "other": {"us": 2.0, "kernels": 1}}
     assert d["top_kernels"][0] == {"name": "loop_add_fusion", "us": 20.0, "count": 2}
     host = ts.host_summary(events, names)
     assert host == [{"name": "cuGraphLaunch", "us": 30.0, "count": 10}]  # python frames and one-offs left out
     text = ts.format_summary(summary, host)
-    assert "kernels busy 0.0 ms (52%)" in text and "| env_step | 0.0 | 3 |" in text
+    assert "kernels busy 0.0 ms (52%)" in text
+    assert "| env_step | 0.0 | 3 |" in text
 
 
 def test_the_json_names_what_made_it(tmp_path, monkeypatch):
