@@ -24,13 +24,12 @@ import mujoco
 import numpy as np
 from mujoco import rollout
 
+from envs.robots import Panda, UR5e
+
 HERE = pathlib.Path(__file__).resolve().parent
 
-# Official joint velocity limits (rad/s): UR5e user manual, 180 deg/s on every joint; Franka docs table.
-VMAX = {
-    "ur5e": np.full(6, np.pi),
-    "panda": np.array([2.175, 2.175, 2.175, 2.175, 2.61, 2.61, 2.61]),
-}
+# Official joint velocity limits (rad/s), from the robot classes (their one home).
+VMAX = {robot.name: np.array(robot.VELOCITY_LIMITS) for robot in (UR5e, Panda)}
 # Candidate pairs in contact in the samples that we still leave out, with the reason.
 EXCLUDED = {
     "panda": {

@@ -10,11 +10,13 @@ class Panda(Robot):
 
     name = "panda"
     xml_file = "panda.xml"
+    VELOCITY_LIMITS = (2.175,) * 4 + (2.61,) * 3
+    """Official joint velocity limits (rad/s): Franka documentation, control parameters of the Panda (assets/derive.py
+    reads them without building the robot)."""
 
     @property
     def velocity_limits(self) -> np.ndarray:
-        # Franka documentation, control parameters of the Panda.
-        return np.array([2.175] * 4 + [2.61] * 3, np.float32)
+        return np.array(self.VELOCITY_LIMITS, np.float32)
 
     @property
     def reach(self) -> float:

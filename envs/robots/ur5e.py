@@ -10,11 +10,13 @@ class UR5e(Robot):
 
     name = "ur5e"
     xml_file = "ur5e.xml"
+    VELOCITY_LIMITS = (np.pi,) * 6
+    """Official joint velocity limits (rad/s): UR5e user manual, 180 deg/s on every joint (assets/derive.py reads
+    them without building the robot)."""
 
     @property
     def velocity_limits(self) -> np.ndarray:
-        # UR5e user manual: 180 deg/s on every joint.
-        return np.full(6, np.pi, np.float32)
+        return np.array(self.VELOCITY_LIMITS, np.float32)
 
     @property
     def reach(self) -> float:
