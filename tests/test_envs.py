@@ -437,7 +437,7 @@ def test_nan_physics_ends_episode_and_never_reaches_obs(compiled):
 
 
 def test_nan_action_ends_episode_with_the_last_finite_distance(compiled):
-    """Issue 27: the NaN step's distance metrics were NaN, so every average over episodes was NaN."""
+    """Before the fix, the NaN step's distance metrics were NaN, so every average over episodes was NaN."""
     c = compiled("ur5e-reach")
     state = c.start(seed=18)
     actions = standstill(c.env).at[0].set(jnp.nan)
@@ -452,7 +452,7 @@ def test_nan_action_ends_episode_with_the_last_finite_distance(compiled):
 
 @pytest.mark.parametrize("name", ["ur5e-reach", "point-mass"])
 def test_wrong_action_shapes_are_refused_at_trace_time(name):
-    """Issue 27: (n,) or (n, 1) actions for n envs, and () or (1,) for one, were broadcast over every joint."""
+    """Before the fix, (n,) or (n, 1) actions for n envs, and () or (1,) for one, were broadcast over every joint."""
     env = envs.make(name, **({} if name == "point-mass" else {"substeps": 2}))
     a = env.action_size
     one = jax.eval_shape(env.reset, jax.random.PRNGKey(0))

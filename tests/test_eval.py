@@ -570,7 +570,7 @@ BAD = [
      None),
     (lambda d, t: ["--checkpoint", str(d["arm"]), "--env", "ur5e-reach-avoid", "--env.observation", "joint_pos",
                    "ee_pos", "target_pos", "ee_to_target", "obstacle_pos"], r"shape \(15,\) .* gives shape \(18,\)"),
-    # issue 27: the trained parts reordered, or another action mode, ran without a word
+    # formerly the trained parts reordered, or another action mode, ran without a word
     (lambda d, t: ["--checkpoint", str(d["arm"]), "--env.observation", "ee_pos", "joint_pos", "target_pos", "ee_to_target"],
      r"cannot run with observation=\('ee_pos', 'joint_pos', 'target_pos', 'ee_to_target'\) \(trained: \('joint_pos', "
      r"'ee_pos', 'target_pos', 'ee_to_target'\)\): .*\(or --allow-env-mismatch"),
@@ -626,7 +626,7 @@ def test_mismatch_allowed_with_a_warning_naming_both(arm_export, no_compile):
 
 
 def test_damaged_export_is_rebuilt_from_the_full_checkpoint(point_run, tmp_path, capsys):
-    """Issue 27: a damaged policy export with its full checkpoint beside it is written anew."""
+    """A damaged policy export with its full checkpoint beside it is written anew."""
     run = _corrupt(point_run, tmp_path, "npz")
     policy = evaluation.checkpoint_policy(str(run))
     err = capsys.readouterr().err

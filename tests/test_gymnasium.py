@@ -291,7 +291,7 @@ def test_gymnasium_env_checker_passes_on_the_single_env():
 
 
 def test_gymnasium_env_checker_passes_on_the_native_arm_env():
-    """Issue 28: the UR5e reach-avoid env on the native MuJoCo backend through Gymnasium's checker, and a few
+    """The UR5e reach-avoid env on the native MuJoCo backend through Gymnasium's checker, and a few
     steps that move the arm (the physics really runs in C)."""
     env = eg.make("ur5e-reach-avoid", backend="mujoco", episode_length=5, sampling_candidates=4)
     assert env.vector_env.env.backend == "mujoco"
@@ -351,7 +351,7 @@ def test_ur5e_reach_avoid_through_the_bridge():
             assert terminations[i] == (failed > 0)
         ended |= done
     assert ended.all()
-    # A NaN action ends the episodes with finite metrics (issue 27: averages over episodes were NaN).
+    # A NaN action ends the episodes with finite metrics (else averages over episodes would be NaN).
     obs, rewards, terminations, _, infos = vec.step(np.full((2, nq), np.nan, np.float32))
     assert terminations.all()
     assert (infos["final_info"]["physics_nan"] == 1).all()

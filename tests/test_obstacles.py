@@ -1,4 +1,4 @@
-"""The reach-avoid options beyond the paper (issue 29): several obstacles, random radii, moving
+"""The reach-avoid options beyond the paper: several obstacles, random radii, moving
 obstacles, observation noise and action latency. Collisions against CPU MuJoCo with the obstacle
 spheres as geoms; trajectories against hand-computed positions and their bounds; bad values.
 

@@ -1,5 +1,5 @@
 """What train.py does with a logdir, a damaged checkpoint, a non-finite learner metric and Ctrl-C
-(issue 27: a reused logdir lost runs, a damaged checkpoint bricked --resume, NaN metrics were kept).
+(defects these guard against: a reused logdir lost runs, a damaged checkpoint bricked --resume, NaN metrics were kept).
 
 Every run is the PPO point-mass probe with the same length, so the tests share one compiled program.
 """

@@ -50,7 +50,7 @@ def test_numpy_scalars_count_as_numbers():
                                                                r"allowed is a non-empty tuple"),
 ])
 def test_arm_options_are_bounded_by_the_robot(name, options, message):
-    """Issue 27: absurd finite values trained without an error (every episode ending at step 1)."""
+    """Absurd finite values used to train without an error (every episode ending at step 1)."""
     with pytest.raises(ValueError, match=message):
         envs.make_config(name, **options)
     with pytest.raises(ValueError, match=message):  # the env itself checks too
