@@ -142,7 +142,7 @@ def _train(config: TrainConfig, learner_cls: type | None = None) -> TrainResult:
             fallback = getattr(state.env_state, "metrics", {}).get("reset_fallback")
             if fallback is not None:  # options whose samplers cannot succeed: refused before any training
                 validation.resets_succeed(config.env_name, config.env, envs.default_config(config.env_name),
-                                          np.asarray(jax.device_get(fallback)))
+                                          jax.device_get(fallback))
         write_atomic(os.path.join(logdir, "config.json"), json.dumps(config_json(config), indent=2))
         sinks = [WandbLogger(config)] if config.logger == "wandb" else []
     except BaseException:

@@ -66,6 +66,12 @@ def pooled(results: list) -> dict | None:
     return summarize({n: np.concatenate([r.per_env[n] for r in results]) for n in sorted(names)})
 
 
+def sample_std(stats: dict) -> float:
+    """The sample std over units (ddof 1) of a summary entry, whose `std_units` is the population std."""
+    n = stats["units"]
+    return stats["std_units"] * math.sqrt(n / (n - 1))
+
+
 def fmt(stats: dict | None, digits: int, spread: str = "std_units", ci: bool = False) -> str:
     """"mean ± std" (over units the sample std, ddof 1, from the summary's population `std_units`; omitted with a
     single unit; or `spread="std_episodes"`), or "-" if missing; with `ci` the mean's 95 % confidence interval over
@@ -76,8 +82,7 @@ def fmt(stats: dict | None, digits: int, spread: str = "std_units", ci: bool = F
     if spread == "std_episodes":
         text += f" ± {stats[spread]:.{digits}f}"
     elif stats["units"] > 1:
-        n = stats["units"]
-        text += f" ± {stats[spread] * math.sqrt(n / (n - 1)):.{digits}f}"
+        text += f" ± {sample_std(stats):.{digits}f}"
     interval = stats.get("ci95_units") if ci else None
     if interval:
         text += f" [{interval[0]:.{digits}f}, {interval[1]:.{digits}f}]"

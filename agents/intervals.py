@@ -4,6 +4,7 @@ standard for comparisons over few seeds, reported beside the sample std."""
 
 from __future__ import annotations
 
+import contextlib
 import warnings
 
 import numpy as np
@@ -17,6 +18,20 @@ SEED = 0
 """Seed of the resampling, so that the same values always give the same interval (tables are regenerated)."""
 
 
+@contextlib.contextmanager
+def seeded_numpy(seed: int):
+    """NumPy's global generator seeded inside, restored after: rliable's bootstrap (arch) draws from it whatever
+    random_state it is given, so this makes its intervals repeatable without touching the caller's draws."""
+    saved = np.random.get_state()
+    np.random.seed(seed)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", FutureWarning)  # arch: random_state is deprecated
+            yield
+    finally:
+        np.random.set_state(saved)
+
+
 def mean_ci(values, confidence: float = CONFIDENCE, reps: int = REPS, seed: int = SEED) -> list[float] | None:
     """[low, high]: the percentile bootstrap interval of the mean of `values` (one per seed) by rliable's
     `get_interval_estimates`; None for fewer than 2 finite values (no interval over one seed)."""
@@ -24,16 +39,8 @@ def mean_ci(values, confidence: float = CONFIDENCE, reps: int = REPS, seed: int 
     values = values[np.isfinite(values)]
     if values.size < 2:
         return None
-    # rliable's bootstrap (arch) draws from NumPy's global generator whatever random_state it is given: seed it
-    # for this call and put it back as it was.
-    saved = np.random.get_state()
-    np.random.seed(seed)
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", FutureWarning)  # arch: random_state is deprecated
-            _, intervals = rly.get_interval_estimates({"runs": values.reshape(-1, 1)}, lambda s: np.array([np.mean(s)]),
-                                                      reps=reps, confidence_interval_size=confidence)
-    finally:
-        np.random.set_state(saved)
+    with seeded_numpy(seed):
+        _, intervals = rly.get_interval_estimates({"runs": values.reshape(-1, 1)}, lambda s: np.array([np.mean(s)]),
+                                                  reps=reps, confidence_interval_size=confidence)
     low, high = intervals["runs"][:, 0]
     return [float(low), float(high)]

@@ -6,6 +6,8 @@ from __future__ import annotations
 import math
 import numbers
 
+import numpy as np
+
 INT32_MAX = 2**31 - 1
 """The largest integer JAX holds: it computes in int32 and float32 (64-bit types are off)."""
 FLOAT32_MAX = 3.4028234663852886e38
@@ -86,19 +88,13 @@ def resets_succeed(env_name: str, config, default, fallback) -> None:
     """ValueError naming the options that differ from the env's `default` config when more than
     `RESET_FALLBACK_LIMIT` of the resets' `fallback` values (their reset_fallback metric) found no valid start,
     target or obstacle: options that leave the rejection samplers almost no room."""
-    values = [float(v) for v in _flat(fallback)]
-    rate = sum(values) / max(len(values), 1)
+    values = np.asarray(fallback, np.float64).ravel()
+    rate = float(values.mean()) if values.size else 0.0
     if rate <= RESET_FALLBACK_LIMIT:
         return
     changed = [f"{name}={getattr(config, name)!r}" for name in vars(config)
                if hasattr(default, name) and getattr(config, name) != getattr(default, name)]
-    raise ValueError(f"env {env_name!r} with {', '.join(changed) or 'its defaults'}: {rate:.0%} of {len(values)} resets "
+    raise ValueError(f"env {env_name!r} with {', '.join(changed) or 'its defaults'}: {rate:.0%} of {values.size} resets "
                      "found no valid start, target or obstacle (reset_fallback): allowed are options whose resets "
                      "succeed (e.g. a smaller obstacle_radius, fewer obstacles or a larger workspace).")
 
-
-def _flat(values):
-    """The numbers of a nested list or array (NumPy or JAX, after device_get)."""
-    if hasattr(values, "ravel"):
-        return list(values.ravel())
-    return [values]

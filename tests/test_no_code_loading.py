@@ -1,4 +1,4 @@
-"""Nothing a run, an export or a config file holds is run as code: loading an export whose arrays carry a pickled
+"""Nothing a run, an export or a config file holds is run as code: loading an export whose arrays hold a pickled
 object refuses it without unpickling, and no module of the product calls a code-loading function on data."""
 
 import pathlib

@@ -23,7 +23,6 @@ their files) and comparison.md (the tables) into --out.
 from __future__ import annotations
 
 import argparse
-import contextlib
 import datetime
 import glob
 import json
@@ -33,6 +32,8 @@ import re
 import warnings
 
 import numpy as np
+from rliable import library as rly
+from rliable import metrics, plot_utils
 
 from agents import intervals
 from agents.provenance import code_version, command
@@ -154,27 +155,12 @@ def score_matrices(scores: dict, truncate: bool = False) -> tuple[dict, list[str
 # rliable's estimates
 
 
-@contextlib.contextmanager
-def seeded_numpy(seed: int):
-    """NumPy's global generator seeded inside, restored after: rliable's bootstrap (arch) draws from it whatever
-    random_state it is given (the pattern of agents/intervals.py)."""
-    saved = np.random.get_state()
-    np.random.seed(seed)
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", FutureWarning)  # arch: random_state is deprecated
-            yield
-    finally:
-        np.random.set_state(saved)
-
-
 def bootstrap(key: str, scores, func, reps: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
     """(point estimate, [low, high] per value) of `func` on one algorithm's matrix (or a pair's list of two) by
     rliable's stratified bootstrap, seeded for this key alone: an algorithm's interval does not depend on which
     others are compared."""
-    from rliable import library as rly
 
-    with seeded_numpy(seed):
+    with intervals.seeded_numpy(seed):
         points, cis = rly.get_interval_estimates({key: scores}, func, reps=reps,
                                                  confidence_interval_size=intervals.CONFIDENCE)
     return np.atleast_1d(np.asarray(points[key], np.float64)), np.asarray(cis[key], np.float64).reshape(2, -1)
@@ -183,7 +169,6 @@ def bootstrap(key: str, scores, func, reps: int, seed: int) -> tuple[np.ndarray,
 def aggregate_estimates(matrices: dict, reps: int, seed: int, gamma: float = 1.0) -> dict:
     """{algorithm: {aggregate: {"estimate", "ci"}}}: rliable's median, IQM, mean and optimality gap over seeds x
     tasks with their confidence intervals."""
-    from rliable import metrics
 
     def func(s):
         return np.array([metrics.aggregate_median(s), metrics.aggregate_iqm(s), metrics.aggregate_mean(s),
@@ -200,7 +185,6 @@ def aggregate_estimates(matrices: dict, reps: int, seed: int, gamma: float = 1.0
 def improvement_estimates(matrices: dict, reps: int, seed: int) -> list[dict]:
     """[{"x", "y", "estimate", "ci"}] for each pair of algorithms (X listed before Y): P(X > Y), the probability that
     X's seed beats Y's on a task (ties count half), averaged over tasks, with its confidence interval."""
-    from rliable import metrics
 
     algos = list(matrices)
     result = []
@@ -218,7 +202,6 @@ def improvement_estimates(matrices: dict, reps: int, seed: int) -> list[dict]:
 
 def plot_aggregate(aggregate: dict, metric: str, path: str) -> str:
     """aggregate.png: rliable's interval-estimates figure, a panel per aggregate, a bar per algorithm."""
-    from rliable import plot_utils
 
     plt = plots.pyplot()
     points = {a: np.array([v[n]["estimate"] for n in AGGREGATES]) for a, v in aggregate.items()}
@@ -235,7 +218,6 @@ def plot_aggregate(aggregate: dict, metric: str, path: str) -> str:
 
 def plot_improvement(improvement: list[dict], metric: str, path: str) -> str:
     """improvement.png: rliable's probability-of-improvement figure, a bar per pair (X left, Y right)."""
-    from rliable import plot_utils
 
     plt = plots.pyplot()
     probs = {p["x"] + PAIR_SEPARATOR + p["y"]: p["estimate"] for p in improvement}

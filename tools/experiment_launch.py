@@ -392,8 +392,10 @@ def launch(selection, config: LaunchConfig, runs_dir: str, out: str, max_seeds: 
     slots = gpu_slots(config.gpus_per_part) if config.executor == "local" else []
     jobs, running = [], {}
 
+    folders = {item: part_folder(*item, runs_dir, out) for item in items}
+
     def submit(key, part, slot=None):
-        logdir = part_folder(key, part, runs_dir, out)
+        logdir = folders[key, part]
         note_job(logdir, executor=config.executor, submitted=now(), status="submitted", error=None)
         job = executor.submit(PartJob(key, part, runs_dir, out, compilation_cache))
         note_job(logdir, job_id=job.job_id, log=str(job.paths.stderr))
@@ -402,7 +404,7 @@ def launch(selection, config: LaunchConfig, runs_dir: str, out: str, max_seeds: 
         return job
 
     for key, part in items:
-        note_job(part_folder(key, part, runs_dir, out), attempts=0)
+        note_job(folders[key, part], attempts=0)
         if config.executor == "local":
             while len(running) >= len(slots):  # wait for a free GPU
                 for i, job in list(running.items()):
@@ -423,7 +425,7 @@ def launch(selection, config: LaunchConfig, runs_dir: str, out: str, max_seeds: 
             if not job_ended(job, config.executor):
                 time.sleep(2)
                 continue
-            if _after_job(job, key, part, part_folder(key, part, runs_dir, out), config, resubmits, log):
+            if _after_job(job, key, part, folders[key, part], config, resubmits, log):
                 entry[0], entry[3] = submit(key, part), resubmits + 1
                 jobs.append(entry[0])
             else:

@@ -13,7 +13,6 @@ ours with the row's preset: the mean over trained seeds with its 95 % bootstrap 
 from __future__ import annotations
 
 import argparse
-import glob
 import os
 
 import numpy as np
@@ -22,7 +21,7 @@ import envs
 from agents import evaluation, intervals
 from tools import plots, run_cli
 from tools.results_cells import Context, runs
-from tools.results_index import PAPER_ROWS, finished_experiment_row
+from tools.results_index import PAPER_ROWS, finished_experiment_row, paper_settings_seeds
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SHOWN = ("ur5e-reach-avoid-ppo", "panda-reach-avoid-ppo", "ur5e-reach-avoid-ppo-moving3")
@@ -87,11 +86,9 @@ def headline_rows(ctx: Context) -> list[dict]:
     from_experiments = {r["file"]: (r["experiment"], r["run"]) for r in readme["from_experiments"]}
     rows = []
     for run in runs(ctx, "headline")[:HEADLINE_ROWS]:
-        settings = []
-        if run.file in readme["paper_settings"]:
-            pattern = os.path.join(ctx.results, readme["paper_settings"][run.file], "seed*", "eval.json")
-            settings = [ctx.json(os.path.relpath(f, ctx.results))["mean"]["episode/target_reached"]
-                        for f in sorted(glob.glob(pattern))]
+        settings = [seed["episode/target_reached"] for seed in
+                    paper_settings_seeds(ctx, readme["paper_settings"][run.file])] \
+            if run.file in readme["paper_settings"] else []
         experiment = finished_experiment_row(ctx, *from_experiments[run.file]) if run.file in from_experiments else None
         preset = (experiment["per_seed"]["target_reached"] if experiment else
                   ctx.evaluation(run.file)["summary"]["target_reached"]["unit_values"])

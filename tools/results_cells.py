@@ -7,12 +7,12 @@ from __future__ import annotations
 import dataclasses
 import functools
 import json
-import math
 import os
 import statistics
 from typing import Callable
 
 from agents import intervals
+from agents.eval_stats import sample_std
 from tools.experiment_spec import paper_row, paper_table
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -74,12 +74,6 @@ class Context:
     def link(self, file: str) -> str:
         path = os.path.relpath(os.path.join(self.results, file), self.md_dir).replace(os.sep, "/")
         return f"[{os.path.basename(file)}]({path})"
-
-
-def sample_std(stats: dict) -> float:
-    """The sample std over seeds (ddof 1) of an eval.py summary, whose `std_units` is the population std."""
-    n = stats["units"]
-    return stats["std_units"] * math.sqrt(n / (n - 1))
 
 
 @functools.lru_cache(maxsize=None)

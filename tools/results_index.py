@@ -67,11 +67,18 @@ def _seed_rate(values: list[float]) -> str:
     return seed_stats(values, 1, 100.0, " %")
 
 
-def _paper_settings_cell(ctx: Context, runs_dir: str, paper_key: str) -> str:
-    """The paper-settings column: mean ± sample std over the per-seed train.py eval.json files under
-    `runs_dir`/seed*/ (the `*-paper` presets), collisions as the paper's row counts them."""
+def paper_settings_seeds(ctx: Context, runs_dir: str) -> list[dict]:
+    """Each seed's evaluation means ({"episode/<metric>": value}) of the per-seed train.py eval.json files under
+    `runs_dir`/seed*/ (the `*-paper` presets), in seed-folder order."""
     files = sorted(glob.glob(os.path.join(ctx.results, runs_dir, "seed*", "eval.json")))
-    seeds = [ctx.json(os.path.relpath(f, ctx.results))["mean"] for f in files]
+    return [ctx.json(os.path.relpath(f, ctx.results))["mean"] for f in files]
+
+
+def _paper_settings_cell(ctx: Context, runs_dir: str, paper_key: str) -> str:
+    """The paper-settings column: mean ± sample std over `paper_settings_seeds`, collisions as the paper's row
+    counts them."""
+    files = sorted(glob.glob(os.path.join(ctx.results, runs_dir, "seed*", "eval.json")))
+    seeds = paper_settings_seeds(ctx, runs_dir)
     get = lambda key: [s[f"episode/{key}"] for s in seeds]
     cell = f"{_seed_rate(get('target_reached'))} / {_seed_rate(get('self_collision'))} self"
     if "obstacle_collision" in PAPER_ROWS[paper_key]:
