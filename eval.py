@@ -5,6 +5,7 @@
     python eval.py --checkpoint runs/X/checkpoints/2048000 runs/Y --csv out.csv  # a step, several runs
     python eval.py --checkpoint runs/R --env ur5e-reach-avoid --env.obstacle-radius 0.3  # reach agent, obstacle
     python eval.py --env panda-reach --policy pseudo_ik --num-envs 8 --video ik.mp4
+    python eval.py --env ur5e-reach-avoid --policy mppi --planner.samples 64 --planner.horizon 16 --num-envs 512
     python eval.py --checkpoint runs/X --help                                     # also lists every --env.* option
 
 What runs: `--num-envs` environments per evaluation seed (`--seeds` seeds from `--seed`, by default
@@ -46,6 +47,10 @@ control's (results: baselines study). The distance column is each episode's own 
 evaluator, Brax's: an episode that ended in a collision counts as 0 m; `distance_reached` and
 `steps_in_target_reached` are the precision of the episodes that reached the target only.
 
+Planner (`agents.planner`): `--policy mppi` plans every step with the env itself as its model (MPPI:
+`--planner.samples` sequences of `--planner.horizon` steps, weighted by return), a reference with a compute cost
+(samples x horizon x iterations simulated env steps per env step, in the JSON as `model_steps_per_step`).
+
 Video: `--video PATH` (.mp4 or .gif) renders the first `--video-envs` envs' first episodes (a grid)
 with MuJoCo's offscreen renderer (`envs.render`; headless: EGL or OSMesa, chosen
 automatically, or set MUJOCO_GL). Needs the `viz` extra (imageio, imageio-ffmpeg).
@@ -68,7 +73,7 @@ from typing import Annotated, Generic, TypeVar
 import tyro
 
 import envs
-from agents import baselines, evaluation, provenance
+from agents import baselines, evaluation, planner as planners, provenance
 from agents import logdir as logdirs
 from tools import run_cli
 
@@ -92,7 +97,9 @@ class EvalConfig(Generic[EnvConfigT]):
     """What to evaluate (or --policy): train.py logdirs (their newest checkpoint), checkpoint step
     directories or policy export directories, evaluated one after the other."""
     policy: Annotated[str | None, tyro.conf.arg(metavar="NAME")] = None
-    """What to evaluate (or --checkpoint): a baseline, one of random, standstill, pseudo_ik."""
+    """What to evaluate (or --checkpoint): a baseline, one of random, standstill, pseudo_ik, or the planner, mppi."""
+    planner: planners.PlannerConfig = planners.PlannerConfig()
+    """The planner's options (with --policy mppi)."""
     env_name: Annotated[str | None, tyro.conf.arg(name="env", metavar="NAME")] = None
     """Registered env name; None: the checkpoint's env."""
     num_envs: int = 4096
@@ -125,6 +132,10 @@ class EvalConfig(Generic[EnvConfigT]):
     """Replace an existing --json, --csv or --video file (a run's or an export's own files are never replaced)."""
 
 
+POLICIES = baselines.BASELINES + (planners.NAME,)
+"""What --policy names: the baselines and the planner."""
+
+
 def parse(argv: list[str], base=None, show_help: bool = False) -> EvalConfig:
     """`argv` parsed by tyro over `EvalConfig` with `base` as the env config's defaults (None: the
     env options are left for a second call, once the env is known). `show_help`: prints the help and
@@ -142,7 +153,12 @@ def check(args: EvalConfig) -> None:
     """ValueError naming the option, its value and what is allowed (before anything is loaded)."""
     if bool(args.checkpoint) == bool(args.policy):
         raise ValueError("give exactly one of --checkpoint PATH... and --policy NAME (allowed policies: "
-                         f"{', '.join(baselines.BASELINES)}).")
+                         f"{', '.join(POLICIES)}).")
+    if args.policy is not None and args.policy not in POLICIES:
+        raise ValueError(f"--policy={args.policy!r} is unknown: allowed are {', '.join(POLICIES)}.")
+    if args.planner != planners.PlannerConfig() and args.policy != planners.NAME:
+        raise ValueError(f"--planner.* options are invalid with {'--policy ' + args.policy if args.policy else '--checkpoint'}:"
+                         f" allowed only with --policy {planners.NAME}.")
     for name in ("num_envs", "seeds", "last_steps", "video_envs"):
         if getattr(args, name) < 1:
             raise ValueError(f"--{name.replace('_', '-')}={getattr(args, name)} is invalid: allowed is an integer >= 1.")
@@ -159,13 +175,13 @@ def check(args: EvalConfig) -> None:
             check_output(f"--{option}", getattr(args, option), args.force)
     if args.stochastic and args.policy:
         raise ValueError(f"--stochastic is invalid with --policy {args.policy}: allowed only with --checkpoint (the "
-                         "baselines have no action distribution).")
+                         "baselines and the planner have no action distribution).")
     if args.compute_dtype is not None and args.compute_dtype not in evaluation.COMPUTE_DTYPES:
         raise ValueError(f"--compute-dtype={args.compute_dtype!r} is invalid: allowed are "
                          f"{', '.join(evaluation.COMPUTE_DTYPES)}.")
     if args.compute_dtype and args.policy:
         raise ValueError(f"--compute-dtype is invalid with --policy {args.policy}: allowed only with --checkpoint (the "
-                         "baselines have no network).")
+                         "baselines and the planner have no network).")
     if args.policy and not args.env_name:
         raise ValueError("--policy needs --env NAME (allowed: " + ", ".join(envs.names()) + ").")
 
@@ -181,6 +197,8 @@ def main(argv: list[str] | None = None) -> list:
     if args.checkpoint:
         policies = [evaluation.with_compute_dtype(evaluation.checkpoint_policy(path), args.compute_dtype)
                     for path in args.checkpoint]
+    elif args.policy == planners.NAME:
+        policies = [evaluation.planner_policy(args.planner)]
     else:
         policies = [evaluation.baseline_policy(args.policy or "standstill")]
     env_name = args.env_name or policies[0].train_env_name

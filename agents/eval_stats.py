@@ -1,6 +1,6 @@
 """Statistics of evaluation results over units (trained seeds) and episodes: the summary every table reads (mean,
 sample and population spreads, the mean's 95 % confidence interval by rliable), two extra readings of the final
-distance, the pooled summary of several checkpoints, and the "mean ± std [low, high]" cell."""
+distance, the pooled summary of several checkpoints, the "mean ± std [low, high]" cell, and strict-JSON values."""
 
 from __future__ import annotations
 
@@ -87,3 +87,14 @@ def fmt(stats: dict | None, digits: int, spread: str = "std_units", ci: bool = F
     if interval:
         text += f" [{interval[0]:.{digits}f}, {interval[1]:.{digits}f}]"
     return text
+
+
+def jsonable(obj):
+    """`obj` with NaN / inf floats as None (strict JSON) and tuples as lists."""
+    if isinstance(obj, dict):
+        return {k: jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [jsonable(v) for v in obj]
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    return obj

@@ -8,8 +8,8 @@ and tools/paper_tables.py).
     result = evaluation.run(policy, "ur5e-reach", config, num_envs=4096, eval_seeds=[1_000_000])
     print(evaluation.markdown([result]))
 
-A policy is a checkpoint's policy export (`agents.export`, one unit per trained seed) or a baseline
-(`agents.baselines`). Every unit (trained seed x evaluation seed) runs `num_envs` environments for
+A policy is a checkpoint's policy export (`agents.export`, one unit per trained seed), a baseline
+(`agents.baselines`) or the MPPI planner (`agents.planner`). Every unit (trained seed x evaluation seed) runs `num_envs` environments for
 one episode each with the deterministic policy (`agents.loop.make_evaluate`); the same evaluation
 seed gives every policy the same episodes. Reported per unit: the mean over episodes of each paper
 metric (`PAPER_METRICS`); summarised as mean and standard deviation over units, plus the standard
@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import math
 import sys
 import time
 import warnings
@@ -30,11 +29,12 @@ import jax
 import numpy as np
 
 import envs
-from agents import baselines, driver, export, registry
+from agents import baselines, driver, export, planner as planners, registry
 from envs import physics
 from agents.loop import make_evaluate
 from agents.networks import COMPUTE_DTYPES
-from agents.eval_stats import collided_distances, fmt, pooled, reached_precision, summarize  # noqa: F401 (evaluation.fmt, ...)
+from agents.eval_stats import (collided_distances, fmt, jsonable, pooled, reached_precision,  # noqa: F401 (evaluation.fmt, ...)
+                                summarize)
 
 PAPER_METRICS = {
     "target_reached": "episode/target_reached",
@@ -62,15 +62,17 @@ DEFAULT_EVAL_SEED = 1_000_000
 
 @dataclasses.dataclass
 class Policy:
-    """What to evaluate: a checkpoint's policy (one unit per trained seed) or a baseline."""
+    """What to evaluate: a checkpoint's policy (one unit per trained seed), a baseline or the planner."""
 
     kind: str
-    """"checkpoint" or "baseline"."""
+    """"checkpoint", "baseline" or "planner"."""
     name: str
-    """The baseline's name or the checkpoint's path as given."""
+    """The baseline's or planner's name, or the checkpoint's path as given."""
     units: list
-    """Labels of the policy's units: trained seeds (checkpoint) or [None] (baseline)."""
+    """Labels of the policy's units: trained seeds (checkpoint) or [None] (baseline, planner)."""
     export: export.PolicyExport | None = None
+    planner: planners.PlannerConfig | None = None
+    """The planner's options (kind "planner")."""
     compute_dtype: str | None = None
     """The number format of the network's hidden layers in this evaluation (learners with a `compute_dtype`
     field, `with_compute_dtype`); None: as trained."""
@@ -94,6 +96,9 @@ class Policy:
         return self.export.config.env if self.export else None
 
     def describe(self) -> dict:
+        if self.planner is not None:
+            return {"kind": self.kind, "name": self.name, "planner": dataclasses.asdict(self.planner),
+                    "model_steps_per_step": self.planner.model_steps_per_step}
         if self.export is None:
             return {"kind": self.kind, "name": self.name}
         e = self.export
@@ -124,6 +129,19 @@ def with_compute_dtype(policy: Policy, dtype: str | None) -> Policy:
 def baseline_policy(name: str) -> Policy:
     baselines.index(name)  # unknown name -> ValueError
     return Policy("baseline", name, [None])
+
+
+def planner_policy(config: planners.PlannerConfig = planners.PlannerConfig()) -> Policy:
+    """The MPPI planner (`agents.planner`) with `config`: it plans with the env itself, on any env."""
+    return Policy("planner", planners.NAME, [None], planner=config)
+
+
+def act_params(policy: Policy):
+    """What the evaluation program takes as its first argument: the trained parameters, the baseline's index,
+    or nothing the planner reads."""
+    if policy.export is not None:
+        return policy.export.state
+    return baselines.index(policy.name) if policy.planner is None else np.int32(0)
 
 
 def checkpoint_policy(path: str) -> Policy:
@@ -181,7 +199,8 @@ def check_compatible(policy: Policy, env_name: str, env, allow_env_mismatch: boo
     sizes, and the trained observation layout and action mode; with `allow_env_mismatch` a different
     layout or mode is only warned about)."""
     if policy.export is None:
-        baselines.check(policy.name, env)
+        if policy.planner is None:  # the planner acts on any env: it simulates the env itself
+            baselines.check(policy.name, env)
         return
     e = policy.export
     trained, asked = envs.registry.spec(e.env_name).robot, envs.registry.spec(env_name).robot
@@ -246,14 +265,19 @@ class _Program:
 
 @functools.lru_cache(maxsize=16)
 def _evaluator(env_name: str, env_config, algo_config, obs_size: int, act_size: int, num_envs: int, last_steps: int,
-               stochastic: bool = False) -> _Program:
+               stochastic: bool = False, planner: planners.PlannerConfig | None = None) -> _Program:
     """The evaluation program, cached per setting so that several checkpoints / seeds / baselines
     (and a video of as many envs) share one compilation. The env is not auto-reset
     (`envs.wrap(..., autoreset=False)`): only each env's first episode counts, and its poses are
     recorded for rendering. `stochastic`: a checkpoint's actions are drawn from its policy's
-    distribution (the learner's `stochastic_policy`, a fresh key per step) instead of its mode."""
+    distribution (the learner's `stochastic_policy`, a fresh key per step) instead of its mode. `planner`: the
+    MPPI planner with these options acts (`agents.planner.make_act`)."""
     env = envs.wrap(envs.from_config(env_name, env_config), autoreset=False)
     length = env_config.episode_length
+    if planner is not None:
+        act, memory = planners.make_act(env, planner)
+        fn = make_evaluate(env, None, num_envs, length, last_steps, act=act, per_env=True, record=_record, memory=memory)
+        return _Program(env, jax.jit(fn))
     if algo_config is None:
         fn = make_evaluate(env, None, num_envs, length, last_steps, act=baselines.make_act(env), per_env=True,
                            record=_record)
@@ -269,11 +293,11 @@ def _program(policy: Policy, env_name: str, env_config, num_envs: int, last_step
     """The cached evaluation program (`_evaluator`) for `policy`'s network on this env, after checking
     that the env fits the policy and that a stochastic evaluation has a distribution to sample."""
     if stochastic and policy.export is None:
-        raise ValueError(f"stochastic=True is invalid for the baseline {policy.name!r}: allowed only for checkpoints "
-                         "(the baselines have no action distribution).")
+        raise ValueError(f"stochastic=True is invalid for the {policy.kind} {policy.name!r}: allowed only for checkpoints "
+                         f"(the {policy.kind} has no action distribution).")
     e = policy.export
     program = _evaluator(env_name, env_config, policy.algo_config, e.observation_size if e else 0,
-                         e.action_size if e else 0, int(num_envs), int(last_steps), bool(stochastic))
+                         e.action_size if e else 0, int(num_envs), int(last_steps), bool(stochastic), policy.planner)
     check_compatible(policy, env_name, program.env, allow_env_mismatch)
     return program
 
@@ -305,6 +329,8 @@ class Result:
     """{name: array (units, num_envs)}: every episode's value (for stds over episodes)."""
     seconds: float
     """Wall time of the evaluation, compilation included."""
+    seed_seconds: list = dataclasses.field(default_factory=list)
+    """Wall time of each evaluation seed (the first includes compiling unless the program was compiled before)."""
     stochastic: bool = False
     """Actions drawn from the policy's distribution instead of its mode (deterministic, the default)."""
 
@@ -323,20 +349,10 @@ class Result:
             "episodes": int(self.num_envs * len(self.units)),
             "actions": "stochastic" if self.stochastic else "deterministic",
             "seconds": round(self.seconds, 2),
+            "seed_seconds": [round(t, 3) for t in self.seed_seconds],
             "summary": self.summary(),
             "units": self.units,
         })
-
-
-def jsonable(obj):
-    """`obj` with NaN / inf floats as None (strict JSON) and tuples as lists."""
-    if isinstance(obj, dict):
-        return {k: jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [jsonable(v) for v in obj]
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    return obj
 
 
 def _metric_names(per_step: dict, last_steps: int) -> dict:
@@ -363,15 +379,17 @@ def run(policy: Policy, env_name: str, env_config, num_envs: int = 4096, eval_se
     if not eval_seeds:
         raise ValueError("eval_seeds=[] is invalid: allowed is at least one seed.")
     program = _program(policy, env_name, env_config, num_envs, last_steps, stochastic, allow_env_mismatch)
-    params = policy.export.state if policy.export else baselines.index(policy.name)
+    params = act_params(policy)
     batch = len(policy.units) if policy.export else 0
     t0 = time.perf_counter()
     if progress and batch not in program.compiled:
         progress(f"compiling the evaluation of {num_envs} envs x {env_config.episode_length} steps"
                  + (f", {batch} trained seed(s) at once" if batch else "") + " (the first eval seed waits for it) ...")
-    units, per_env = [], {}
+    units, per_env, seed_seconds = [], {}, []
     for k, eval_seed in enumerate(eval_seeds):
+        t_seed = time.perf_counter()
         out = jax.device_get(program.evaluate(params, jax.random.PRNGKey(int(eval_seed)))[0])
+        seed_seconds.append(time.perf_counter() - t_seed)
         program.compiled.add(batch)
         names = _metric_names(out, last_steps)
         for i, label in enumerate(policy.units):
@@ -390,7 +408,7 @@ def run(policy: Policy, env_name: str, env_config, num_envs: int = 4096, eval_se
         for i, unit in enumerate(units):
             unit["metrics"].update({name: float(np.nanmean(v[i])) for name, v in derived.items()})
     return Result(policy, env_name, env_config, int(num_envs), [int(s) for s in eval_seeds], int(last_steps), units,
-                  per_env, time.perf_counter() - t0, bool(stochastic))
+                  per_env, time.perf_counter() - t0, seed_seconds, bool(stochastic))
 
 
 def _seed_line(k: int, n: int, eval_seed: int, units: list, seconds: float) -> str:
@@ -470,7 +488,7 @@ def rollout(policy: Policy, env_name: str, env_config, num_envs: int = 1, eval_s
         records = jax.tree.map(lambda x: x[0], records)
         program.compiled.add(1)
     else:
-        out, records = jax.device_get(program.evaluate(baselines.index(policy.name), jax.random.PRNGKey(int(eval_seed))))
+        out, records = jax.device_get(program.evaluate(act_params(policy), jax.random.PRNGKey(int(eval_seed))))
         program.compiled.add(0)
     records = {k: np.asarray(v) for k, v in records.items()}
     records["length"] = np.asarray(out["episode/length"]).astype(int)

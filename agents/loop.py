@@ -299,7 +299,7 @@ def episode_metrics(done, reward, metrics: dict, last_steps: int = 10) -> dict:
 
 
 def make_evaluate(env, learner: Learner, num_envs: int, episode_length: int, last_steps: int = 10,
-                  act=None, per_env: bool = False, record=None):
+                  act=None, per_env: bool = False, record=None, memory=None):
     """`evaluate(learner_state, key) -> metrics`: one episode per env with the deterministic policy.
 
     `env` is the batched environment. Each env's *first* episode counts (it ends by termination or
@@ -314,6 +314,8 @@ def make_evaluate(env, learner: Learner, num_envs: int, episode_length: int, las
     arrays instead of means. `record(state) -> pytree` additionally returns, as `(metrics, records)`,
     that pytree for the reset state and after every step, stacked along a leading time axis of
     `episode_length + 1` (e.g. joint positions for rendering).
+    `memory(start) -> pytree` gives `act` a state of its own across steps (a planner's plan, `agents.planner`):
+    it is then called `act(learner_state, state, start, key, mem)` and returns `(actions, mem)`.
     The reset keys depend on `key` alone, so every policy sees the same episodes for one key.
     """
     if act is None:
@@ -323,12 +325,18 @@ def make_evaluate(env, learner: Learner, num_envs: int, episode_length: int, las
         start = env.reset(jax.random.split(key, num_envs))
         act_keys = jax.random.split(jax.random.fold_in(key, 1), episode_length)
 
-        def step(s, k):
-            nxt = env.step(s, act(ls, s, start, k))
+        def step(carry, k):
+            s, mem = carry
+            if memory is None:
+                action = act(ls, s, start, k)
+            else:
+                action, mem = act(ls, s, start, k, mem)
+            nxt = env.step(s, action)
             extra = () if record is None else record(nxt)
-            return nxt, (nxt.done, nxt.reward, nxt.metrics, extra)
+            return (nxt, mem), (nxt.done, nxt.reward, nxt.metrics, extra)
 
-        _, (done, reward, metrics, records) = jax.lax.scan(step, start, act_keys)
+        first = () if memory is None else memory(start)
+        _, (done, reward, metrics, records) = jax.lax.scan(step, (start, first), act_keys)
         out = episode_metrics(done, reward, metrics, last_steps)
         if not per_env:
             out = {k: jnp.mean(v) for k, v in out.items()}

@@ -1,0 +1,227 @@
+"""The MPPI planner beside the shipped policies: how far the learners are from a planner that knows the dynamics.
+
+    python -m tools.planner_table --out results/planner                  # every shipped task, the default budget
+    python -m tools.planner_table --checkpoint results/checkpoints/ur5e-reach-ppo --budgets 16x8 64x16 --out DIR
+
+For each shipped policy export (`--checkpoint`, default: every one under results/checkpoints) its task is its
+trained env config; the planner (`agents.planner`, `--samples` x `--horizon`) and every export of that task are
+evaluated on the same episodes (`--seeds` evaluation seeds x `--episodes` envs, the same eval seeds for all).
+`--budgets KxH ...` evaluates the planner at each planning budget on the first task (`--budget-task` picks
+another) for the success-against-budget plot. The planner's cost is reported as simulated env steps per executed
+one (K x H x iterations) and as the warm wall clock per control step of the whole batch (the last seed's time,
+after compilation, divided by the episode length).
+
+Writes to `--out`: `planner.json` (every row with its per-unit numbers, the options, command, code version,
+device, date), `table.md` (per task: the planner against each export, and the gap between the planner and the
+best export in reached percentage points) and, with `--budgets`, `budget.png`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import glob
+import json
+import os
+
+import envs
+from agents import evaluation, planner as planners, provenance
+from agents.eval_stats import jsonable
+from tools import run_cli
+
+SHIPPED = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "results", "checkpoints")
+COLUMNS = (("target_reached", "reached %", 100.0), ("self_collision", "self coll. %", 100.0),
+           ("obstacle_collision", "obstacle coll. %", 100.0), ("distance", "distance (m)", 1.0))
+"""The table's metrics: (summary key, header, scale)."""
+
+
+def parse_budget(text: str) -> tuple[int, int]:
+    """"64x16" -> (64, 16); ValueError naming the option otherwise."""
+    try:
+        samples, horizon = (int(part) for part in text.lower().split("x"))
+    except ValueError:
+        raise ValueError(f"--budgets entry {text!r} is invalid: allowed is SAMPLESxHORIZON, e.g. 64x16.") from None
+    planners.PlannerConfig(samples=samples, horizon=horizon)  # range checks, naming the field
+    return samples, horizon
+
+
+def task_of(policy: evaluation.Policy, episode_length: int | None, backend: str | None):
+    """(env name, env config) a policy is compared on: its trained env, optionally shortened or on another backend."""
+    changes = {}
+    if episode_length is not None:
+        changes["episode_length"] = episode_length
+    if backend is not None:
+        changes["backend"] = backend
+    return policy.train_env_name, envs.make_config(policy.train_env_name, policy.train_env_config, **changes)
+
+
+def task_label(env_name: str, config) -> str:
+    """"ur5e-reach-avoid" or "ur5e-reach-avoid, 3 moving obstacles": what tells two tasks apart in the table."""
+    count = getattr(config, "num_obstacles", 1)
+    motion = getattr(config, "obstacle_motion", "static")
+    if count > 1 or motion != "static":
+        return f"{env_name}, {count} {'' if motion == 'static' else motion + ' moving '}obstacles"
+    return env_name
+
+
+def row(result: evaluation.Result, episode_length: int) -> dict:
+    """One table row: the policy, its summary and, for the planner, its cost."""
+    policy = result.policy
+    out = {"policy": policy.describe(), "summary": result.summary(), "units": result.units,
+           "episodes": result.num_envs * len(result.units), "seed_seconds": result.seed_seconds}
+    if policy.planner is not None:
+        out["model_steps_per_step"] = policy.planner.model_steps_per_step
+        out["ms_per_control_step"] = 1000.0 * result.seed_seconds[-1] / episode_length
+    return out
+
+
+def evaluate_tasks(checkpoints: list[str], config: planners.PlannerConfig, episodes: int, seeds: list[int],
+                   episode_length: int | None, backend: str | None, progress=print) -> list[dict]:
+    """[{"task", "env_name", "env_config", "rows": [...]}]: the planner and every export of each task, same episodes."""
+    tasks: dict[str, dict] = {}
+    for path in checkpoints:
+        policy = evaluation.checkpoint_policy(path)
+        env_name, env_config = task_of(policy, episode_length, backend)
+        label = task_label(env_name, env_config)
+        task = tasks.setdefault(label, {"task": label, "env_name": env_name, "env_config": env_config, "policies": []})
+        task["policies"].append(policy)
+    out = []
+    for task in tasks.values():
+        length = task["env_config"].episode_length
+        rows = []
+        for policy in [evaluation.planner_policy(config)] + task["policies"]:
+            progress(f"{task['task']}: {policy.name}")
+            result = evaluation.run(policy, task["env_name"], task["env_config"], episodes, seeds)
+            rows.append(row(result, length))
+        out.append({"task": task["task"], "env_name": task["env_name"],
+                    "env_config": dataclasses.asdict(task["env_config"]), "rows": rows})
+    return out
+
+
+def gap(task: dict) -> float | None:
+    """Reached percentage points of the planner minus the best export's (None without an export)."""
+    reached = [r["summary"]["target_reached"]["mean"] for r in task["rows"]]
+    return 100.0 * (reached[0] - max(reached[1:])) if len(reached) > 1 else None
+
+
+def markdown(tasks: list[dict], budget_rows: list[dict]) -> str:
+    """The planner against each export per task, then the budget sweep."""
+    head = "| task | policy | episodes | " + " | ".join(h for _, h, _ in COLUMNS) + " | model steps / step | ms / step |"
+    lines = [head, "|" + "---|" * (head.count("|") - 1)]
+    for task in tasks:
+        for r in task["rows"]:
+            name = r["policy"]["name"] if r["policy"]["kind"] != "checkpoint" else os.path.basename(r["policy"]["name"].rstrip("/"))
+            cells = [task["task"], name, str(r["episodes"])] + [_scaled(r["summary"], key, scale) for key, _, scale in COLUMNS]
+            cost = [str(r.get("model_steps_per_step", "-")),
+                    f"{r['ms_per_control_step']:.1f}" if "ms_per_control_step" in r else "-"]
+            lines.append("| " + " | ".join(cells + cost) + " |")
+    lines.append("")
+    lines.append("| task | planner minus best export, reached (points) |")
+    lines.append("|---|---:|")
+    for task in tasks:
+        g = gap(task)
+        lines.append(f"| {task['task']} | {'-' if g is None else f'{g:+.1f}'} |")
+    if budget_rows:
+        lines += ["", "| budget (samples x horizon) | model steps / step | reached % | self coll. % | obstacle coll. % |"
+                  " ms / step |", "|---|---:|---:|---:|---:|---:|"]
+        for r in budget_rows:
+            p = r["policy"]["planner"]
+            lines.append(f"| {p['samples']} x {p['horizon']} | {r['model_steps_per_step']} | "
+                         + " | ".join(_scaled(r["summary"], k, 100.0) for k in ("target_reached", "self_collision",
+                                                                                 "obstacle_collision"))
+                         + f" | {r['ms_per_control_step']:.1f} |")
+    return "\n".join(lines) + "\n"
+
+
+def _scaled(summary: dict, key: str, scale: float) -> str:
+    """"mean ± sample std over units" in the column's unit, "-" if the env has no such metric."""
+    s = summary.get(key)
+    if s is None:
+        return "-"
+    digits = 1 if scale > 1 else 3
+    std = s.get("std_units")
+    text = f"{scale * s['mean']:.{digits}f}"
+    return text + (f" ± {scale * std:.{digits}f}" if std is not None and s.get("units", 1) > 1 else "")
+
+
+def plot_budget(budget_rows: list[dict], task: str, path: str) -> None:
+    """Reached and obstacle-collision percentages against the planning budget (simulated steps per step, log scale)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    cost = [r["model_steps_per_step"] for r in budget_rows]
+    fig, ax = plt.subplots(figsize=(5, 3.4))
+    for key, label in (("target_reached", "reached"), ("obstacle_collision", "obstacle collision"),
+                       ("self_collision", "self collision")):
+        if key in budget_rows[0]["summary"]:
+            ax.plot(cost, [100.0 * r["summary"][key]["mean"] for r in budget_rows], "o-", label=label)
+    for r, x in zip(budget_rows, cost):
+        p = r["policy"]["planner"]
+        ax.annotate(f"{p['samples']}x{p['horizon']}", (x, 100.0 * r["summary"]["target_reached"]["mean"]),
+                    textcoords="offset points", xytext=(0, 6), ha="center", fontsize=7)
+    ax.set_xscale("log")
+    ax.set_xlabel("planning budget: simulated env steps per env step (samples x horizon)")
+    ax.set_ylabel("% of episodes")
+    ax.set_title(f"MPPI on {task}", fontsize=9)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m tools.planner_table", description=__doc__.split("\n\n")[0])
+    p.add_argument("--checkpoint", nargs="+", default=None, metavar="PATH",
+                   help="policy exports to compare with (default: every one under results/checkpoints)")
+    p.add_argument("--out", required=True, metavar="DIR")
+    p.add_argument("--episodes", type=int, default=256, help="envs per evaluation seed")
+    p.add_argument("--seeds", type=int, default=2, help="evaluation seeds (the last one's time is the warm timing)")
+    p.add_argument("--samples", type=int, default=planners.PlannerConfig.samples)
+    p.add_argument("--horizon", type=int, default=planners.PlannerConfig.horizon)
+    p.add_argument("--iterations", type=int, default=planners.PlannerConfig.iterations)
+    p.add_argument("--temperature", type=float, default=planners.PlannerConfig.temperature)
+    p.add_argument("--noise", type=float, default=planners.PlannerConfig.noise)
+    p.add_argument("--budgets", nargs="*", default=[], metavar="KxH", help="planning budgets for the sweep")
+    p.add_argument("--budget-task", type=int, default=0, help="index of the task (in table order) the sweep runs on")
+    p.add_argument("--episode-length", type=int, default=None, help="shorten episodes (default: as trained)")
+    p.add_argument("--backend", default=None, help="physics backend (default: as the env config says)")
+    args = p.parse_args(argv)
+    for name in ("episodes", "seeds"):
+        if getattr(args, name) < 1:
+            raise ValueError(f"--{name}={getattr(args, name)} is invalid: allowed is an integer >= 1.")
+    config = planners.PlannerConfig(samples=args.samples, horizon=args.horizon, iterations=args.iterations,
+                                    temperature=args.temperature, noise=args.noise)
+    budgets = [parse_budget(b) for b in args.budgets]
+    checkpoints = args.checkpoint or sorted(os.path.dirname(p) for p in glob.glob(os.path.join(SHIPPED, "*", "policy.json")))
+    if not checkpoints:
+        raise ValueError(f"--checkpoint is empty and {SHIPPED} holds no policy export: allowed are export directories.")
+    seeds = [evaluation.DEFAULT_EVAL_SEED + i for i in range(args.seeds)]
+    os.makedirs(args.out, exist_ok=True)
+    tasks = evaluate_tasks(checkpoints, config, args.episodes, seeds, args.episode_length, args.backend)
+    if not 0 <= args.budget_task < len(tasks):
+        raise ValueError(f"--budget-task={args.budget_task} is invalid: allowed is 0..{len(tasks) - 1}.")
+    budget_rows = []
+    if budgets:
+        task = tasks[args.budget_task]
+        env_config = envs.make_config(task["env_name"], **task["env_config"])
+        for samples, horizon in budgets:
+            swept = dataclasses.replace(config, samples=samples, horizon=horizon)
+            print(f"{task['task']}: budget {samples}x{horizon}")
+            result = evaluation.run(evaluation.planner_policy(swept), task["env_name"], env_config, args.episodes, seeds)
+            budget_rows.append(row(result, env_config.episode_length))
+        plot_budget(budget_rows, task["task"], os.path.join(args.out, "budget.png"))
+    report = {**provenance.stamp(), "planner": dataclasses.asdict(config), "episodes": args.episodes,
+              "eval_seeds": seeds, "tasks": tasks, "budget_task": tasks[args.budget_task]["task"] if budgets else None,
+              "budgets": budget_rows}
+    with open(os.path.join(args.out, "planner.json"), "w") as f:
+        json.dump(jsonable(report), f, indent=2, default=str)
+    table = markdown(tasks, budget_rows)
+    with open(os.path.join(args.out, "table.md"), "w") as f:
+        f.write(table)
+    print(table)
+    return 0
+
+
+if __name__ == "__main__":
+    run_cli(main)
