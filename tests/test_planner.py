@@ -224,3 +224,24 @@ def test_the_table_has_a_row_per_policy_and_the_gap(table_run):
     out, _ = table_run
     table = (out / "table.md").read_text()
     assert "| point-mass | mppi | 16 |" in table
+
+
+def test_the_sweep_reuses_the_tables_planner_row_at_the_tables_budget(table_run):
+    _, report = table_run
+    assert report["budgets"][1]["summary"] == report["tasks"][0]["rows"][0]["summary"]
+
+
+def test_runs_made_apart_merge_into_one_table(table_run, tmp_path):
+    out, report = table_run
+    other = dict(report, budgets=[], budget_task=None, tasks=[dict(report["tasks"][0], task="point-mass, again")])
+    (tmp_path / "other.json").write_text(json.dumps(other))
+    planner_table.main(["--from-json", str(out / "planner.json"), str(tmp_path / "other.json"), "--out",
+                        str(tmp_path / "merged")])
+    merged = json.loads((tmp_path / "merged" / "planner.json").read_text())
+    assert [t["task"] for t in merged["tasks"]] == ["point-mass", "point-mass, again"]
+
+
+def test_merging_two_sweeps_is_refused(table_run, tmp_path):
+    out, _ = table_run
+    with pytest.raises(ValueError, match="2 budget sweeps"):
+        planner_table.main(["--from-json", str(out / "planner.json"), str(out / "planner.json"), "--out", str(tmp_path)])

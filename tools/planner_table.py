@@ -11,6 +11,9 @@ another) for the success-against-budget plot. The planner's cost is reported as 
 one (K x H x iterations) and as the warm wall clock per control step of the whole batch (the last seed's time,
 after compilation, divided by the episode length).
 
+`--from-json A/planner.json B/planner.json --out DIR` merges runs made separately (e.g. one per robot) into one
+table, keeping each run's command, code version, device and date.
+
 Writes to `--out`: `planner.json` (every row with its per-unit numbers, the options, command, code version,
 device, date), `table.md` (per task: the planner against each export, and the gap between the planner and the
 best export in reached percentage points) and, with `--budgets`, `budget.png`.
@@ -75,9 +78,9 @@ def row(result: evaluation.Result, episode_length: int) -> dict:
     return out
 
 
-def evaluate_tasks(checkpoints: list[str], config: planners.PlannerConfig, episodes: int, seeds: list[int],
-                   episode_length: int | None, backend: str | None, progress=print) -> list[dict]:
-    """[{"task", "env_name", "env_config", "rows": [...]}]: the planner and every export of each task, same episodes."""
+def group_tasks(checkpoints: list[str], episode_length: int | None, backend: str | None) -> list[dict]:
+    """[{"task", "env_name", "env_config", "policies"}]: the exports grouped by task, in the order first seen; a
+    task's env config (the planner's) is its first export's."""
     tasks: dict[str, dict] = {}
     for path in checkpoints:
         policy = evaluation.checkpoint_policy(path)
@@ -85,16 +88,38 @@ def evaluate_tasks(checkpoints: list[str], config: planners.PlannerConfig, episo
         label = task_label(env_name, env_config)
         task = tasks.setdefault(label, {"task": label, "env_name": env_name, "env_config": env_config, "policies": []})
         task["policies"].append(policy)
+    return list(tasks.values())
+
+
+def evaluate_task(task: dict, config: planners.PlannerConfig, episodes: int, seeds: list[int], progress=print) -> dict:
+    """{"task", "env_name", "env_config", "rows"}: the planner on the task's env config, then each export on its own
+    trained one (the same episodes: the reset draws do not depend on the observation layout)."""
+    rows = []
+    for policy in [evaluation.planner_policy(config)] + task["policies"]:
+        progress(f"{task['task']}: {policy.name}")
+        env_name, env_config = task["env_name"], task["env_config"]
+        if policy.export is not None:  # its own observation layout, the task's episode length and backend
+            same = {k: getattr(env_config, k) for k in ("episode_length", "backend") if hasattr(env_config, k)}
+            env_config = envs.make_config(env_name, policy.train_env_config, **same)
+        result = evaluation.run(policy, env_name, env_config, episodes, seeds)
+        rows.append(row(result, env_config.episode_length))
+    return {"task": task["task"], "env_name": task["env_name"], "env_config": dataclasses.asdict(task["env_config"]),
+            "rows": rows}
+
+
+def sweep(task: dict, done: dict, config: planners.PlannerConfig, budgets, episodes: int, seeds: list[int],
+          progress=print) -> list[dict]:
+    """The planner's rows at each (samples, horizon) budget on `task` (`done`: its evaluated table entry, whose
+    planner row is reused for the table's own budget)."""
     out = []
-    for task in tasks.values():
-        length = task["env_config"].episode_length
-        rows = []
-        for policy in [evaluation.planner_policy(config)] + task["policies"]:
-            progress(f"{task['task']}: {policy.name}")
-            result = evaluation.run(policy, task["env_name"], task["env_config"], episodes, seeds)
-            rows.append(row(result, length))
-        out.append({"task": task["task"], "env_name": task["env_name"],
-                    "env_config": dataclasses.asdict(task["env_config"]), "rows": rows})
+    for samples, horizon in budgets:
+        if (samples, horizon) == (config.samples, config.horizon):
+            out.append(done["rows"][0])
+            continue
+        progress(f"{task['task']}: budget {samples}x{horizon}")
+        swept = dataclasses.replace(config, samples=samples, horizon=horizon)
+        result = evaluation.run(evaluation.planner_policy(swept), task["env_name"], task["env_config"], episodes, seeds)
+        out.append(row(result, task["env_config"].episode_length))
     return out
 
 
@@ -104,31 +129,29 @@ def gap(task: dict) -> float | None:
     return 100.0 * (reached[0] - max(reached[1:])) if len(reached) > 1 else None
 
 
-def markdown(tasks: list[dict], budget_rows: list[dict]) -> str:
-    """The planner against each export per task, then the budget sweep."""
+def markdown(tasks: list[dict], budget_rows: list[dict], budget_task: str | None = None) -> str:
+    """The planner against each export per task, the gap per task, then the budget sweep (on `budget_task`)."""
     head = "| task | policy | episodes | " + " | ".join(h for _, h, _ in COLUMNS) + " | model steps / step | ms / step |"
     lines = [head, "|" + "---|" * (head.count("|") - 1)]
     for task in tasks:
         for r in task["rows"]:
-            name = r["policy"]["name"] if r["policy"]["kind"] != "checkpoint" else os.path.basename(r["policy"]["name"].rstrip("/"))
+            policy = r["policy"]
+            name = os.path.basename(policy["name"].rstrip("/")) if policy["kind"] == "checkpoint" else policy["name"]
             cells = [task["task"], name, str(r["episodes"])] + [_scaled(r["summary"], key, scale) for key, _, scale in COLUMNS]
             cost = [str(r.get("model_steps_per_step", "-")),
                     f"{r['ms_per_control_step']:.1f}" if "ms_per_control_step" in r else "-"]
             lines.append("| " + " | ".join(cells + cost) + " |")
-    lines.append("")
-    lines.append("| task | planner minus best export, reached (points) |")
-    lines.append("|---|---:|")
+    lines += ["", "| task | planner minus best export, reached (points) |", "|---|---:|"]
     for task in tasks:
         g = gap(task)
         lines.append(f"| {task['task']} | {'-' if g is None else f'{g:+.1f}'} |")
     if budget_rows:
-        lines += ["", "| budget (samples x horizon) | model steps / step | reached % | self coll. % | obstacle coll. % |"
-                  " ms / step |", "|---|---:|---:|---:|---:|---:|"]
+        lines += ["", f"| planning budget on {budget_task} (samples x horizon) | model steps / step | reached % | "
+                      "self coll. % | obstacle coll. % | ms / step |", "|---|---:|---:|---:|---:|---:|"]
         for r in budget_rows:
             p = r["policy"]["planner"]
-            lines.append(f"| {p['samples']} x {p['horizon']} | {r['model_steps_per_step']} | "
-                         + " | ".join(_scaled(r["summary"], k, 100.0) for k in ("target_reached", "self_collision",
-                                                                                 "obstacle_collision"))
+            rates = [_scaled(r["summary"], k, 100.0) for k in ("target_reached", "self_collision", "obstacle_collision")]
+            lines.append(f"| {p['samples']} x {p['horizon']} | {r['model_steps_per_step']} | " + " | ".join(rates)
                          + f" | {r['ms_per_control_step']:.1f} |")
     return "\n".join(lines) + "\n"
 
@@ -175,6 +198,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--checkpoint", nargs="+", default=None, metavar="PATH",
                    help="policy exports to compare with (default: every one under results/checkpoints)")
     p.add_argument("--out", required=True, metavar="DIR")
+    p.add_argument("--from-json", nargs="+", default=None, metavar="FILE",
+                   help="merge the planner.json files of earlier runs into one table instead of evaluating")
     p.add_argument("--episodes", type=int, default=256, help="envs per evaluation seed")
     p.add_argument("--seeds", type=int, default=2, help="evaluation seeds (the last one's time is the warm timing)")
     p.add_argument("--samples", type=int, default=planners.PlannerConfig.samples)
@@ -187,6 +212,10 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--episode-length", type=int, default=None, help="shorten episodes (default: as trained)")
     p.add_argument("--backend", default=None, help="physics backend (default: as the env config says)")
     args = p.parse_args(argv)
+    if args.from_json:
+        merged = merge(args.from_json, args.out)
+        print(markdown(merged["tasks"], merged["budgets"], merged["budget_task"]))
+        return 0
     for name in ("episodes", "seeds"):
         if getattr(args, name) < 1:
             raise ValueError(f"--{name}={getattr(args, name)} is invalid: allowed is an integer >= 1.")
@@ -197,31 +226,49 @@ def main(argv: list[str] | None = None) -> int:
     if not checkpoints:
         raise ValueError(f"--checkpoint is empty and {SHIPPED} holds no policy export: allowed are export directories.")
     seeds = [evaluation.DEFAULT_EVAL_SEED + i for i in range(args.seeds)]
-    os.makedirs(args.out, exist_ok=True)
-    tasks = evaluate_tasks(checkpoints, config, args.episodes, seeds, args.episode_length, args.backend)
-    if not 0 <= args.budget_task < len(tasks):
-        raise ValueError(f"--budget-task={args.budget_task} is invalid: allowed is 0..{len(tasks) - 1}.")
-    budget_rows = []
-    if budgets:
-        task = tasks[args.budget_task]
-        env_config = envs.make_config(task["env_name"], **task["env_config"])
-        for samples, horizon in budgets:
-            swept = dataclasses.replace(config, samples=samples, horizon=horizon)
-            print(f"{task['task']}: budget {samples}x{horizon}")
-            result = evaluation.run(evaluation.planner_policy(swept), task["env_name"], env_config, args.episodes, seeds)
-            budget_rows.append(row(result, env_config.episode_length))
-        plot_budget(budget_rows, task["task"], os.path.join(args.out, "budget.png"))
+    groups = group_tasks(checkpoints, args.episode_length, args.backend)
+    if budgets and not 0 <= args.budget_task < len(groups):
+        raise ValueError(f"--budget-task={args.budget_task} is invalid: allowed is 0..{len(groups) - 1}.")
     report = {**provenance.stamp(), "planner": dataclasses.asdict(config), "episodes": args.episodes,
-              "eval_seeds": seeds, "tasks": tasks, "budget_task": tasks[args.budget_task]["task"] if budgets else None,
-              "budgets": budget_rows}
-    with open(os.path.join(args.out, "planner.json"), "w") as f:
-        json.dump(jsonable(report), f, indent=2, default=str)
-    table = markdown(tasks, budget_rows)
-    with open(os.path.join(args.out, "table.md"), "w") as f:
-        f.write(table)
-    print(table)
+              "eval_seeds": seeds, "tasks": [], "budget_task": groups[args.budget_task]["task"] if budgets else None,
+              "budgets": []}
+    os.makedirs(args.out, exist_ok=True)
+    for group in groups:  # written after every task: a run cut short keeps what it finished
+        report["tasks"].append(evaluate_task(group, config, args.episodes, seeds))
+        write(args.out, report)
+    if budgets:
+        group = groups[args.budget_task]
+        report["budgets"] = sweep(group, report["tasks"][args.budget_task], config, budgets, args.episodes, seeds)
+        write(args.out, report)
+    print(markdown(report["tasks"], report["budgets"], report["budget_task"]))
     return 0
 
+
+def write(out: str, report: dict) -> None:
+    """planner.json, table.md and (with a sweep) budget.png of `report`."""
+    with open(os.path.join(out, "planner.json"), "w") as f:
+        json.dump(jsonable(report), f, indent=2, default=str)
+    with open(os.path.join(out, "table.md"), "w") as f:
+        f.write(markdown(report["tasks"], report["budgets"], report["budget_task"]))
+    if report["budgets"]:
+        plot_budget(report["budgets"], report["budget_task"], os.path.join(out, "budget.png"))
+
+
+def merge(paths: list[str], out: str) -> dict:
+    """One report of several planner.json files (their tasks in order, the sweep of the one that has it), each
+    source's command, code, device and date kept under "sources"."""
+    reports = [json.load(open(path)) for path in paths]
+    swept = [r for r in reports if r.get("budgets")]
+    if len(swept) > 1:
+        raise ValueError(f"--from-json holds {len(swept)} budget sweeps: allowed is at most one.")
+    merged = {"sources": [{k: r[k] for k in ("command", "code", "device", "date", "planner", "episodes", "eval_seeds")}
+                          | {"tasks": [t["task"] for t in r["tasks"]], "path": path} for path, r in zip(paths, reports)],
+              "tasks": [t for r in reports for t in r["tasks"]],
+              "budget_task": swept[0]["budget_task"] if swept else None,
+              "budgets": swept[0]["budgets"] if swept else []}
+    os.makedirs(out, exist_ok=True)
+    write(out, merged)
+    return merged
 
 if __name__ == "__main__":
     run_cli(main)
