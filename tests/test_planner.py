@@ -241,6 +241,16 @@ def test_runs_made_apart_merge_into_one_table(table_run, tmp_path):
     assert [t["task"] for t in merged["tasks"]] == ["point-mass", "point-mass, again"]
 
 
+def test_a_task_in_two_runs_keeps_the_first_runs_rows(table_run, tmp_path):
+    out, report = table_run
+    other = dict(report, budgets=[], budget_task=None, tasks=[dict(report["tasks"][0], rows=[])])
+    (tmp_path / "other.json").write_text(json.dumps(other))
+    planner_table.main(["--from-json", str(tmp_path / "other.json"), str(out / "planner.json"), "--out",
+                        str(tmp_path / "merged")])
+    merged = json.loads((tmp_path / "merged" / "planner.json").read_text())
+    assert [len(t["rows"]) for t in merged["tasks"]] == [0]
+
+
 def test_merging_two_sweeps_is_refused(table_run, tmp_path):
     out, _ = table_run
     with pytest.raises(ValueError, match="2 budget sweeps"):

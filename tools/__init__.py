@@ -1,6 +1,7 @@
 """User tools around trained policies: the paper's tables (`paper_tables`), why a policy fails
 (`failure_report`), shipping a policy export (`ship_checkpoint`), figures (`plots`, the README's `readme_media`),
-algorithms compared over tasks with rliable (`compare_runs`), the results tables (`results_index`), the UR5e's
+algorithms compared over tasks with rliable (`compare_runs`), the MPPI planner beside the shipped policies
+(`planner_table`), the results tables (`results_index`), the UR5e's
 fidelity to the paper (`fidelity`, `fidelity_train`) and the experiments (`experiments`: registry, state,
 launching, tables). Each runs as
 `python -m tools.<name> --help` from the repository root and imports as `from tools import <name>`."""

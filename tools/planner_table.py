@@ -167,27 +167,33 @@ def _scaled(summary: dict, key: str, scale: float) -> str:
     return text + (f" ± {scale * std:.{digits}f}" if std is not None and s.get("units", 1) > 1 else "")
 
 
-def plot_budget(budget_rows: list[dict], task: str, path: str) -> None:
-    """Reached and obstacle-collision percentages against the planning budget (simulated steps per step, log scale)."""
+def plot_budget(budget_rows: list[dict], task: dict | None, title: str, path: str) -> None:
+    """Reached and collision percentages against the planning budget (simulated steps per step, log scale), with
+    the task's best export's reached percentage as a dashed line (`task`: its table entry, if evaluated)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     cost = [r["model_steps_per_step"] for r in budget_rows]
-    fig, ax = plt.subplots(figsize=(5, 3.4))
-    for key, label in (("target_reached", "reached"), ("obstacle_collision", "obstacle collision"),
-                       ("self_collision", "self collision")):
+    fig, ax = plt.subplots(figsize=(6, 3.6))
+    for key, label in (("target_reached", "planner: reached"), ("obstacle_collision", "planner: obstacle collision"),
+                       ("self_collision", "planner: self collision")):
         if key in budget_rows[0]["summary"]:
             ax.plot(cost, [100.0 * r["summary"][key]["mean"] for r in budget_rows], "o-", label=label)
-    for r, x in zip(budget_rows, cost):
-        p = r["policy"]["planner"]
-        ax.annotate(f"{p['samples']}x{p['horizon']}", (x, 100.0 * r["summary"]["target_reached"]["mean"]),
-                    textcoords="offset points", xytext=(0, 6), ha="center", fontsize=7)
+    exports = [r for r in (task or {}).get("rows", []) if r["policy"]["kind"] == "checkpoint"]
+    if exports:
+        best = max(exports, key=lambda r: r["summary"]["target_reached"]["mean"])
+        ax.axhline(100.0 * best["summary"]["target_reached"]["mean"], color="gray", ls="--",
+                   label=f"{os.path.basename(best['policy']['name'].rstrip('/'))}: reached")
     ax.set_xscale("log")
-    ax.set_xlabel("planning budget: simulated env steps per env step (samples x horizon)")
+    ax.minorticks_off()
+    ax.set_xticks(cost, [f"{r['policy']['planner']['samples']}x{r['policy']['planner']['horizon']}\n{c}"
+                         for r, c in zip(budget_rows, cost)], fontsize=7)
+    ax.set_xlabel("planning budget: samples x horizon (simulated env steps per env step)", fontsize=8)
     ax.set_ylabel("% of episodes")
-    ax.set_title(f"MPPI on {task}", fontsize=9)
-    ax.legend(fontsize=7)
+    ax.set_ylim(0, 100)
+    ax.set_title(f"MPPI on {title}", fontsize=9)
+    ax.legend(fontsize=7, loc="lower right", bbox_to_anchor=(1.0, 0.12))
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
@@ -251,19 +257,25 @@ def write(out: str, report: dict) -> None:
     with open(os.path.join(out, "table.md"), "w") as f:
         f.write(markdown(report["tasks"], report["budgets"], report["budget_task"]))
     if report["budgets"]:
-        plot_budget(report["budgets"], report["budget_task"], os.path.join(out, "budget.png"))
+        task = next((t for t in report["tasks"] if t["task"] == report["budget_task"]), None)
+        plot_budget(report["budgets"], task, report["budget_task"], os.path.join(out, "budget.png"))
 
 
 def merge(paths: list[str], out: str) -> dict:
-    """One report of several planner.json files (their tasks in order, the sweep of the one that has it), each
-    source's command, code, device and date kept under "sources"."""
+    """One report of several planner.json files (their tasks in order; a task in several files keeps the first
+    file's rows, so a sweep made apart with fewer episodes adds only its sweep), each source's command, code,
+    device and date kept under "sources"."""
     reports = [json.load(open(path)) for path in paths]
     swept = [r for r in reports if r.get("budgets")]
     if len(swept) > 1:
         raise ValueError(f"--from-json holds {len(swept)} budget sweeps: allowed is at most one.")
+    first: dict[str, dict] = {}
+    for r in reports:
+        for t in r["tasks"]:
+            first.setdefault(t["task"], t)
     merged = {"sources": [{k: r[k] for k in ("command", "code", "device", "date", "planner", "episodes", "eval_seeds")}
                           | {"tasks": [t["task"] for t in r["tasks"]], "path": path} for path, r in zip(paths, reports)],
-              "tasks": [t for r in reports for t in r["tasks"]],
+              "tasks": list(first.values()),
               "budget_task": swept[0]["budget_task"] if swept else None,
               "budgets": swept[0]["budgets"] if swept else []}
     os.makedirs(out, exist_ok=True)
