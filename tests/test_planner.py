@@ -255,3 +255,10 @@ def test_merging_two_sweeps_is_refused(table_run, tmp_path):
     out, _ = table_run
     with pytest.raises(ValueError, match="2 budget sweeps"):
         planner_table.main(["--from-json", str(out / "planner.json"), str(out / "planner.json"), "--out", str(tmp_path)])
+
+
+def test_a_merged_report_names_its_sources_code_device_and_date(table_run, tmp_path):
+    out, report = table_run
+    planner_table.main(["--from-json", str(out / "planner.json"), "--out", str(tmp_path / "merged")])
+    merged = json.loads((tmp_path / "merged" / "planner.json").read_text())
+    assert (merged["code"], merged["device"], merged["date"]) == (report["code"], report["device"], report["date"])

@@ -264,7 +264,7 @@ def write(out: str, report: dict) -> None:
 def merge(paths: list[str], out: str) -> dict:
     """One report of several planner.json files (their tasks in order; a task in several files keeps the first
     file's rows, so a sweep made apart with fewer episodes adds only its sweep), each source's command, code,
-    device and date kept under "sources"."""
+    device and date kept under "sources"; at the top, the merge's command and the sources' codes, devices, dates."""
     reports = [json.load(open(path)) for path in paths]
     swept = [r for r in reports if r.get("budgets")]
     if len(swept) > 1:
@@ -273,7 +273,9 @@ def merge(paths: list[str], out: str) -> dict:
     for r in reports:
         for t in r["tasks"]:
             first.setdefault(t["task"], t)
-    merged = {"sources": [{k: r[k] for k in ("command", "code", "device", "date", "planner", "episodes", "eval_seeds")}
+    joined = lambda key: ", ".join(dict.fromkeys(str(r[key]) for r in reports))
+    merged = {"command": provenance.command(), "code": joined("code"), "device": joined("device"),
+              "date": joined("date"), "sources": [{k: r[k] for k in ("command", "code", "device", "date", "planner", "episodes", "eval_seeds")}
                           | {"tasks": [t["task"] for t in r["tasks"]], "path": path} for path, r in zip(paths, reports)],
               "tasks": list(first.values()),
               "budget_task": swept[0]["budget_task"] if swept else None,
