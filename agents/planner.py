@@ -25,6 +25,7 @@ import jax.numpy as jnp
 
 from agents.baselines import joint_target_action
 from envs import validation
+from envs.wrappers import VmapWrapper
 
 NAME = "mppi"
 """The planner's policy name (eval.py --policy mppi)."""
@@ -118,6 +119,9 @@ def make_act(env, config: PlannerConfig):
     """`(act, memory)` for `agents.loop.make_evaluate` over the batched, non-resetting evaluation env `env`
     (`envs.wrap(..., autoreset=False)`): `memory(start)` is each env's first plan `(n, H, A)`;
     `act(params, state, start, key, plans)` plans every env (params are unused) and returns `(actions, plans)`."""
+    if not isinstance(env, VmapWrapper):
+        raise ValueError(f"env of type {type(env).__name__} is invalid for the planner: allowed is a batched env, "
+                         "envs.wrap(env, autoreset=False).")
     single = env.env  # the batch's per-env stack: episode limit included, no auto-reset
     step = single.step
 

@@ -30,6 +30,11 @@ def test_the_cost_is_samples_times_horizon_times_iterations():
     assert planner.PlannerConfig(samples=8, horizon=5, iterations=3).model_steps_per_step == 120
 
 
+def test_an_unbatched_env_is_refused():
+    with pytest.raises(ValueError, match="allowed is a batched env"):
+        planner.make_act(envs.make("point-mass"), planner.PlannerConfig())
+
+
 def test_the_weights_follow_the_best_return_at_a_small_temperature():
     w = planner.mppi_weights(jnp.array([0.0, 1.0, 0.5]), 0.01)
     assert float(w[1]) == pytest.approx(1.0, abs=1e-6)
