@@ -19,7 +19,7 @@ from typing import Any, Generic, Literal, TypeVar
 import jax
 
 import envs
-from envs.validation import INT32_MAX, integer
+from envs.validation import INT32_MAX, in_range, integer
 from agents import registry
 from agents.loop import MULTI_DEVICE_MODES
 
@@ -87,6 +87,10 @@ class TrainConfig(Generic[EnvConfigT, AlgoConfigT]):
     a chunk of updates starts only if it ends in time at the last chunk's speed (0 = no limit; the
     first chunk's time includes compilation, so the second is judged conservatively). The final
     evaluation is not counted: keep time for it. Continue later with --resume."""
+    stop_at_success: float = 0.0
+    """Stop early, and evaluate, once every seed's training episodes reach this success rate: the share of
+    episodes that reached the target among those finished since the last log (checked at every log, so
+    `log_every` sets how often); 0 = never. The final evaluation then measures the policy on fresh episodes."""
     eval_envs: int = 4096
     """Environments of the final deterministic evaluation (one episode each; 0 = no evaluation)."""
     eval_seed: int = 1_000_000
@@ -115,7 +119,7 @@ class TrainConfig(Generic[EnvConfigT, AlgoConfigT]):
 
 
 RUN_FIELDS = ("num_timesteps", "devices", "multi_device", "logdir", "resume", "overwrite", "checkpoint_every", "keep_checkpoints",
-              "checkpoint_envs", "log_every", "stop_after_steps", "stop_after_seconds", "eval_envs", "eval_seed", "eval_last_steps",
+              "checkpoint_envs", "log_every", "stop_after_steps", "stop_after_seconds", "stop_at_success", "eval_envs", "eval_seed", "eval_last_steps",
               "tensorboard", "progress", "logger", "wandb_mode", "wandb_project")
 """Fields that may differ between a checkpoint's config and a resuming command line."""
 
@@ -161,6 +165,7 @@ def validate(config: TrainConfig) -> None:
             raise ValueError(f"{name}={getattr(config, name)!r} is invalid: allowed is at most "
                              f"{INT32_MAX * spu:,} env steps ({INT32_MAX:,} updates "
                              f"of {spu:,}: the update counter is int32, as JAX computes).")
+    in_range("stop_at_success", config.stop_at_success, 0.0, 1.0)
     if not config.stop_after_seconds >= 0:  # also refuses NaN
         raise ValueError(f"stop_after_seconds={config.stop_after_seconds!r} is invalid: allowed is a number >= 0 "
                          "(0 = no limit).")

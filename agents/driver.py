@@ -198,6 +198,10 @@ def _train(config: TrainConfig, learner_cls: type | None = None) -> TrainResult:
             logger.log(step, metrics, {"steps_per_second": rate, "wall_seconds": seconds})
             logger.progress(step, updates_total * spu, rate / config.seeds, metrics, compiled=compiled)
             last_metrics = metrics
+            if succeeded(config, metrics):
+                logger.say(f"[{logger.label}] every seed's training episodes reached the target at least "
+                           f"{config.stop_at_success:.0%} of the time (stop_at_success): stopping at {step:,} env steps")
+                break
             due = config.checkpoint_every and updates_done % every(config.checkpoint_every) == 0
             if due or interrupted["flag"]:
                 save_checkpoint(ckpt, step, state, config, programs.learner)
@@ -207,7 +211,7 @@ def _train(config: TrainConfig, learner_cls: type | None = None) -> TrainResult:
                 status = "interrupted"
                 break
         step = updates_done * spu
-        if status == "done" and updates_done < updates_total:
+        if status == "done" and updates_done < updates_total and not succeeded(config, last_metrics):
             status = "stopped"
         if last_saved != step:
             save_checkpoint(ckpt, step, state, config, programs.learner)
@@ -448,6 +452,12 @@ def evaluate(programs: Programs, state, config: TrainConfig) -> dict:
 STOP_SIGNALS = (signal.SIGINT, signal.SIGUSR2)
 """Signals that ask a run to save a checkpoint after the current chunk and return "interrupted": Ctrl-C, and
 SIGUSR2, the scheduler's warning before a time limit or a preemption (Slurm's `--signal`, submitit's default)."""
+
+
+def succeeded(config: TrainConfig, metrics: dict | None) -> bool:
+    """Whether `stop_at_success` is set and every seed's training episodes of the last chunk reached it."""
+    reached = (metrics or {}).get("episode/target_reached")
+    return bool(config.stop_at_success) and reached is not None and bool(np.all(np.asarray(reached) >= config.stop_at_success))
 
 
 def _install_sigint(flag: dict):
