@@ -6,6 +6,7 @@ swish activations, LeCun-uniform kernels and zero biases; those are our defaults
 
 from __future__ import annotations
 
+import dataclasses
 import numbers
 from typing import Callable, Sequence
 
@@ -113,3 +114,27 @@ def validate_network_fields(hidden_field: str, hidden_sizes, activation: str, in
         raise ValueError(f"{prefix}{hidden_field}={tuple(hidden_sizes)!r} is invalid: allowed is a non-empty tuple of integers >= 1.")
     validation.choice(prefix + "activation", activation, tuple(ACTIVATIONS))
     validation.choice(prefix + "kernel_init", init, KERNEL_INITS)
+
+
+@dataclasses.dataclass(frozen=True)
+class NetworkConfig:
+    """The network fields PPO's and SAC's configs share (`agents.ppo.PPOConfig`, `agents.sac.SACConfig` inherit
+    them; each adds the hidden sizes of its second network)."""
+
+    min_std: float = 1e-3
+    """Lower bound of the policy's pre-squash standard deviation."""
+    policy_hidden_sizes: tuple[int, ...] = (256, 256, 256)
+    """Hidden layer widths of the policy (paper: 3x256; 4x256 for absolute control / reach-avoid)."""
+    activation: str = "swish"
+    """Hidden activation: swish, relu, tanh, elu or gelu."""
+    kernel_init: str = "lecun_uniform"
+    """Weight initialiser: lecun_uniform, orthogonal or glorot_uniform."""
+    layer_norm: bool = False
+    """LayerNorm after each hidden layer (of every network)."""
+
+    def validate_networks(self, other_hidden_field: str) -> None:
+        """ValueErrors naming the field: the policy's and the other network's sizes (`other_hidden_field`), the
+        activation, the initialiser and min_std."""
+        validation.positive("algo.min_std", self.min_std)
+        for field in ("policy_hidden_sizes", other_hidden_field):
+            validate_network_fields(field, getattr(self, field), self.activation, self.kernel_init)

@@ -41,7 +41,7 @@ LR_SCHEDULES = ("constant", "linear", "cosine")
 
 
 @dataclasses.dataclass(frozen=True)
-class PPOConfig:
+class PPOConfig(networks.NetworkConfig):
     """PPO hyperparameters. Defaults: the paper's reach setting (relative control)."""
 
     num_envs: int = 8192
@@ -90,18 +90,8 @@ class PPOConfig:
     recompute_advantages: bool = True
     """Recompute advantages with the current value function at the start of every epoch after the
     first (whose parameters give the update's initial advantages)."""
-    min_std: float = 1e-3
-    """Lower bound of the policy's pre-squash standard deviation."""
-    policy_hidden_sizes: tuple[int, ...] = (256, 256, 256)
-    """Hidden layer widths of the policy (paper: 3x256; 4x256 for absolute control / reach-avoid)."""
     value_hidden_sizes: tuple[int, ...] = (256, 256, 256)
     """Hidden layer widths of the value network."""
-    activation: str = "swish"
-    """Hidden activation: swish, relu, tanh, elu or gelu."""
-    kernel_init: str = "lecun_uniform"
-    """Weight initialiser: lecun_uniform, orthogonal or glorot_uniform."""
-    layer_norm: bool = False
-    """LayerNorm after each hidden layer."""
 
     @property
     def env_steps_per_update(self) -> int:
@@ -132,12 +122,10 @@ class PPOConfig:
         validation.in_range("algo.lr_end_fraction", self.lr_end_fraction, 0.0, 1.0)
         validation.in_range("algo.value_norm_decay", self.value_norm_decay, 0.0, 1.0)
         validation.positive("algo.clip_epsilon", self.clip_epsilon)
-        validation.positive("algo.min_std", self.min_std)
         for name in ("entropy_coef", "value_loss_coef", "max_grad_norm", "target_kl", "obs_clip"):
             validation.positive("algo." + name, getattr(self, name), strict=False)
         validation.choice("algo.lr_schedule", self.lr_schedule, LR_SCHEDULES)
-        networks.validate_network_fields("policy_hidden_sizes", self.policy_hidden_sizes, self.activation, self.kernel_init)
-        networks.validate_network_fields("value_hidden_sizes", self.value_hidden_sizes, self.activation, self.kernel_init)
+        self.validate_networks("value_hidden_sizes")
 
 
 def _divisors_near(n: int, x: int) -> str:

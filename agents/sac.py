@@ -39,7 +39,7 @@ from envs import validation
 
 
 @dataclasses.dataclass(frozen=True)
-class SACConfig:
+class SACConfig(networks.NetworkConfig):
     """SAC hyperparameters. Defaults: the paper's SAC setting (section "Training and evaluation")."""
 
     num_envs: int = 128
@@ -72,18 +72,8 @@ class SACConfig:
     """Normalised observations are clipped to [-obs_clip, obs_clip] (0 disables)."""
     max_grad_norm: float = 0.0
     """Clip each network's gradient norm to this (0 disables)."""
-    min_std: float = 1e-3
-    """Lower bound of the policy's pre-squash standard deviation."""
-    policy_hidden_sizes: tuple[int, ...] = (256, 256, 256)
-    """Hidden layer widths of the policy."""
     q_hidden_sizes: tuple[int, ...] = (256, 256, 256)
     """Hidden layer widths of each Q network."""
-    activation: str = "swish"
-    """Hidden activation: swish, relu, tanh, elu or gelu."""
-    kernel_init: str = "lecun_uniform"
-    """Weight initialiser: lecun_uniform, orthogonal or glorot_uniform."""
-    layer_norm: bool = False
-    """LayerNorm after each hidden layer (of the policy and the critics)."""
     n_step: int = 1
     """Steps summed in each critic target before bootstrapping (cut at episode ends); 1 = one-step SAC."""
     distributional: bool = False
@@ -141,13 +131,11 @@ class SACConfig:
         validation.positive("algo.learning_rate", self.learning_rate)
         validation.positive("algo.reward_scaling", self.reward_scaling)
         validation.positive("algo.init_alpha", self.init_alpha)
-        validation.positive("algo.min_std", self.min_std)
         validation.in_range("algo.discount", self.discount, 0.0, 1.0)
         validation.in_range("algo.tau", self.tau, 0.0, 1.0)
         for name in ("max_grad_norm", "obs_clip"):
             validation.positive("algo." + name, getattr(self, name), strict=False)
-        networks.validate_network_fields("policy_hidden_sizes", self.policy_hidden_sizes, self.activation, self.kernel_init)
-        networks.validate_network_fields("q_hidden_sizes", self.q_hidden_sizes, self.activation, self.kernel_init)
+        self.validate_networks("q_hidden_sizes")
         validation.choice("algo.compute_dtype", self.compute_dtype, tuple(networks.COMPUTE_DTYPES))
 
 
