@@ -1,0 +1,131 @@
+"""Time to result: how long a researcher waits, per fresh seed, for a policy at a target success rate.
+
+    python -m benchmarks.time_to_result ur5e-reach-ppo --seeds 5 --target 0.96 --out results/time_to_result/ur5e_reach_ppo
+    python -m benchmarks.time_to_result point-mass-ppo --seeds 2 --target 0.8 --out /tmp/ttr -- --eval-envs 64
+
+Each seed is one `train.py PRESET --seed S --stop-at-success TARGET` process of its own, timed from its start to its
+exit: importing, compiling (no persistent compilation cache unless `--cache-dir`), training until every training
+episode batch reaches the target (or the preset's budget ends) and the final evaluation on fresh episodes. Options
+after `--` go to train.py unchanged. Reported per seed: the wall clock, the env steps trained, the training success
+at the stop and the evaluation's success; a seed counts as a result when its evaluation reaches the target.
+
+Writes `--out`.json (every seed, command, code version, device, date) and `--out`.md (the table).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import os
+import shlex
+import subprocess
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+from agents import provenance
+from agents.eval_stats import jsonable
+from agents.presets import PRESETS
+from tools import run_cli
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def train_command(preset: str, seed: int, target: float, logdir: str, extra: list[str]) -> list[str]:
+    """The train.py command line of one seed."""
+    return [sys.executable, os.path.join(ROOT, "train.py"), preset, "--seed", str(seed), "--seeds", "1",
+            "--stop-at-success", str(target), "--logdir", logdir, "--no-progress", "--no-tensorboard", *extra]
+
+
+def run_seed(preset: str, seed: int, target: float, logdir: str, extra: list[str], cache_dir: str | None) -> dict:
+    """One seed's process: its wall clock and what its eval.json and metrics.csv say."""
+    env = dict(os.environ)
+    env.pop("JAX_COMPILATION_CACHE_DIR", None)
+    if cache_dir:
+        env["JAX_COMPILATION_CACHE_DIR"] = cache_dir
+    command = train_command(preset, seed, target, logdir, extra)
+    start = time.perf_counter()
+    done = subprocess.run(command, env=env, capture_output=True, text=True)
+    seconds = time.perf_counter() - start
+    if done.returncode != 0:
+        raise RuntimeError(f"seed {seed}: train.py exited with {done.returncode}: {done.stderr.strip()[-2000:]}")
+    with open(os.path.join(logdir, "eval.json")) as f:
+        report = json.load(f)
+    training = last_training_success(os.path.join(logdir, "metrics.csv"))
+    evaluated = float(report["mean"]["episode/target_reached"])
+    return {"seed": seed, "wall_seconds": seconds, "env_steps": int(report["env_steps"]), "training_success": training,
+            "eval_success": evaluated, "reached_target": evaluated >= target,
+            "command": " ".join(shlex.quote(c) for c in command[1:])}
+
+
+def last_training_success(path: str) -> float:
+    """The training episodes' success rate at the last log of a one-seed run's metrics.csv."""
+    with open(path) as f:
+        rows = list(csv.DictReader(f))
+    return float(rows[-1]["episode/target_reached"])
+
+
+def summary(rows: list[dict]) -> dict:
+    """Mean, sample std (ddof 1) and max of the wall clocks; how many seeds' evaluations reached the target."""
+    wall = np.array([r["wall_seconds"] for r in rows])
+    return {"seeds": len(rows), "wall_mean": float(wall.mean()), "wall_std": float(np.std(wall, ddof=1)) if len(wall) > 1 else None,
+            "wall_max": float(wall.max()), "reached": int(sum(r["reached_target"] for r in rows))}
+
+
+def markdown(preset: str, target: float, rows: list[dict]) -> str:
+    s = summary(rows)
+    lines = [f"`{preset}` to {100 * target:.1f} % reached", "",
+             "| seed | wall clock (s) | env steps | training success at the stop | evaluation reached | target met |",
+             "|---:|---:|---:|---:|---:|---|"]
+    for r in rows:
+        lines.append(f"| {r['seed']} | {r['wall_seconds']:.0f} | {r['env_steps']:,} | {100 * r['training_success']:.1f} % "
+                     f"| {100 * r['eval_success']:.1f} % | {'yes' if r['reached_target'] else 'no'} |")
+    std = "" if s["wall_std"] is None else f" ± {s['wall_std']:.0f}"
+    lines += ["", f"Wall clock {s['wall_mean']:.0f}{std} s (mean ± sample std over {s['seeds']} seeds), at most "
+                  f"{s['wall_max']:.0f} s; {s['reached']} of {s['seeds']} seeds' evaluations reached the target."]
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    extra = argv[argv.index("--") + 1:] if "--" in argv else []
+    argv = argv[:argv.index("--")] if "--" in argv else argv
+    p = argparse.ArgumentParser(prog="python -m benchmarks.time_to_result", description=__doc__.split("\n\n")[0])
+    p.add_argument("preset")
+    p.add_argument("--seeds", type=int, default=5, help="fresh seeds, one process each")
+    p.add_argument("--first-seed", type=int, default=100, help="the first seed (seeds the presets' runs did not use)")
+    p.add_argument("--target", type=float, required=True, help="success rate to stop at and to reach in evaluation")
+    p.add_argument("--out", required=True, help="path prefix of the .json and .md written")
+    p.add_argument("--cache-dir", default=None, help="a persistent compilation cache (default: none, a cold start)")
+    p.add_argument("--logdir", default=None, help="where the runs go (default: a temporary folder, removed)")
+    args = p.parse_args(argv)
+    if args.preset not in PRESETS:
+        raise ValueError(f"preset={args.preset!r} is unknown: allowed are {', '.join(sorted(PRESETS))}.")
+    if args.seeds < 1:
+        raise ValueError(f"--seeds={args.seeds} is invalid: allowed is an integer >= 1.")
+    if not 0.0 < args.target <= 1.0:
+        raise ValueError(f"--target={args.target} is invalid: allowed is a success rate in (0, 1].")
+    os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        base = args.logdir or tmp
+        for seed in range(args.first_seed, args.first_seed + args.seeds):
+            rows.append(run_seed(args.preset, seed, args.target, os.path.join(base, f"seed{seed}"), extra,
+                                 args.cache_dir))
+            print(f"seed {seed}: {rows[-1]['wall_seconds']:.0f} s, {rows[-1]['env_steps']:,} env steps, "
+                  f"evaluation {100 * rows[-1]['eval_success']:.1f} %", flush=True)
+            report = {**provenance.stamp(), "preset": args.preset, "target": args.target, "train_options": extra,
+                      "cache_dir": args.cache_dir, "seeds": rows, "summary": summary(rows)}
+            with open(args.out + ".json", "w") as f:  # after every seed: a run cut short keeps what it finished
+                json.dump(jsonable(report), f, indent=2)
+            with open(args.out + ".md", "w") as f:
+                f.write(markdown(args.preset, args.target, rows))
+    print(markdown(args.preset, args.target, rows))
+    return 0
+
+
+if __name__ == "__main__":
+    run_cli(main)

@@ -1,0 +1,55 @@
+"""benchmarks/time_to_result.py: one fresh process per seed, stopped at the target success, timed and evaluated."""
+
+import json
+
+import pytest
+
+from benchmarks import time_to_result
+
+
+@pytest.fixture(scope="module")
+def one_seed(tmp_path_factory):
+    out = tmp_path_factory.mktemp("ttr")
+    time_to_result.main(["point-mass-ppo", "--seeds", "1", "--target", "0.8", "--out", str(out / "pm"),
+                         "--logdir", str(out / "runs"), "--", "--eval-envs", "64", "--log-every", "5000"])
+    return out, json.loads((out / "pm.json").read_text())
+
+
+def test_the_seed_stops_before_the_presets_budget(one_seed):
+    _, report = one_seed
+    assert report["seeds"][0]["env_steps"] < 150_000
+
+
+def test_the_reported_evaluation_is_the_runs_own(one_seed):
+    out, report = one_seed
+    run = json.loads((out / "runs" / "seed100" / "eval.json").read_text())
+    assert report["seeds"][0]["eval_success"] == run["mean"]["episode/target_reached"]
+
+
+def test_the_stop_came_at_the_target_training_success(one_seed):
+    _, report = one_seed
+    assert report["seeds"][0]["training_success"] >= 0.8
+
+
+def test_the_report_names_what_made_it(one_seed):
+    _, report = one_seed
+    assert all(report.get(key) for key in ("command", "code", "device", "date"))
+
+
+def test_the_table_is_written(one_seed):
+    out, _ = one_seed
+    assert "| 100 |" in (out / "pm.md").read_text()
+
+
+def test_the_summary_uses_the_sample_std():
+    rows = [{"wall_seconds": w, "reached_target": r} for w, r in ((100.0, True), (120.0, False), (140.0, True))]
+    s = time_to_result.summary(rows)
+    assert (s["wall_mean"], s["wall_std"], s["wall_max"], s["reached"]) == (120.0, 20.0, 140.0, 2)
+
+
+@pytest.mark.parametrize("args, field", [(["nope", "--target", "0.9"], "preset="),
+                                         (["point-mass-ppo", "--target", "0"], "--target="),
+                                         (["point-mass-ppo", "--target", "0.9", "--seeds", "0"], "--seeds=")])
+def test_bad_options_are_refused_naming_them(args, field, tmp_path):
+    with pytest.raises(ValueError, match=field):
+        time_to_result.main(args + ["--out", str(tmp_path / "x")])
