@@ -39,6 +39,12 @@ class Compiled:
     def start(self, seed, n=N):
         return self.reset(jax.random.split(jax.random.PRNGKey(seed), n))
 
+    def starts(self, seed, batches):
+        """`batches` x N start states from the compiled reset of N envs (one program for every sample size),
+        stacked along the batch axis."""
+        states = [self.start(seed * 1000 + i) for i in range(batches)]
+        return jax.tree.map(lambda *leaves: np.concatenate([np.asarray(x) for x in leaves]), *states)
+
 
 @pytest.fixture(scope="module")
 def compiled():
@@ -111,7 +117,7 @@ def test_default_envs_reproduce_their_golden_rollout(compiled, name):
 @pytest.mark.parametrize("name", ["ur5e-reach", "panda-reach"])
 def test_initial_poses_collision_free_and_in_range(compiled, name):
     c = compiled(name)
-    state = c.raw_reset(jax.random.split(jax.random.PRNGKey(3), 64))
+    state = c.starts(3, 16)  # 64 envs
     model = contact_model(c.env.robot)
     qpos = np.asarray(state.pipeline_state.qpos)
     assert (qpos >= c.env.robot.joint_low - 1e-6).all()
@@ -123,16 +129,16 @@ def test_initial_poses_collision_free_and_in_range(compiled, name):
 
 def test_limited_initial_range_ur5e(compiled):
     c = compiled("ur5e-reach", init_range="limited")
-    qpos = np.asarray(c.raw_reset(jax.random.split(jax.random.PRNGKey(4), 64)).pipeline_state.qpos)
+    qpos = np.asarray(c.starts(4, 16).pipeline_state.qpos)  # 64 envs
     assert np.abs(qpos).max() <= np.pi + 1e-6
-    full = np.asarray(compiled("ur5e-reach").raw_reset(jax.random.split(jax.random.PRNGKey(4), 64)).pipeline_state.qpos)
+    full = np.asarray(compiled("ur5e-reach").starts(4, 16).pipeline_state.qpos)
     assert np.abs(full).max() > np.pi  # the full range really uses +-2 pi
 
 
 @pytest.mark.parametrize("workspace", ["full", "front", "upper"])
 def test_reachable_targets_inside_workspace_and_reached_by_their_pose(compiled, workspace):
     c = compiled("ur5e-reach", workspace=workspace)
-    state = c.raw_reset(jax.random.split(jax.random.PRNGKey(5), 48))
+    state = c.starts(5, 12)  # 48 envs
     robot = c.env.robot
     model = contact_model(robot)
     targets = np.asarray(state.info["target_pos"])
@@ -181,7 +187,7 @@ def test_uniform_workspace_sampler_geometry():
 def test_obstacles_clear_of_initial_pose_and_target(compiled, name):
     c = compiled(name)
     cfg = c.env.config
-    state = c.raw_reset(jax.random.split(jax.random.PRNGKey(10), 48))
+    state = c.starts(10, 12)  # 48 envs
     model = contact_model(c.env.robot, obstacle_radius=cfg.obstacle_radius)
     obstacle = np.asarray(state.info["obstacle_pos"])
     assert (np.abs(obstacle) <= cfg.obstacle_region).all()

@@ -35,7 +35,7 @@ QUIET = dict(tensorboard=False, progress=False)
 
 def _subprocess_env():
     path = os.pathsep.join(p for p in (ROOT, os.environ.get("PYTHONPATH", "")) if p)
-    return dict(os.environ, PYTHONPATH=path, JAX_COMPILATION_CACHE_DIR=os.path.join(ROOT, ".jax_cache"),
+    return dict(os.environ, PYTHONPATH=path, JAX_COMPILATION_CACHE_DIR=jax.config.jax_compilation_cache_dir,
                 JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS="1")
 
 
@@ -355,7 +355,7 @@ def test_pseudo_ik_with_relative_to_target_commands_the_target_pose():
     reach the target pose exactly after ceil(max |target - start| / action_scale) steps and stay there."""
     env = envs.wrap(envs.make("ur5e-reach", backend="mujoco", relative_to="target", action_scale=0.5), autoreset=False)
     act, step = jax.jit(baselines.make_act(env)), jax.jit(env.step)
-    start = state = env.reset(jax.random.split(jax.random.PRNGKey(2), 2))
+    start = state = jax.jit(env.reset)(jax.random.split(jax.random.PRNGKey(2), 2))  # jitted: one step program
     needed = int(np.ceil(np.abs(np.asarray(start.info["target_qpos"] - start.pipeline_state.qpos)).max() / 0.5))
     for t in range(needed + 1):
         before = state.pipeline_state.ctrl

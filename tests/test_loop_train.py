@@ -18,20 +18,27 @@ import pytest
 import envs
 import train as train_cli
 from agents import driver, logger, presets
-from agents.config import config_from_json, total_updates, validate
+from agents.config import config_from_json, config_json, num_devices, total_updates, validate
 from agents.checkpoint import Checkpointer
 from agents.ppo import PPO, PPOConfig
 from agents.sac import SACConfig
 from limits import HANG_GUARD_S
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-SHORT = 30_720  # 6 updates of the PPO probe preset (same compiled program as tests/test_agents_learning.py)
+SHORT = 30_720  # 6 updates of the PPO probe preset (2 seeds: the program of tests/test_agents_learning.py's 2-seed run)
 QUIET = dict(tensorboard=False, progress=False)
+PROBE = dict(num_timesteps=SHORT, seeds=2, eval_envs=0, log_every=5120, **QUIET)
+"""The in-process PPO runs of this module: one compiled program (a stop or a time limit changes no program)."""
+SAC_PROBE = dict(num_timesteps=3_200, eval_envs=0, log_every=1_600, **QUIET)
+"""The in-process SAC runs of this module, likewise (the program of tests/test_agents_learning.py's SAC run: SAC's
+program does not depend on the run's length)."""
 
 
 def _subprocess_env(**extra):
+    """The environment of a train.py subprocess: this checkout importable, and the tests' compilation cache (the
+    runs of this module share programs across processes)."""
     path = os.pathsep.join(p for p in (ROOT, os.environ.get("PYTHONPATH", "")) if p)
-    return dict(os.environ, PYTHONPATH=path, **extra)
+    return dict(os.environ, PYTHONPATH=path, JAX_COMPILATION_CACHE_DIR=jax.config.jax_compilation_cache_dir, **extra)
 
 
 def test_train_cli_writes_checkpoints_logs_and_eval_that_load_back(tmp_path):
@@ -72,18 +79,41 @@ def test_train_cli_writes_checkpoints_logs_and_eval_that_load_back(tmp_path):
     assert any(name.startswith("events.out.tfevents") for name in os.listdir(logdir / "tb" / "seed_0"))
 
 
-def test_train_cli_on_the_arm_writes_a_checkpoint_that_loads_back(tmp_path):
-    """The main job on the real env: its MJX state (with zero-size fields) checkpoints and restores."""
-    logdir = tmp_path / "arm"
+TWO_CPU_DEVICES = "--xla_force_host_platform_device_count=2"
+"""XLA_FLAGS of a subprocess with two CPU devices."""
+
+
+@pytest.fixture(scope="module")
+def arm_run(tmp_path_factory):
+    """`train.py ur5e-reach-ppo-cpu` for one update (native physics, 2 substeps) on two CPU devices, split the default
+    way (multi_device="gspmd"): its logdir. test_two_devices_match_one_device trains the same run split by
+    shard_map."""
+    logdir = tmp_path_factory.mktemp("arm") / "arm"
     cmd = [sys.executable, "train.py", "ur5e-reach-ppo-cpu", "--num-timesteps", "1280", "--eval-envs", "4",
-           "--logdir", str(logdir), "--no-progress", "--env.substeps", "2", "--env.sampling-candidates", "4"]
-    proc = subprocess.run(cmd, cwd=ROOT, env=_subprocess_env(), capture_output=True, text=True, timeout=HANG_GUARD_S)
+           "--logdir", str(logdir), "--no-progress", "--env.substeps", "2", "--env.sampling-candidates", "4",
+           "--devices", "2"]
+    proc = subprocess.run(cmd, cwd=ROOT, env=_subprocess_env(XLA_FLAGS=TWO_CPU_DEVICES), capture_output=True,
+                          text=True, timeout=HANG_GUARD_S)
     assert proc.returncode == 0, proc.stderr[-3000:]
+    return logdir
+
+
+def _restored_arm_run(logdir):
+    """(config, the full state of its checkpoint at 1280 env steps restored onto this process's one device)."""
     config = config_from_json(json.loads((logdir / "config.json").read_text()))
+    ckpt = Checkpointer(str(logdir / "checkpoints"))
+    state, _ = ckpt.restore(1280, driver.programs_for(dataclasses.replace(config, devices=1)).abstract_state)
+    return config, state
+
+
+def test_train_cli_on_the_arm_writes_a_checkpoint_that_loads_back(arm_run):
+    """The main job on the real env (here on two devices): its state (with MJX's zero-size fields) checkpoints
+    and restores, onto one device."""
+    logdir = arm_run
+    config, state = _restored_arm_run(logdir)
     assert config.env_name == "ur5e-reach"
     assert config.env.substeps == 2
-    ckpt = Checkpointer(str(logdir / "checkpoints"))
-    state, _ = ckpt.restore(1280, driver.programs_for(config).abstract_state)
+    assert config.devices == 2
     assert int(state.updates[0]) == 1
     assert state.env_state.pipeline_state.act.shape[-1] == 0  # zero-size MJX fields come back
     np.testing.assert_array_less(np.abs(np.asarray(state.env_state.pipeline_state.qpos)), 2 * np.pi + 1e-3)
@@ -98,7 +128,7 @@ def _full_state(result):
 
 
 def test_resume_reproduces_an_unbroken_run_bit_for_bit(tmp_path):
-    base = dict(num_timesteps=SHORT, eval_envs=0, log_every=5120, **QUIET)
+    base = PROBE
     unbroken = driver.train(presets.make_config("point-mass-ppo", logdir=str(tmp_path / "a"), **base))
     first = driver.train(presets.make_config("point-mass-ppo", logdir=str(tmp_path / "b"), stop_after_steps=15_360, **base))
     assert first.status == "stopped"
@@ -160,8 +190,8 @@ def _simulated_compile(clock):
 
 
 def test_a_time_limit_judges_the_next_chunk_by_its_speed_not_the_compilation(tmp_path, monkeypatch):
-    """A 50 s compilation and 1 s chunks under a 60.5 s limit: compiled ahead, the run trains 10 chunks (the 11th
-    would end at 61 s); judged by a first chunk that included the compilation (51 s) it would stop after one.
+    """A 50 s compilation and 1 s chunks under a 54.5 s limit: compiled ahead, the run trains 4 of its 6 chunks (the
+    5th would end at 55 s); judged by a first chunk that included the compilation (51 s) it would stop after one.
     The logged time of the first chunk keeps the compilation."""
     clock = {"now": 0.0, "compiled": False}
     real_programs_for = driver.programs_for
@@ -175,20 +205,24 @@ def test_a_time_limit_judges_the_next_chunk_by_its_speed_not_the_compilation(tmp
     monkeypatch.setattr(driver, "compile_ahead", compile_ahead)
     monkeypatch.setattr(driver, "programs_for",
                         lambda config, learner_cls=None: _TimedPrograms(real_programs_for(config, learner_cls), clock))
-    config = presets.make_config("point-mass-ppo", logdir=str(tmp_path / "t"), num_timesteps=25 * 5120, eval_envs=0,
-                                 log_every=5120, stop_after_seconds=60.5, **QUIET)
+    config = presets.make_config("point-mass-ppo", logdir=str(tmp_path / "t"), stop_after_seconds=54.5, **PROBE)
     result = driver.train(config)
     assert result.status == "stopped"
-    assert result.env_steps == 10 * 5120
+    assert result.env_steps == 4 * 5120
     with open(tmp_path / "t" / "metrics.csv") as f:
-        seconds = [float(row["wall_seconds"]) for row in csv.DictReader(f)]
-    assert seconds == [51.0] + [1.0] * 9
+        seconds = [float(row["wall_seconds"]) for row in csv.DictReader(f) if row["seed"] == "0"]
+    assert seconds == [51.0] + [1.0] * 3
 
 
 def test_compile_ahead_leaves_the_jit_call_nothing_to_compile(caplog):
-    """The executable compiled ahead is the one the jit call runs (fresh programs: 3 seeds, no other test's)."""
-    config = presets.make_config("point-mass-ppo", seeds=3, num_timesteps=SHORT, eval_envs=0, **QUIET)
-    programs = driver.programs_for(config)
+    """The executable compiled ahead is the one the jit call runs. Fresh programs, not the in-memory ones of the
+    tests above (which ran already): they compile, or load what the tests above put in the persistent compilation
+    cache, and jax logs either as a compilation."""
+    config = presets.make_config("point-mass-ppo", **PROBE)
+    programs = driver.build_programs.__wrapped__(config.env_name, config.env, config.algo, config.seeds,
+                                                 num_devices(config), total_updates(config), config.eval_envs,
+                                                 config.eval_last_steps, PPO, config.multi_device)
+    assert programs is not driver.programs_for(config)
     state = programs.init(driver.seed_keys(config))
     with jax.log_compiles(True), caplog.at_level("WARNING"):
         assert driver.compile_ahead(programs, state) > 0.0
@@ -207,7 +241,7 @@ def _stored_leaf_names(step_dir: str) -> list[str]:
 
 
 def test_checkpoint_without_envs_resumes_the_learner_with_fresh_episodes(tmp_path):
-    base = dict(num_timesteps=SHORT, eval_envs=0, log_every=5120, checkpoint_envs=False, **QUIET)
+    base = dict(PROBE, checkpoint_envs=False)
     logdir = str(tmp_path / "small")
     first = driver.train(presets.make_config("point-mass-ppo", logdir=logdir, stop_after_steps=15_360, **base))
     assert first.status == "stopped"
@@ -232,7 +266,7 @@ def test_checkpoint_without_envs_resumes_the_learner_with_fresh_episodes(tmp_pat
 
 
 def test_learner_only_checkpoint_of_sac_leaves_out_the_replay_buffer_and_refills_it(tmp_path):
-    base = dict(num_timesteps=3_200, eval_envs=0, log_every=1_600, checkpoint_envs=False, **QUIET)
+    base = dict(SAC_PROBE, checkpoint_envs=False)
     logdir = str(tmp_path / "sac")
     first = driver.train(presets.make_config("point-mass-sac", logdir=logdir, stop_after_steps=1_600, **base))
     assert first.status == "stopped"
@@ -269,8 +303,8 @@ class _PoisonedPPO(PPO):
 
 
 def test_nan_loss_stops_the_run_and_keeps_the_last_good_checkpoint(tmp_path):
-    config = presets.make_config("point-mass-ppo", num_timesteps=6 * 5120, checkpoint_every=2 * 5120,
-                                   log_every=5120, eval_envs=0, logdir=str(tmp_path / "nan"), **QUIET)
+    # The probe's 6 updates (its initial state is the same program for any learner class: compiled once).
+    config = presets.make_config("point-mass-ppo", checkpoint_every=2 * 5120, logdir=str(tmp_path / "nan"), **PROBE)
     with pytest.raises(driver.NonFiniteLossError, match=r"loss/total .*env step 20480.*last good checkpoint \(env step 10240\)"):
         driver.train(config, learner_cls=_PoisonedPPO)  # the user's learner class (notebooks/02)
     ckpt = Checkpointer(str(tmp_path / "nan" / "checkpoints"))
@@ -392,59 +426,82 @@ def test_resume_without_checkpoint_is_refused(tmp_path):
 
 
 TWO_DEVICES = textwrap.dedent("""
-    import dataclasses, json, jax, numpy as np
-    jax.config.update("jax_compilation_cache_dir", "{ROOT}/.jax_cache")
-    from agents import driver, presets as T
+    import json, sys
+    import jax, numpy as np
+    from agents import driver
+    from agents.config import config_from_json
     assert jax.local_device_count() == 2
-    out = {}
-    for preset, steps in (("point-mass-ppo", 2 * 5120), ("point-mass-sac", 40 * 16)):
-        algo = dict(num_envs=16, min_replay_size=256) if preset.endswith("sac") else {}
-        runs = []
-        for devices, mode in ((1, "shard_map"), (2, "shard_map"), (2, "gspmd")):
-            cfg = T.make_config(preset, num_timesteps=steps, devices=devices, multi_device=mode, seeds=2, eval_envs=0,
-                                logdir=f"{TMP}/{preset}-{devices}-{mode}", tensorboard=False, progress=False)
-            cfg = dataclasses.replace(cfg, algo=dataclasses.replace(cfg.algo, **algo))
-            r = driver.train(cfg)
-            runs.append(r)
-        one = jax.tree.leaves(jax.device_get(runs[0].state.learner))
-        for mode, run in (("shard_map", runs[1]), ("gspmd", runs[2])):
-            two = jax.tree.leaves(jax.device_get(run.state.learner))
-            out[f"{preset} {mode}"] = {
-                "max_diff": max(float(np.max(np.abs(x - y)) / (np.max(np.abs(x)) + 1e-3)) if x.size else 0.0 for x, y in zip(one, two)),
-                "moved": max(float(np.max(np.abs(x))) for x in one if x.size) > 0,
-                "env_shards": len(run.state.env_state.obs.sharding.device_set),
-                "returns": [runs[0].last_metrics["episode/return"].tolist(), run.last_metrics["episode/return"].tolist()],
-            }
-    # The MJX arm on two devices (its constraint solver needs shard_map's check_vma=False), both ways.
-    for mode in ("shard_map", "gspmd"):
-        cfg = T.make_config("ur5e-reach-ppo-cpu", num_timesteps=1280, devices=2, multi_device=mode, eval_envs=0,
-                            logdir=f"{TMP}/arm-{mode}", tensorboard=False, progress=False)
-        cfg = dataclasses.replace(cfg, env=dataclasses.replace(cfg.env, substeps=2, sampling_candidates=4))
-        r = driver.train(cfg)
-        out[f"arm {mode}"] = {"env_shards": len(r.state.env_state.obs.sharding.device_set),
-                              "losses_finite": bool(all(np.isfinite(v).all() for k, v in r.last_metrics.items() if k.startswith("loss/"))),
-                              "policy": jax.tree.leaves(jax.device_get(r.state.learner.params))[-1].ravel()[:8].tolist()}
-    print("RESULT" + json.dumps(out))
+    for path in sys.argv[1:]:  # one run per config.json; its learner state and what the test checks beside it
+        with open(path) as f:
+            r = driver.train(config_from_json(json.load(f)))
+        metrics = {f"metric {k}": v for k, v in r.last_metrics.items()
+                   if k.startswith("loss/") or k == "episode/return"}
+        leaves = {f"leaf {i}": np.asarray(x) for i, x in enumerate(jax.tree.leaves(jax.device_get(r.state.learner)))}
+        np.savez(path + ".npz", env_shards=len(r.state.env_state.obs.sharding.device_set), **metrics, **leaves)
 """)
+"""Trains each config.json given on the command line in a process with two CPU devices (XLA_FLAGS)."""
+
+TWO_DEVICE_MODES = ("shard_map", "gspmd")
 
 
-def test_two_devices_match_one_device(tmp_path):
-    env = _subprocess_env(XLA_FLAGS="--xla_force_host_platform_device_count=2")
-    code = TWO_DEVICES.replace("{TMP}", str(tmp_path)).replace("{ROOT}", ROOT)
-    proc = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True, timeout=HANG_GUARD_S)
+def _two_device_runs(tmp_path, runs: dict) -> dict:
+    """{(name, mode): the run's npz} of each (config, modes) in `runs` trained on two devices each of those ways,
+    in one subprocess (the programs of the one-device runs stay in this process)."""
+    paths = {}
+    for name, (config, modes) in runs.items():
+        for mode in modes:
+            path = tmp_path / f"{name}-{mode}.json"
+            two = dataclasses.replace(config, devices=2, multi_device=mode, logdir=str(tmp_path / f"{name}-{mode}"))
+            path.write_text(json.dumps(config_json(two)))
+            paths[name, mode] = path
+    env = _subprocess_env(XLA_FLAGS=TWO_CPU_DEVICES)
+    proc = subprocess.run([sys.executable, "-c", TWO_DEVICES, *map(str, paths.values())], cwd=ROOT, env=env,
+                          capture_output=True, text=True, timeout=HANG_GUARD_S)
     assert proc.returncode == 0, proc.stderr[-3000:]
-    result = json.loads(proc.stdout.split("RESULT", 1)[1])
-    arms = [result.pop("arm shard_map"), result.pop("arm gspmd")]
-    for arm in arms:
-        assert arm["env_shards"] == 2
-        assert arm["losses_finite"]
-    np.testing.assert_allclose(arms[0]["policy"], arms[1]["policy"], rtol=1e-3, atol=1e-5)  # the same update
-    assert sorted(result) == ["point-mass-ppo gspmd", "point-mass-ppo shard_map", "point-mass-sac gspmd",
-                              "point-mass-sac shard_map"]
-    for name, r in result.items():
-        assert r["moved"] and r["env_shards"] == 2, name  # the environments really were split over both devices
-        assert r["max_diff"] < 1e-4, (name, r)  # relative to each leaf's scale
-        np.testing.assert_allclose(r["returns"][0], r["returns"][1], rtol=1e-4)
+    return {key: dict(np.load(str(path) + ".npz")) for key, path in paths.items()}
+
+
+def _leaves(npz: dict) -> list:
+    return [npz[f"leaf {i}"] for i in range(sum(k.startswith("leaf ") for k in npz))]
+
+
+def test_two_devices_match_one_device(tmp_path, arm_run):
+    """Two updates of PPO (2 seeds) and 36 vector steps of SAC updates (1 seed) on the point mass, on two devices
+    split by shard_map and by GSPMD, end where the same run on one device ends (the one-device runs are this
+    module's probe programs, compiled once here); the UR5e arm (native physics: every device's envs call C
+    MuJoCo) trains one PPO update on two devices split by shard_map to the state that `arm_run` (GSPMD)
+    checkpointed."""
+    ppo = presets.make_config("point-mass-ppo", logdir=str(tmp_path / "ppo"), stop_after_steps=2 * 5120, **PROBE)
+    sac = presets.make_config("point-mass-sac", logdir=str(tmp_path / "sac"), stop_after_steps=1_600, **SAC_PROBE)
+    arm_config, arm_state = _restored_arm_run(arm_run)
+    arm = dataclasses.replace(arm_config, eval_envs=0)  # the evaluation after training changes no state
+    two = _two_device_runs(tmp_path, {"ppo": (ppo, TWO_DEVICE_MODES), "sac": (sac, TWO_DEVICE_MODES),
+                                      "arm": (arm, ("shard_map",))})
+    for name, config in (("ppo", ppo), ("sac", sac)):
+        one = driver.train(config)
+        assert one.status == "stopped"
+        reference = [np.asarray(x) for x in jax.tree.leaves(jax.device_get(one.state.learner))]
+        programs = driver.programs_for(config)
+        policy = lambda state: jax.tree.leaves(jax.device_get(programs.learner.export_policy(state.learner)[0]))
+        moved = zip(policy(programs.init(driver.seed_keys(config))), policy(one.state))
+        assert not all(np.allclose(a, b) for a, b in moved)  # the policy trained: the comparison is not vacuous
+        for mode in TWO_DEVICE_MODES:
+            run = two[name, mode]
+            assert run["env_shards"] == 2, (name, mode)  # the environments really were split over both devices
+            leaves = _leaves(run)
+            assert len(leaves) == len(reference)
+            max_diff = max(float(np.max(np.abs(x - y)) / (np.max(np.abs(x)) + 1e-3)) if x.size else 0.0
+                           for x, y in zip(reference, leaves))
+            assert max_diff < 1e-4, (name, mode, max_diff)  # relative to each leaf's scale
+            np.testing.assert_allclose(run["metric episode/return"], one.last_metrics["episode/return"], rtol=1e-4)
+    arm_two = two["arm", "shard_map"]
+    assert arm_two["env_shards"] == 2
+    losses = [k for k in arm_two if k.startswith("metric loss/")]
+    assert losses and all(np.isfinite(arm_two[k]).all() for k in losses)
+    gspmd = [np.asarray(x) for x in jax.tree.leaves(jax.device_get(arm_state.learner))]
+    assert len(gspmd) == len(_leaves(arm_two))
+    for a, b in zip(gspmd, _leaves(arm_two)):
+        np.testing.assert_allclose(a, b, rtol=1e-3, atol=1e-5)  # the same update
 
 
 def test_a_resumed_run_logs_under_its_files_header(tmp_path, capsys):

@@ -40,8 +40,9 @@ def _key(i):
 
 @pytest.fixture(scope="module")
 def pair():
-    """`get(name)` -> (jitted reset, native step, MJX step) of the env wrapped without auto-reset, for
-    batches of N envs (the reset is the same JAX code on both backends: it steps no physics)."""
+    """`get(name)` -> (native env wrapped without auto-reset, its jitted reset, native step, MJX step), for
+    batches of N envs (the reset is the same JAX code on both backends: it steps no physics). Nothing compiles
+    before a function is called."""
     cache = {}
 
     def get(name):
@@ -62,12 +63,13 @@ def test_backend_is_validated_and_auto_resolves_by_device():
 
 
 @pytest.mark.parametrize("name", ARM_ENVS)
-def test_native_episode_matches_a_plain_mujoco_loop(name):
+def test_native_episode_matches_a_plain_mujoco_loop(pair, name):
     """125 steps of random actions: the env's joint positions and velocities against `mj_step` called
-    substeps times per env step with the controls the env applied, in float64 from the same start."""
-    env = envs.make(name, backend="mujoco")
-    wrapped = envs.wrap(env, autoreset=False)
-    n, steps = 3, 125
+    substeps times per env step with the controls the env applied, in float64 from the same start (N envs: the
+    reset compiled for the tests below)."""
+    wrapped, reset, _, _ = pair(name)
+    env = wrapped.unwrapped
+    n, steps = N, 125
 
     @jax.jit
     def episode(state, key):
@@ -77,7 +79,7 @@ def test_native_episode_matches_a_plain_mujoco_loop(name):
             return state, (state.pipeline_state.ctrl, state.pipeline_state.qpos, state.pipeline_state.qvel)
         return jax.lax.scan(body, state, jax.random.split(key, steps))[1]
 
-    start = jax.jit(wrapped.reset)(jax.random.split(_key(3), n))
+    start = reset(jax.random.split(_key(3), n))
     ctrls, qpos, qvel = (np.asarray(x) for x in episode(start, _key(4)))
     model = env.robot.mj_model
     tol = EPISODE_TOLERANCE[env.robot.name]
@@ -134,12 +136,16 @@ def test_backends_flag_the_same_collisions_from_colliding_configurations(pair, n
 
 
 def test_ur5e_difference_is_the_force_clamp():
-    """The documented UR5e difference between the backends: with the actuators' force limits lifted,
-    MJX and C MuJoCo agree; with them, a large position step (clamped forces) makes them differ."""
+    """The documented UR5e difference between the backends: with the actuators' force limits lifted (their
+    range widened to +-1e9 N m, which no force reaches), MJX and C MuJoCo agree; with them, a large position step
+    (clamped forces) makes them differ. The model is an argument of one compiled MJX loop: the range is data."""
     gaps = {}
+    loop = jax.jit(lambda mx, d: jax.lax.fori_loop(0, 20, lambda _, d: mjx.step(mx, d), d))
     for limited in (True, False):
         model = envs.make("ur5e-reach", backend="mujoco").robot.mj_model.__copy__()
-        model.actuator_forcelimited[:] = limited
+        assert model.actuator_forcelimited.all()
+        if not limited:
+            model.actuator_forcerange[:] = [-1e9, 1e9]
         q0 = np.array([0.3, -1.2, 1.0, -0.5, 0.8, 0.1])
         ctrl = q0 + 0.3
         data = mujoco.MjData(model)
@@ -147,7 +153,7 @@ def test_ur5e_difference_is_the_force_clamp():
         mujoco.mj_step(model, data, nstep=20)
         mx = mjx.put_model(model)
         d = mjx.make_data(mx).replace(qpos=jnp.asarray(q0, jnp.float32), ctrl=jnp.asarray(ctrl, jnp.float32))
-        d = jax.jit(lambda d: jax.lax.fori_loop(0, 20, lambda _, d: mjx.step(mx, d), d))(d)
+        d = loop(mx, d)
         gaps[limited] = float(np.abs(np.asarray(d.qpos) - data.qpos).max())
     assert gaps[False] < 1e-5 and gaps[True] > 1e-3, gaps
 

@@ -2,7 +2,8 @@
 obstacles, observation noise and action latency. Collisions against CPU MuJoCo with the obstacle
 spheres as geoms; trajectories against hand-computed positions and their bounds; bad values.
 
-Two compiled variants, shared by the module (2 physics substeps keep MJX's CPU compile short).
+Two compiled variants, shared by the module (2 physics substeps keep MJX's CPU compile short), each at one
+batch size (a reset or step of another size would compile again).
 """
 
 import dataclasses
@@ -19,6 +20,9 @@ from envs import obstacles
 from mujoco_reference import ee_position, geom_poses, obstacle_contacts, obstacles_model
 
 N = 8
+"""Envs per batch of the moving-obstacle variant."""
+SENSING_N = 32
+"""Envs per batch of the noise-and-latency variant (its noise statistics: 32 x 6 joint and 32 x 3 obstacle draws)."""
 MOVING = dict(num_obstacles=3, obstacle_motion="linear", obstacle_radius_range=(0.05, 0.15), substeps=2,
               obstacle_speed_range=(0.05, 0.2),
               observation=("joint_pos", "ee_pos", "target_pos", "obstacle_pos", "obstacle_size", "obstacle_radius",
@@ -197,7 +201,8 @@ def test_trajectories_stay_in_the_cube_over_a_long_horizon(motion):
 
 def test_sampled_obstacles_clear_of_start_pose_and_target(moving):
     env, cfg = moving.env, moving.env.config
-    state = moving.start(seed=1, n=16)
+    # 16 envs: two batches of the compiled reset of N envs
+    state = jax.tree.map(lambda *x: np.concatenate(x), *(jax.device_get(moving.start(seed)) for seed in (1, 2)))
     pos = np.asarray(state.info["obstacle_pos"]).reshape(16, 3, 3)
     radii = np.asarray(state.info["obstacle_radius"])
     vel = np.asarray(state.info["obstacle_vel"]).reshape(16, 3, 3)
@@ -361,9 +366,9 @@ def test_observations_and_penalty_of_several_moving_obstacles(moving):
 
 def test_noise_is_seeded_fresh_each_step_and_only_in_the_observation(sensing):
     env, robot = sensing.env, sensing.env.robot
-    state = sensing.start(seed=6, n=32)
-    again = sensing.start(seed=6, n=32)
-    other = sensing.start(seed=7, n=32)
+    state = sensing.start(seed=6, n=SENSING_N)
+    again = sensing.start(seed=6, n=SENSING_N)
+    other = sensing.start(seed=7, n=SENSING_N)
     np.testing.assert_array_equal(state.obs, again.obs)  # same key, same noise
 
     def noise(s):
@@ -382,7 +387,7 @@ def test_noise_is_seeded_fresh_each_step_and_only_in_the_observation(sensing):
     links = np.asarray(state.pipeline_state.xpos)[:, robot.link_bodies]
     d = np.linalg.norm(links - parts["obstacle_pos"][:, None], axis=-1) - env.config.obstacle_radius
     np.testing.assert_allclose(parts["link_obstacle_dist"], d, atol=1e-5)
-    actions = jax.random.uniform(jax.random.PRNGKey(8), (32, env.action_size), minval=-1, maxval=1)
+    actions = jax.random.uniform(jax.random.PRNGKey(8), (SENSING_N, env.action_size), minval=-1, maxval=1)
     after = sensing.step(state, actions)
     np.testing.assert_array_equal(after.obs, sensing.step(again, actions).obs)  # reproducible through a step
     np.testing.assert_array_equal(after.info["obstacle_pos"], state.info["obstacle_pos"])  # truth untouched
@@ -434,8 +439,8 @@ def test_encoder_noise_reaches_every_part_computed_from_the_joints():
 def test_action_latency_applies_the_previous_action(sensing):
     env, robot = sensing.env, sensing.env.robot
     scale, low, high = env.config.action_scale, robot.joint_low, robot.joint_high
-    s0 = sensing.start(seed=9)
-    a1 = np.asarray(jax.random.uniform(jax.random.PRNGKey(10), (N, env.action_size), minval=-1, maxval=1))
+    s0 = sensing.start(seed=9, n=SENSING_N)
+    a1 = np.asarray(jax.random.uniform(jax.random.PRNGKey(10), (SENSING_N, env.action_size), minval=-1, maxval=1))
     a2 = -a1
     np.testing.assert_array_equal(s0.info["prev_action"], 0.0)  # relative control: the first step holds the pose
     s1 = sensing.step(s0, jnp.asarray(a1))

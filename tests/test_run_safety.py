@@ -22,7 +22,7 @@ from agents.checkpoint import Checkpointer
 from agents.config import config_json, merge_resume_config
 from agents.ppo import PPO
 
-SHORT = 30_720  # 6 updates of the PPO probe preset (the program of tests/test_loop_train.py)
+SHORT = 30_720  # 6 updates of the PPO probe preset (the program of tests/test_agents_learning.py's 1-seed runs)
 QUIET = dict(tensorboard=False, progress=False, eval_envs=0)
 
 

@@ -67,17 +67,34 @@ def test_shipped_ur5e_reach_checkpoint_far_above_the_baselines():
 MOVING_OBSTACLE_EXPORTS = {"panda": 0.5, "ur5e": 0.3}
 
 
+def _standstill_on_moving_obstacles(robot: str, config) -> dict:
+    """The standstill baseline's summary on the env of the moving-obstacle export, as eval.py recorded it on a CPU
+    (2,048 episodes, results/obstacles/): standing still reaches nothing and ends 0.86-0.88 m from the target. The
+    recorded env is the export's (the baseline reads no observation; its relative step back to the start pose is the
+    same at any action scale)."""
+    with open(os.path.join(ROOT, "results", "obstacles", f"{robot}_standstill_moving3_cpu_eval.json")) as f:
+        [recorded] = json.load(f)["evaluations"]
+    assert recorded["policy"] == {"kind": "baseline", "name": "standstill"}
+    assert recorded["env_name"] == f"{robot}-reach-avoid"
+    assert recorded["num_envs"] == 2048
+    as_recorded = lambda value: list(value) if isinstance(value, tuple) else value
+    for field, value in recorded["env_config"].items():
+        if field not in ("observation", "action_scale"):
+            assert as_recorded(getattr(config, field)) == value, field
+    return recorded["summary"]
+
+
 @pytest.mark.parametrize("robot", sorted(MOVING_OBSTACLE_EXPORTS))
 def test_shipped_moving_obstacle_policy_reaches_between_moving_obstacles(robot):
     """The policy trained among 3 moving obstacles of random radius, on 16 CPU episodes of its own env: it reaches
-    where standing still never does, and ends nearer the target."""
+    where standing still never does, and ends at least 0.2 m nearer the target than standing still does on this env
+    (recorded: 0.86-0.88 m over 2,048 episodes; here the policies end 0.07-0.10 m away on average)."""
     least = MOVING_OBSTACLE_EXPORTS[robot]
     policy = evaluation.checkpoint_policy(os.path.join(ROOT, "results", "checkpoints", f"{robot}-reach-avoid-ppo-moving3"))
     config = policy.train_env_config
     assert (config.num_obstacles, config.obstacle_motion, config.obstacle_radius_range) == (3, "linear", (0.05, 0.1))
-    env_name = f"{robot}-reach-avoid"
-    result = evaluation.run(policy, env_name, config, num_envs=16).summary()
-    still = evaluation.run(evaluation.baseline_policy("standstill"), env_name, config, num_envs=16).summary()
+    result = evaluation.run(policy, f"{robot}-reach-avoid", config, num_envs=16).summary()
+    still = _standstill_on_moving_obstacles(robot, config)
     assert still["target_reached"]["mean"] == 0.0
     assert result["target_reached"]["mean"] >= least
     assert result["distance"]["mean"] < still["distance"]["mean"] - 0.2
