@@ -52,6 +52,10 @@ class TrainConfig(Generic[EnvConfigT, AlgoConfigT]):
     """Independent runs trained together in one compiled program (vmapped)."""
     devices: int = 0
     """Local devices to split the environments over (0 = all)."""
+    episode_restarts: Literal["fresh", "first"] = "fresh"
+    """How a training env starts its next episode: fresh (a newly sampled start pose, target and obstacle) or
+    first (that env's first initial state again: Brax's and MuJoCo Playground's auto-reset, with which the paper
+    trained, so training sees only num_envs distinct episodes; results/fidelity). Evaluation always samples."""
     multi_device: Literal["shard_map", "gspmd"] = "gspmd"
     """How several devices share the work: gspmd (the one-device program under jit with sharded env
     axes; XLA inserts the collectives) or shard_map (each device runs the chunk on its envs; the
@@ -174,6 +178,9 @@ def validate(config: TrainConfig) -> None:
                          "(it names the default logdir, runs/<preset>/<date-time>).")
     if config.multi_device not in MULTI_DEVICE_MODES:
         raise ValueError(f"multi_device={config.multi_device!r} is unknown: allowed are {', '.join(MULTI_DEVICE_MODES)}.")
+    if config.episode_restarts not in envs.wrappers.RESTARTS:
+        raise ValueError(f"episode_restarts={config.episode_restarts!r} is unknown: allowed are "
+                         f"{', '.join(envs.wrappers.RESTARTS)}.")
     if config.matmul_precision not in PRECISIONS:
         raise ValueError(f"matmul_precision={config.matmul_precision!r} is unknown: allowed are {', '.join(PRECISIONS)}.")
     validate_logging(config)

@@ -49,13 +49,14 @@ class NonFiniteLossError(RuntimeError):
 @functools.lru_cache(maxsize=8)
 def build_programs(env_name: str, env_config, algo_config, seeds: int, devices: int, updates: int,
                    eval_envs: int, eval_last_steps: int, learner_cls: type | None,
-                   multi_device: str) -> Programs:
+                   multi_device: str, episode_restarts: str = "fresh") -> Programs:
     """Compiled programs for one setting; cached so repeated runs (tests, resumes) reuse them. The
     learner class is part of the key: a class redefined (e.g. in a notebook cell) is a new object
     and compiles anew."""
     env = envs.wrap(envs.from_config(env_name, env_config))
+    train_env = env if episode_restarts == "fresh" else envs.wrap(env.unwrapped, restarts=episode_restarts)
     learner = registry.make_learner(algo_config, env.observation_size, env.action_size, updates, learner_cls)
-    return Programs(env, env, learner, algo_config.num_envs, seeds, jax.local_devices()[:devices],
+    return Programs(train_env, env, learner, algo_config.num_envs, seeds, jax.local_devices()[:devices],
                     max(eval_envs, 1), env_config.episode_length, eval_last_steps, multi_device)
 
 
@@ -63,7 +64,8 @@ def programs_for(config: TrainConfig, learner_cls: type | None = None) -> Progra
     """The (cached) programs of `config`, with `learner_cls` in place of the registered learner class."""
     return build_programs(config.env_name, config.env, config.algo, config.seeds, num_devices(config),
                           total_updates(config), config.eval_envs, config.eval_last_steps,
-                          learner_cls or registry.of_config(config.algo).learner_cls, config.multi_device)
+                          learner_cls or registry.of_config(config.algo).learner_cls, config.multi_device,
+                          config.episode_restarts)
 
 
 def seed_keys(config: TrainConfig) -> jax.Array:

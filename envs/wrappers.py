@@ -5,8 +5,9 @@ n))` and `state = env.step(state, actions)` on batches of `n` environments.
 
 Two deliberate differences from Brax's training wrappers:
 - Auto-reset draws a *fresh* initial state (pose, target, obstacle) from the environment's own
-  sampler. Brax restores one cached first state per environment, which would collapse the start /
-  goal distribution to `num_envs` fixed episodes.
+  sampler. Brax restores one cached first state per environment, which collapses the start /
+  goal distribution to `num_envs` fixed episodes; `restarts="first"` does the same, to measure what
+  that does (the paper trained with Brax's wrappers; results/fidelity).
 - The terminal observation of a finished episode is kept in `info["final_obs"]`, so learners can
   bootstrap truncated episodes from it (truncation is not termination).
 """
@@ -17,6 +18,9 @@ import jax
 import jax.numpy as jnp
 
 from envs.base import Env, State, check_action
+
+RESTARTS = ("fresh", "first")
+"""How auto-reset starts the next episode: `fresh` samples it, `first` repeats the env's first initial state."""
 
 
 class Wrapper(Env):
@@ -91,17 +95,28 @@ class AutoResetWrapper(Wrapper):
     `pipeline_state` and `info`, while `reward`, `done`, `metrics`, `info["truncation"]` and
     `info["final_obs"]` (the terminal observation) describe the step that ended the old one.
     The reset key lives in `info["reset_key"]`, so the whole thing stays a pure function.
+    `restarts="first"`: every episode of an env restarts from that env's first initial state (its key
+    is kept instead of advanced), as Brax's AutoResetWrapper does.
     """
+
+    def __init__(self, env: Env, restarts: str = "fresh"):
+        super().__init__(env)
+        if restarts not in RESTARTS:
+            raise ValueError(f"restarts={restarts!r} is unknown: allowed are {', '.join(RESTARTS)}.")
+        self.restarts = restarts
 
     def reset(self, rng: jax.Array) -> State:
         rng, reset_key = jax.random.split(rng)
         state = self.env.reset(rng)
-        state.info["reset_key"] = reset_key
+        state.info["reset_key"] = rng if self.restarts == "first" else reset_key
         state.info["final_obs"] = state.obs
         return state
 
     def step(self, state: State, action: jax.Array) -> State:
-        reset_key, next_key = jax.random.split(state.info["reset_key"])
+        if self.restarts == "first":  # the key of the env's first episode, again
+            reset_key = next_key = state.info["reset_key"]
+        else:
+            reset_key, next_key = jax.random.split(state.info["reset_key"])
         stepped = self.env.step(state, action)
         fresh = self.env.reset(reset_key)
         done = stepped.done > 0
@@ -156,16 +171,19 @@ class VmapWrapper(Wrapper):
         return jax.vmap(self.env.step)(state, action)
 
 
-def wrap(env: Env, episode_length: int | None = None, batch_size: int | None = None, autoreset: bool = True) -> Env:
+def wrap(env: Env, episode_length: int | None = None, batch_size: int | None = None, autoreset: bool = True,
+         restarts: str = "fresh") -> Env:
     """The standard training stack: episode limit, fresh auto-reset, then vmap.
 
     `episode_length` defaults to the environment's `config.episode_length`. `autoreset=False`: the
     same stack and initial states, each env staying in its first episode (`NoAutoResetWrapper`).
+    `restarts`: `fresh` samples every episode anew, `first` restarts each env from its first initial state.
     """
     if episode_length is None:
         config = getattr(env.unwrapped, "config", None)
         if config is None or not hasattr(config, "episode_length"):
             raise ValueError("episode_length=None needs an environment with config.episode_length; pass it explicitly.")
         episode_length = config.episode_length
-    reset = AutoResetWrapper if autoreset else NoAutoResetWrapper
-    return VmapWrapper(reset(EpisodeWrapper(env, episode_length)), batch_size=batch_size)
+    episodes = EpisodeWrapper(env, episode_length)
+    reset = AutoResetWrapper(episodes, restarts) if autoreset else NoAutoResetWrapper(episodes)
+    return VmapWrapper(reset, batch_size=batch_size)

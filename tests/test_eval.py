@@ -466,6 +466,29 @@ def test_env_without_autoreset_stays_in_its_first_episode():
     np.testing.assert_array_equal(fresh.info["steps"], 1)  # the next episode's first step
 
 
+def test_first_restarts_repeat_each_envs_first_episode_and_fresh_ones_do_not():
+    """`restarts="first"` (Brax's auto-reset, `TrainConfig.episode_restarts`): after an episode ends each env starts
+    again from exactly its first initial state; the default samples a new one (point mass, 3-step episodes)."""
+    env = envs.make("point-mass", episode_length=3)
+    keys = jax.random.split(jax.random.PRNGKey(0), 4)
+    first_env, fresh_env = envs.wrap(env, restarts="first"), envs.wrap(env)
+    first, fresh = first_env.reset(keys), fresh_env.reset(keys)
+    start = first.obs
+    np.testing.assert_array_equal(start, fresh.obs)  # the same first episodes
+    still = jnp.zeros((4, env.action_size))
+    for episode in range(2):
+        for _ in range(3):
+            first, fresh = first_env.step(first, still), fresh_env.step(fresh, still)
+        np.testing.assert_array_equal(first.info["steps"], 0)  # a new episode has started...
+        np.testing.assert_array_equal(first.obs, start)  # ...from the env's first initial state, every time
+        assert not np.allclose(fresh.obs, start), episode  # the default samples anew
+
+
+def test_unknown_restarts_are_refused_naming_the_allowed():
+    with pytest.raises(ValueError, match=r"restarts='brax' is unknown: allowed are fresh, first"):
+        envs.wrap(envs.make("point-mass"), restarts="brax")
+
+
 def test_registry_names_each_envs_robot():
     """What eval.py asks to refuse a checkpoint on another robot and a video of an env without one."""
     robots = {name: envs.registry.spec(name).robot for name in envs.names()}

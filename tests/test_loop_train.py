@@ -214,6 +214,12 @@ def test_a_time_limit_judges_the_next_chunk_by_its_speed_not_the_compilation(tmp
     assert seconds == [51.0] + [1.0] * 3
 
 
+@pytest.mark.parametrize("restarts", ["fresh", "first"])
+def test_episode_restarts_reach_the_training_envs_auto_reset(restarts):
+    config = presets.make_config("point-mass-ppo", episode_restarts=restarts, **PROBE)
+    assert driver.programs_for(config).env.env.restarts == restarts  # VmapWrapper(AutoResetWrapper(...))
+
+
 def test_compile_ahead_leaves_the_jit_call_nothing_to_compile(caplog):
     """The executable compiled ahead is the one the jit call runs. Fresh programs, not the in-memory ones of the
     tests above (which ran already): they compile, or load what the tests above put in the persistent compilation
@@ -401,6 +407,9 @@ BAD_INPUTS = [
     (lambda: train_cli.parse(["point-mass-ppo", "--multi-device", "pmap"]), None),  # tyro: not a Literal choice
     (lambda: validate(presets.make_config("point-mass-ppo", multi_device="pmap")),
      r"multi_device='pmap' is unknown: allowed are shard_map, gspmd"),
+    (lambda: train_cli.parse(["point-mass-ppo", "--episode-restarts", "brax"]), None),  # tyro: not a Literal choice
+    (lambda: validate(presets.make_config("point-mass-ppo", episode_restarts="brax")),
+     r"episode_restarts='brax' is unknown: allowed are fresh, first"),
 ]
 
 
