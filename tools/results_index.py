@@ -68,10 +68,15 @@ def _seed_rate(values: list[float]) -> str:
 
 
 def paper_settings_seeds(ctx: Context, runs_dir: str) -> list[dict]:
-    """Each seed's evaluation means ({"episode/<metric>": value}) of the per-seed train.py eval.json files under
-    `runs_dir`/seed*/ (the `*-paper` presets), in seed-folder order."""
-    files = sorted(glob.glob(os.path.join(ctx.results, runs_dir, "seed*", "eval.json")))
-    return [ctx.json(os.path.relpath(f, ctx.results))["mean"] for f in files]
+    """Each seed's evaluation means ({"episode/<metric>": value}) of the train.py eval.json files under
+    `runs_dir`/seed*/ (the `*-paper` presets; a folder holds one seed or, from `--seeds N`, several), in folder
+    and then seed order."""
+    seeds = []
+    for path in sorted(glob.glob(os.path.join(ctx.results, runs_dir, "seed*", "eval.json"))):
+        per_seed = ctx.json(os.path.relpath(path, ctx.results))["per_seed"]
+        count = len(per_seed["episode/target_reached"])
+        seeds += [{key: values[i] for key, values in per_seed.items()} for i in range(count)]
+    return seeds
 
 
 def _paper_settings_cell(ctx: Context, runs_dir: str, paper_key: str) -> str:
