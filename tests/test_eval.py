@@ -653,7 +653,8 @@ def test_damaged_export_is_rebuilt_from_the_full_checkpoint(point_run, tmp_path,
     run = _corrupt(point_run, tmp_path, "npz")
     policy = evaluation.checkpoint_policy(str(run))
     err = capsys.readouterr().err
-    assert "policy.npz: " in err and "rebuilding it from the full checkpoint" in err, err
+    assert "policy.npz: " in err, err
+    assert "rebuilding it from the full checkpoint" in err, err
     original = export.load(str(point_run))
     for a, b in zip(jax.tree.leaves(original.state), jax.tree.leaves(policy.export.state)):
         np.testing.assert_array_equal(np.asarray(a), np.asarray(b))

@@ -582,8 +582,8 @@ def test_a_part_another_process_holds_is_left_alone_until_that_process_ends(tmp_
     with _lock_held_elsewhere(lock) as holder:
         log = []
         assert not launch.run_parts(selection, runs_dir, out, log=log.append)
-        assert calls == [] and log == [f"[toy/b seeds-0-1] left alone: another process (pid {holder}) holds its "
-                                       f"lock {lock}"], log
+        assert calls == []
+        assert log == [f"[toy/b seeds-0-1] left alone: another process (pid {holder}) holds its lock {lock}"], log
     assert os.path.isfile(lock)  # left behind by the killed process, holding nothing
     log = []
     assert not launch.run_parts(selection, runs_dir, out, log=log.append)  # stopped short of the budget

@@ -237,7 +237,8 @@ def test_compile_ahead_leaves_the_jit_call_nothing_to_compile(caplog):
         jax.block_until_ready(programs.chunk(state, jnp.int32(1)))
         at_call = [r.getMessage() for r in caplog.records if "XLA compilation of jit(chunk)" in r.getMessage()]
     # jax logs "Finished XLA compilation of jit(chunk)" where it compiles (or loads from the persistent cache).
-    assert compiled_ahead and not at_call, (compiled_ahead, at_call)
+    assert compiled_ahead
+    assert not at_call, at_call
 
 
 def _stored_leaf_names(step_dir: str) -> list[str]:
@@ -506,7 +507,8 @@ def test_two_devices_match_one_device(tmp_path, arm_run):
     arm_two = two["arm", "shard_map"]
     assert arm_two["env_shards"] == 2
     losses = [k for k in arm_two if k.startswith("metric loss/")]
-    assert losses and all(np.isfinite(arm_two[k]).all() for k in losses)
+    assert losses
+    assert all(np.isfinite(arm_two[k]).all() for k in losses)
     gspmd = [np.asarray(x) for x in jax.tree.leaves(jax.device_get(arm_state.learner))]
     assert len(gspmd) == len(_leaves(arm_two))
     for a, b in zip(gspmd, _leaves(arm_two)):

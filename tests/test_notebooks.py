@@ -80,7 +80,8 @@ def test_the_four_notebooks_are_there_without_outputs():
         code = [cell for cell in notebook.cells if cell.cell_type == "code"]
         assert "REACH_NOTEBOOK_SMALL" in code[0].source, f"{path.name}: the first code cell reads the size switch"
         for cell in code:  # committed without outputs: the repository stays small
-            assert cell.outputs == [] and cell.execution_count is None, f"{path.name} has outputs: clear them"
+            assert cell.outputs == [], f"{path.name} has outputs: clear them"
+            assert cell.execution_count is None, f"{path.name} has execution counts: clear them"
 
 
 @pytest.mark.parametrize("name", [p.name for p in NOTEBOOKS])
@@ -113,7 +114,8 @@ def test_evaluating_notebook_shows_a_table_with_intervals(executed, name):
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.name)
 def test_notebook_opens_with_what_it_shows_and_its_cpu_time(path):
     first = nbformat.read(path, as_version=4).cells[0]
-    assert first.cell_type == "markdown" and first.source.startswith("# "), path.name
+    assert first.cell_type == "markdown", path.name
+    assert first.source.startswith("# "), path.name
     assert re.search(r"2-core CPU", first.source), f"{path.name}: the first cell states its time on a CPU"
 
 

@@ -255,7 +255,8 @@ def test_several_obstacles_collide_as_in_mujoco(name):
             colliding += m < 0
             clear += m > 0
             assert (m < 0) == bool(contacts)
-    assert colliding > 30 and clear > 20, (colliding, clear)
+    assert colliding > 30, colliding
+    assert clear > 20, clear
 
 
 def _crossing_direction(robot, q, point, radii, others, rng, reach=0.2, region=0.6):

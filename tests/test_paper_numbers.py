@@ -18,7 +18,8 @@ def test_every_entry_names_its_source_and_fills_its_columns():
     assert len(entries) >= 10
     for name, entry in entries.items():
         assert entry["from"].startswith(("Section", "Table")), name
-        assert entry["rows"] and all(len(row) == len(entry["columns"]) for row in entry["rows"]), name
+        assert entry["rows"], name
+        assert all(len(row) == len(entry["columns"]) for row in entry["rows"]), name
 
 
 def test_the_numbers_are_the_papers():

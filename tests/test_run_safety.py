@@ -224,7 +224,8 @@ def test_unusable_logdir_is_a_one_line_error(where, message, tmp_path, no_compil
               "read_only": "/sys/reach_avoid_test_run"}[where]
     assert train_cli.cli(["point-mass-ppo", "--logdir", str(logdir), "--no-progress"]) == 2
     err = capsys.readouterr().err
-    assert err.startswith("error: ") and err.count("\n") == 1, err
+    assert err.startswith("error: "), err
+    assert err.count("\n") == 1, err
     assert re.search(message, err), err
 
 
@@ -302,7 +303,9 @@ def test_resume_with_no_intact_checkpoint_names_them(earlier_run, tmp_path, caps
     code = train_cli.cli(["point-mass-ppo", "--logdir", str(logdir), "--resume", "--num-timesteps", str(SHORT),
                           "--no-progress", "--no-tensorboard"])
     err = capsys.readouterr().err
-    assert code == 2 and err.count("\n") == 1 and err.startswith("error: "), err
+    assert code == 2, err
+    assert err.count("\n") == 1, err
+    assert err.startswith("error: "), err
     assert "holds no intact checkpoint" in err
     assert f"checkpoints/{SHORT}: " in err
     assert "checkpoints/10240: " in err
