@@ -310,7 +310,7 @@ def parse(argv):
     p.add_argument("--seeds", type=int, default=1,
                    help="evaluation seeds (default 1; baselines: use 5, the paper's seed count)")
     p.add_argument("--seed", type=int, default=evaluation.DEFAULT_EVAL_SEED, help="first evaluation seed")
-    p.add_argument("--robots", nargs="+", choices=("ur5e", "panda"), default=["ur5e", "panda"], help="baselines: robots")
+    p.add_argument("--robots", nargs="+", choices=list(envs.ROBOTS), default=list(envs.ROBOTS), help="baselines: robots")
     p.add_argument("--panda-num-envs", type=int, default=0, help="baselines: envs for the Panda (default: --num-envs)")
     p.add_argument("--panda-seeds", type=int, default=0, help="baselines: seeds for the Panda (default: --seeds)")
     p.add_argument("--actions", nargs="+", choices=("absolute", "relative"), default=["absolute", "relative"],
