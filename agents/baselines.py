@@ -10,17 +10,17 @@ Two of them are defined by a joint configuration to command, which maps onto the
 - `random`: uniform actions in [-1, 1] every step, in the env's own action space. The behaviour
   depends strongly on the mode: with `absolute` control every step commands a uniformly random
   configuration of the full joint range (the arm flails around the range's middle); with
-  `relative` control it is a random walk of at most `action_scale` rad per step around the initial
-  pose. The paper's random agent is absolute control's (results: baselines study). On the Panda
+  `relative` control it is a random walk of at most one relative step (`relative_step`) per joint
+  around the initial pose. The paper's random agent is absolute control's (results: baselines study). On the Panda
   absolute control is the safer mode: the middle of its narrow ranges is a safe pose, while a
   random walk runs into its joint limits.
 - `standstill`: commands the episode's initial pose ("uses its initial pose as the action").
-  absolute: that pose's action; relative: the step back to it, (q0 - q) / action_scale, clipped, so
+  absolute: that pose's action; relative: the step back to it, (q0 - q) / relative_step, clipped, so
   the position servo's target is q0 in both modes. The zero relative action is *not* a standstill:
   it re-targets the sagged pose every step, so gravity pulls the arm down step by step.
 - `pseudo_ik`: commands `info["target_qpos"]`, the configuration whose forward kinematics produced
   the target (so it is known to reach it), the same way; only defined for target_sampling =
-  "reachable". Relative control moves the servo target by at most `action_scale` per step
+  "reachable". Relative control moves the servo target by at most `relative_step` per step
   towards it and the arm creeps after it, while absolute control jumps. It fails by
   self-collision on the way (joint-space path) and by the servos' steady-state error under
   gravity (the end effector settles off the target).
@@ -62,7 +62,7 @@ def joint_target_action(config, robot, target, base):
     if config.action == "absolute":
         action = 2.0 * (target - low) / (high - low) - 1.0
     else:
-        action = (target - base) / config.action_scale
+        action = (target - base) / config.relative_step(low, high)
     return jnp.clip(action, -1.0, 1.0)
 
 

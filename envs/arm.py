@@ -268,7 +268,7 @@ class ArmEnv(Env):
         if self.config.action == "absolute":
             target = low + 0.5 * (action + 1.0) * (high - low)
         else:
-            target = base + self.config.action_scale * action
+            target = base + self.config.relative_step(low, high) * action
         return jnp.clip(target, low, high)
 
     def candidates(self, quantity: str) -> int:

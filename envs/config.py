@@ -15,6 +15,7 @@ from envs.validation import below, choice, integer, interval, positive
 
 ACTIONS = ("relative", "absolute")
 RELATIVE_BASES = ("position", "target")
+ACTION_UNITS = ("radian", "joint_range")
 INTEGRATORS = ("model", "implicitfast", "euler")
 REWARDS = ("sparse", "semi_sparse", "dense")
 SUCCESS_MODES = ("reach_and_stay", "reach_and_terminate")
@@ -51,6 +52,10 @@ class ReachConfig:
     """Radians per step commanded by a relative action of magnitude 1 (ignored for absolute). The
     paper does not state it; 0.2 trained the UR5e reach much faster than 0.1 and the UR5e presets
     use 0.3 (results: action-scale study). The joints' damping keeps them within their velocity limits."""
+    action_unit: Literal["radian", "joint_range"] = "radian"
+    """What a relative step of `action_scale` counts in: `radian`, the same step on every joint; `joint_range`, a
+    fraction of each joint's range width (UR5e: 4 pi rad, the elbow 2 pi; Panda 3.0-5.8 rad), so wide joints move
+    further. The paper states neither (results/fidelity)."""
     relative_to: Literal["position", "target"] = "position"
     """What a relative action's delta is added to: `position`, the current joint positions (the paper's
     "deltas that are added to the current joint positions"); `target`, the previous step's joint targets, so
@@ -144,6 +149,7 @@ class ReachConfig:
         """Raises `ValueError` on an impossible or unknown value."""
         choice("action", self.action, ACTIONS)
         choice("relative_to", self.relative_to, RELATIVE_BASES)
+        choice("action_unit", self.action_unit, ACTION_UNITS)
         choice("integrator", self.integrator, INTEGRATORS)
         choice("reward", self.reward, REWARDS)
         choice("success", self.success, SUCCESS_MODES)
@@ -185,14 +191,22 @@ class ReachConfig:
         _observed_if_set("joint_noise_std", self.joint_noise_std, self.observation, noisy)
         integer("action_latency", self.action_latency, 0, maximum=1)
 
+    def relative_step(self, joint_low, joint_high):
+        """Radians a relative action of 1 moves each joint's target (`action_scale` in `action_unit`)."""
+        return self.action_scale * ((joint_high - joint_low) if self.action_unit == "joint_range" else 1.0)
+
     def validate_for_robot(self, robot: str, reach: float, joint_range_width: float) -> None:
         """`validate` plus bounds from the robot's workspace (`envs.robots.base.bounds`): a target
         radius below its reach, a relative step at most its widest joint range. Finite absurd values
         (a 1e6 m target) otherwise train and evaluate without an error but mean nothing."""
         self.validate()
         below("target_radius", self.target_radius, reach, f"below the {robot}'s reach, m")
-        below("action_scale", self.action_scale, joint_range_width, f"at most the {robot}'s widest joint range, rad",
-              inclusive=True)
+        if self.action_unit == "joint_range":
+            below("action_scale", self.action_scale, 1.0, "at most 1 (a whole joint range) with action_unit="
+                  "'joint_range'", inclusive=True)
+        else:
+            below("action_scale", self.action_scale, joint_range_width, f"at most the {robot}'s widest joint range, rad",
+                  inclusive=True)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 import envs
-from agents import driver, presets
+from agents import baselines, driver, presets
 from envs import rewards, validation, workspaces
 from envs.arm import METRICS
 from envs.robots.base import ASSETS
@@ -486,6 +486,29 @@ def test_actions_clipped_to_joint_range():
     assert rel.config.action_scale == 0.2
     np.testing.assert_allclose(rel.action_to_ctrl(-jnp.ones(7), q), high - 0.05 - 0.2, atol=1e-6)
     np.testing.assert_allclose(rel.action_to_ctrl(jnp.full(7, 0.5), q - 0.5), high - 0.55 + 0.1, atol=1e-6)
+
+
+def test_a_relative_step_in_joint_ranges_moves_each_joint_by_its_share_of_its_range():
+    """action_unit="joint_range": UR5e ranges are 4 pi rad (the elbow 2 pi), so a step of 0.08 is 1.005 rad on five
+    joints and 0.503 rad at the elbow; the default counts in radians, the same on every joint."""
+    env = envs.make("ur5e-reach", action_unit="joint_range", action_scale=0.08)
+    q = jnp.zeros(6)
+    expected = 0.08 * np.array([4, 4, 2, 4, 4, 4]) * np.pi
+    np.testing.assert_allclose(env.action_to_ctrl(jnp.ones(6), q), expected, rtol=1e-4)
+    np.testing.assert_allclose(env.action_to_ctrl(-0.5 * jnp.ones(6), q), -0.5 * expected, rtol=1e-4)
+    radians = envs.make("ur5e-reach", action_scale=0.08)
+    np.testing.assert_allclose(radians.action_to_ctrl(jnp.ones(6), q), np.full(6, 0.08), rtol=1e-6)
+    # the baselines' inverse (agents.baselines.joint_target_action) commands a target within one step exactly
+    target = jnp.asarray(0.7 * expected)
+    action = baselines.joint_target_action(env.config, env.robot, target, q)
+    np.testing.assert_allclose(env.action_to_ctrl(action, q), target, rtol=1e-5)
+
+
+def test_a_relative_step_in_joint_ranges_is_at_most_one_range():
+    with pytest.raises(ValueError, match=r"action_scale=1.5 is invalid: allowed is a number in \(0, 1\] \(at most 1"):
+        envs.make("ur5e-reach", action_unit="joint_range", action_scale=1.5)
+    with pytest.raises(ValueError, match=r"action_unit='degree' is invalid: allowed are 'radian', 'joint_range'"):
+        envs.make("ur5e-reach", action_unit="degree")
 
 
 def _two_relative_steps(relative_to):

@@ -58,15 +58,15 @@ def full_step_moves(env, num_envs: int, seed: int = 0) -> tuple[np.ndarray, np.n
 
 def servo_cap(env, num_envs: int = 32, seed: int = 0) -> dict:
     """Per joint: the displacement (rad) of the first full commanded step from rest and the mean of the
-    last `CAP_STEPS // 2` steps (moving), as numbers and as fractions of action_scale."""
+    last `CAP_STEPS // 2` steps (moving), as numbers and as fractions of the commanded step (`relative_step`)."""
     if env.config.action != "relative":
         raise ValueError(f"env.action={env.config.action!r} is invalid for servo_cap: allowed is 'relative' "
                          "(absolute control has no per-step cap).")
     moves, _ = full_step_moves(env, num_envs, seed)
     first = moves[:, 0].mean(0).astype(float)
     moving = moves[:, CAP_STEPS // 2:].mean((0, 1)).astype(float)
-    scale = env.config.action_scale
-    return {"action_scale": scale, "env_dt": float(env.dt), "num_envs": num_envs, "steps": CAP_STEPS,
+    scale = np.asarray(env.config.relative_step(env.robot.joint_low, env.robot.joint_high)) * np.ones_like(moving)
+    return {"action_scale": env.config.action_scale, "env_dt": float(env.dt), "num_envs": num_envs, "steps": CAP_STEPS,
             "first_step": first.round(4).tolist(), "moving_step": moving.round(4).tolist(),
             "moving_step_fraction_of_scale": (moving / scale).round(3).tolist(),
             "moving_speed_rad_s": (moving / env.dt).round(3).tolist()}

@@ -243,7 +243,8 @@ def speed_profile(options, variants, num, seed) -> dict:
         out[scenario] = {"peak": peak.tolist(), "peak_over_limit": (peak / limit).tolist(), "mean_speed_last_half":
                          speed.tolist(), "share_steps_over_limit": (np.abs(qvel) > limit).mean(axis=(0, 1)).tolist()}
         if action == "relative":
-            out[scenario]["gap_closed_per_step"] = (speed * env.dt / env.config.action_scale).tolist()
+            step = env.config.relative_step(env.robot.joint_low, env.robot.joint_high)
+            out[scenario]["gap_closed_per_step"] = (speed * env.dt / step).tolist()
     return out
 
 
