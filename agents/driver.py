@@ -53,10 +53,10 @@ def build_programs(env_name: str, env_config, algo_config, seeds: int, devices: 
     """Compiled programs for one setting; cached so repeated runs (tests, resumes) reuse them. The
     learner class is part of the key: a class redefined (e.g. in a notebook cell) is a new object
     and compiles anew."""
-    env = envs.wrap(envs.from_config(env_name, env_config))
-    train_env = env if episode_restarts == "fresh" else envs.wrap(env.unwrapped, restarts=episode_restarts)
+    base = envs.from_config(env_name, env_config)
+    env, eval_env = envs.wrap(base, restarts=episode_restarts), envs.wrap(base)  # evaluation always samples
     learner = registry.make_learner(algo_config, env.observation_size, env.action_size, updates, learner_cls)
-    return Programs(train_env, env, learner, algo_config.num_envs, seeds, jax.local_devices()[:devices],
+    return Programs(env, eval_env, learner, algo_config.num_envs, seeds, jax.local_devices()[:devices],
                     max(eval_envs, 1), env_config.episode_length, eval_last_steps, multi_device)
 
 

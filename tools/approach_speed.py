@@ -65,7 +65,7 @@ def servo_cap(env, num_envs: int = 32, seed: int = 0) -> dict:
     moves, _ = full_step_moves(env, num_envs, seed)
     first = moves[:, 0].mean(0).astype(float)
     moving = moves[:, CAP_STEPS // 2:].mean((0, 1)).astype(float)
-    scale = np.asarray(env.config.relative_step(env.robot.joint_low, env.robot.joint_high)) * np.ones_like(moving)
+    scale = env.config.relative_step(env.robot.joint_low, env.robot.joint_high)  # a number, or one per joint
     return {"action_scale": env.config.action_scale, "env_dt": float(env.dt), "num_envs": num_envs, "steps": CAP_STEPS,
             "first_step": first.round(4).tolist(), "moving_step": moving.round(4).tolist(),
             "moving_step_fraction_of_scale": (moving / scale).round(3).tolist(),
