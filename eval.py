@@ -209,7 +209,7 @@ def main(argv: list[str] | None = None) -> list:
     if wants_help:
         parse([], bases[0], show_help=True)  # every option, the env's included
     # Each checkpoint's own env config with the --env.<field> options replacing fields.
-    configs = [envs.make_config(env_name, parse(argv, base).env) for base in bases]
+    configs = [parse(argv, base).env for base in bases]  # checked by evaluation.check below
     overrides = {f.name: getattr(config, f.name) for base, config in zip(bases, configs)
                  for f in dataclasses.fields(config) if getattr(config, f.name) != getattr(base, f.name)}
     eval_seeds = [args.seed + i for i in range(args.seeds)]

@@ -22,14 +22,15 @@ import sys
 
 import jax
 
-from agents.config import TrainConfig, adopt_saved_config, read_config, validate
+from agents.config import TrainConfig, adopt_saved_config, read_config
 from agents.driver import NonFiniteLossError, train
 from agents.logger import summary_lines
 from agents.presets import PRESETS, make_config
 
 
 def parse(argv: list[str]) -> TrainConfig:
-    """Preset name first, then tyro-generated options; validated (ValueError) before anything compiles."""
+    """Preset name first, then tyro-generated options. Not validated here: `agents.train` validates every config
+    it is given (ValueError) before anything is written or compiled."""
     if not argv or argv[0] in ("-h", "--help"):
         lines = [f"  {name:26s} {p.description}" for name, p in sorted(PRESETS.items())]
         print("usage: train.py PRESET [OPTIONS]   (train.py PRESET --help lists the options)\n\npresets:\n" + "\n".join(lines))
@@ -40,11 +41,9 @@ def parse(argv: list[str]) -> TrainConfig:
     cls = TrainConfig[type(config.env), type(config.algo)]
     config = tyro.cli(cls, default=config, args=argv[1:], prog=f"train.py {argv[0]}",
                       description=PRESETS[argv[0]].description)
-    validate(config)
     saved_path = os.path.join(config.logdir, "config.json")
     if config.resume and os.path.isfile(saved_path):
         config = adopt_saved_config(config, read_config(saved_path), explicit_fields(argv[1:]))
-        validate(config)
     return config
 
 

@@ -53,7 +53,7 @@ def build_programs(env_name: str, env_config, algo_config, seeds: int, devices: 
     """Compiled programs for one setting; cached so repeated runs (tests, resumes) reuse them. The
     learner class is part of the key: a class redefined (e.g. in a notebook cell) is a new object
     and compiles anew."""
-    base = envs.from_config(env_name, env_config)
+    base = envs.registry.build(env_name, env_config)  # checked once, by `validate` at `train`
     env, eval_env = envs.wrap(base, restarts=episode_restarts), envs.wrap(base)  # evaluation always samples
     learner = registry.make_learner(algo_config, env.observation_size, env.action_size, updates, learner_cls)
     return Programs(env, eval_env, learner, algo_config.num_envs, seeds, jax.local_devices()[:devices],

@@ -172,7 +172,8 @@ def _rebuild_export(step_dir: str, because: str = "") -> export.PolicyExport:
 
 
 def check(policy: Policy, env_name: str, env_config, allow_env_mismatch: bool = False) -> None:
-    """`check_compatible` on the env built from `env_config` (cheap: nothing is compiled)."""
+    """The env config's own checks, then `check_compatible` on the env built from it (cheap: nothing is
+    compiled)."""
     check_compatible(policy, env_name, envs.from_config(env_name, env_config), allow_env_mismatch)
 
 
@@ -272,7 +273,7 @@ def _evaluator(env_name: str, env_config, algo_config, obs_size: int, act_size: 
     recorded for rendering. `stochastic`: a checkpoint's actions are drawn from its policy's
     distribution (the learner's `stochastic_policy`, a fresh key per step) instead of its mode. `planner`: the
     MPPI planner with these options acts (`agents.planner.make_act`)."""
-    env = envs.wrap(envs.from_config(env_name, env_config), autoreset=False)
+    env = envs.wrap(envs.registry.build(env_name, env_config), autoreset=False)  # checked by `_program`
     length = env_config.episode_length
     if planner is not None:
         act, memory = planners.make_act(env, planner)
@@ -291,7 +292,8 @@ def _evaluator(env_name: str, env_config, algo_config, obs_size: int, act_size: 
 def _program(policy: Policy, env_name: str, env_config, num_envs: int, last_steps: int, stochastic: bool,
              allow_env_mismatch: bool = False) -> _Program:
     """The cached evaluation program (`_evaluator`) for `policy`'s network on this env, after checking
-    that the env fits the policy and that a stochastic evaluation has a distribution to sample."""
+    the env config, that the env fits the policy and that a stochastic evaluation has a distribution to sample."""
+    envs.registry.check_config(env_name, env_config)
     if stochastic and policy.export is None:
         raise ValueError(f"stochastic=True is invalid for the {policy.kind} {policy.name!r}: allowed only for checkpoints "
                          f"(the {policy.kind} has no action distribution).")

@@ -185,10 +185,11 @@ PRESETS: dict[str, Preset] = {
 
 
 def make_config(preset: str, **overrides) -> TrainConfig:
-    """The preset's TrainConfig with `overrides` (TrainConfig fields) replacing its values."""
+    """The preset's TrainConfig with `overrides` (TrainConfig fields) replacing its values; not checked here
+    (`agents.validate`, which `agents.train` runs, checks the config a run is given)."""
     if preset not in PRESETS:
         raise ValueError(f"preset={preset!r} is unknown: allowed are {', '.join(sorted(PRESETS))}.")
     p = PRESETS[preset]
-    env_config = envs.make_config(p.env_name, **p.env)
+    env_config = dataclasses.replace(envs.default_config(p.env_name), **p.env)
     config = TrainConfig(env=env_config, algo=p.algo, env_name=p.env_name, preset=preset, **p.run)
     return dataclasses.replace(config, **overrides)

@@ -17,7 +17,6 @@ import operator
 
 import jax
 import jax.numpy as jnp
-import numpy as np
 
 from envs import fast_mjx, physics, rewards, workspaces
 from envs.base import Env, State, check_action, check_state
@@ -54,15 +53,10 @@ def _raw_key(key):
 
 
 class ArmEnv(Env):
-    """A robot arm that must bring its end effector to a target. See `ReachConfig`."""
+    """A robot arm that must bring its end effector to a target. See `ReachConfig`. The config is trusted: it
+    was checked where it was made (`envs.make`, `envs.make_config`, `envs.from_config`, `agents.validate`)."""
 
     def __init__(self, robot: Robot, config: ReachConfig):
-        config.validate_for_robot(robot.name, robot.reach, float(np.max(robot.joint_high - robot.joint_low)))
-        if config.target_sampling == "reachable" and config.workspace == "pandagym":
-            raise ValueError(
-                "target_sampling='reachable' is invalid with workspace='pandagym': random poses rarely put "
-                "the end effector in the 30 cm cube (and every point of it is reachable); allowed is "
-                "target_sampling='uniform' there.")
         self.robot = robot
         self.config = config
         self.d_max = config.d_max if config.d_max is not None else robot.reach

@@ -1,8 +1,8 @@
 """Options of the reach and reach-avoid tasks: one frozen dataclass each, defaults = the paper's
 best configuration for that task (paper sections "Experiments" and "Results").
 
-`validate()` runs at `envs.make()`, before anything is traced, and raises a `ValueError` naming
-the field, the value and what is allowed.
+`validate()` runs where a config enters the package (`envs.make`, `envs.make_config`, `envs.from_config`), before
+anything is traced, and raises a `ValueError` naming the field, the value and what is allowed; the envs trust it.
 """
 
 from __future__ import annotations
@@ -190,6 +190,11 @@ class ReachConfig:
         noisy = ("joint_pos", "joint_sin_cos") + (KINEMATIC_OBSERVATIONS if self.joint_noise_model == "encoders" else ())
         _observed_if_set("joint_noise_std", self.joint_noise_std, self.observation, noisy)
         integer("action_latency", self.action_latency, 0, maximum=1)
+        if self.target_sampling == "reachable" and self.workspace == "pandagym":
+            raise ValueError(
+                "target_sampling='reachable' is invalid with workspace='pandagym': random poses rarely put "
+                "the end effector in the 30 cm cube (and every point of it is reachable); allowed is "
+                "target_sampling='uniform' there.")
 
     def relative_step(self, joint_low, joint_high):
         """Radians a relative action of 1 moves each joint's target (`action_scale` in `action_unit`)."""

@@ -48,8 +48,7 @@ class PointMass(Env):
     """Velocity-controlled point; observation = (position, goal, goal - position)."""
 
     def __init__(self, config: PointMassConfig = PointMassConfig()):
-        config.validate()
-        self.config = config
+        self.config = config  # checked where it was made (envs.make, envs.make_config, envs.from_config)
 
     @property
     def observation_size(self) -> int:

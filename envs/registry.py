@@ -2,7 +2,8 @@
 
 `make(name, **options)` builds the config of that environment with `options` replacing its
 defaults, validates it (a `ValueError` names the field, the value and what is allowed) and returns
-the unwrapped, single environment.
+the unwrapped, single environment. A config is checked once, where it enters (`make`, `make_config`,
+`from_config`, or `agents.validate` for a training run); `build` and the env classes trust it.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ class EnvSpec:
     default_config: Callable[[], object]
     """Returns the environment's default config (a frozen dataclass)."""
     build: Callable[[object], Env]
-    """Builds the environment from a validated config."""
+    """Builds the environment from a checked config (`check_config`); it checks nothing itself."""
     description: str
     """One line shown by `envs.names()` users and error messages."""
     robot: str | None = None
@@ -98,10 +99,16 @@ def make(name: str, **options) -> Env:
 
     Example: `envs.make("ur5e-reach-avoid", obstacle_radius=0.2, workspace="front")`.
     """
-    return spec(name).build(make_config(name, **options))
+    return build(name, make_config(name, **options))
 
 
 def from_config(name: str, config) -> Env:
-    """Builds environment `name` from a complete config (for example one stored in a checkpoint)."""
+    """Builds environment `name` from a complete config (for example one stored in a checkpoint), checked first."""
     check_config(name, config)
+    return build(name, config)
+
+
+def build(name: str, config) -> Env:
+    """Builds environment `name` from a config already checked for it where it was made (`make_config`,
+    `from_config`, `agents.validate`); nothing is checked again, so code below those entry points uses this."""
     return spec(name).build(config)

@@ -311,13 +311,14 @@ def test_wrist_3_variant_resizes_the_capsule_of_that_env_only():
 
 
 def test_training_with_variants_applies_them_to_every_ur5e_env_built(monkeypatch):
-    monkeypatch.setattr(envs, "make", envs.make)  # restored after the test
-    monkeypatch.setattr(envs, "from_config", envs.from_config)
+    monkeypatch.setattr(envs.registry, "build", envs.registry.build)  # restored after the test
     fidelity_train.patch_env_builders(["wrist_3=0"])
     made = envs.make("ur5e-reach")
     assert made.robot.geom_half[made.robot.mj_model.geom("wrist_3").id] == 0.0
     again = envs.from_config("ur5e-reach", envs.make_config("ur5e-reach"))
     assert again.robot.geom_half[again.robot.mj_model.geom("wrist_3").id] == 0.0
+    driven = envs.registry.build("ur5e-reach", envs.make_config("ur5e-reach"))  # how the driver builds its env
+    assert driven.robot.geom_half[driven.robot.mj_model.geom("wrist_3").id] == 0.0
     panda = envs.make("panda-reach")
     assert panda.robot.geom_half.tolist() == envs.robots.Panda().geom_half.tolist()  # left as built
 

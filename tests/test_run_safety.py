@@ -139,7 +139,7 @@ def test_cut_rows_after_leaves_a_file_without_later_rows_untouched(tmp_path):
 
 def test_overwrite_and_resume_together_are_refused(tmp_path, no_compile):
     with pytest.raises(ValueError, match=r"overwrite=True is invalid with resume=True"):
-        train_cli.parse(["point-mass-ppo", "--logdir", str(tmp_path), "--resume", "--overwrite"])
+        train_cli.main(["point-mass-ppo", "--logdir", str(tmp_path), "--resume", "--overwrite"])
 
 
 def test_resume_of_a_missing_directory_creates_nothing(tmp_path, no_compile):

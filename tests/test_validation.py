@@ -7,8 +7,9 @@ import numpy as np
 import pytest
 
 import envs
+import train
 from agents.config import validate
-from agents.presets import make_config
+from agents.presets import PRESETS, make_config
 from envs import validation
 
 
@@ -115,3 +116,48 @@ def test_the_last_seed_of_several_must_fit_int32():
 def test_a_preset_name_that_would_leave_runs_is_refused(name):
     with pytest.raises(ValueError, match=r"preset=.* is invalid: allowed is a name of letters, digits"):
         validate(dataclasses.replace(make_config("point-mass-ppo"), preset=name))
+
+
+@pytest.fixture
+def validations(monkeypatch):
+    """The outermost calls of the env configs' `validate` (ReachAvoidConfig's calls ReachConfig's: one call)."""
+    calls, depth = [], [0]
+    for cls in (envs.PointMassConfig, envs.ReachConfig, envs.ReachAvoidConfig):
+        def counted(self, original=cls.__dict__["validate"]):
+            if not depth[0]:
+                calls.append(type(self).__name__)
+            depth[0] += 1
+            try:
+                return original(self)
+            finally:
+                depth[0] -= 1
+        monkeypatch.setattr(cls, "validate", counted)
+    return calls
+
+
+@pytest.mark.parametrize("name", ["point-mass", "ur5e-reach", "ur5e-reach-avoid"])
+def test_envs_make_checks_the_config_once(validations, name):
+    envs.make(name)
+    assert len(validations) == 1
+
+
+def test_an_env_built_from_a_checked_config_is_not_checked_again(validations):
+    config = envs.make_config("ur5e-reach-avoid")
+    validations.clear()
+    envs.registry.build("ur5e-reach-avoid", config)
+    assert validations == []
+
+
+def test_the_training_cli_leaves_the_check_to_the_training_run(validations):
+    train.parse(["point-mass-ppo", "--env.goal-radius", "0.05"])
+    assert validations == []
+
+
+def test_a_training_config_is_checked_once_by_validate(validations):
+    validate(make_config("point-mass-ppo"))
+    assert len(validations) == 1
+
+
+@pytest.mark.parametrize("name", sorted(PRESETS))
+def test_every_preset_is_a_valid_config(name):
+    validate(make_config(name))  # a preset is made unchecked: this is its check

@@ -124,8 +124,7 @@ def main(argv: list[str] | None = None) -> dict:
         env_name, config = args.env, envs.default_config(args.env)
     if args.action_scale is not None:
         config = dataclasses.replace(config, action_scale=args.action_scale)
-    config.validate()
-    env = envs.from_config(env_name, config)
+    env = envs.from_config(env_name, config)  # checks the config
     made = provenance.stamp(provenance.command(None if argv is None else [__file__] + list(argv)))
     out = {"env_name": env_name, "env_config": dataclasses.asdict(config), **made, "cap": servo_cap(env)}
     print(f"{env_name}: action_scale {config.action_scale}; a full commanded step moves the joints "

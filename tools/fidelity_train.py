@@ -29,15 +29,15 @@ def split(argv: list[str]) -> tuple[list[str], list[str]]:
 
 
 def patch_env_builders(variants: list[str]) -> None:
-    """Makes `envs.make` and `envs.from_config` apply `variants` to each UR5e env they build (the driver and the
-    evaluation build theirs through them)."""
-    make, from_config = envs.make, envs.from_config
+    """Makes `envs.registry.build`, through which every env is built (by `envs.make`, `envs.from_config`, the
+    driver and the evaluation), apply `variants` to each UR5e env."""
+    build = envs.registry.build
 
-    def varied(env):
+    def varied(name, config):
+        env = build(name, config)
         return apply_variants(env, variants) if env.robot.name == "ur5e" else env
 
-    envs.make = lambda name, **options: varied(make(name, **options))
-    envs.from_config = lambda name, config: varied(from_config(name, config))
+    envs.registry.build = varied
 
 
 def main(argv: list[str] | None = None):
