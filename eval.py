@@ -55,6 +55,9 @@ Video: `--video PATH` (.mp4 or .gif) renders the first `--video-envs` envs' firs
 with MuJoCo's offscreen renderer (`envs.render`; headless: EGL or OSMesa, chosen
 automatically, or set MUJOCO_GL). Needs the `viz` extra (imageio, imageio-ffmpeg).
 
+Compiled programs go to JAX's persistent compilation cache (`.jax_cache/` in the checkout, or
+$JAX_COMPILATION_CACHE_DIR; set it empty for none): a second evaluation of a setting skips compiling.
+
 Exit codes: 0 done, 2 bad input (a one-line `error:` message: missing or corrupt checkpoint,
 another robot, unknown policy or option).
 """
@@ -73,7 +76,7 @@ from typing import Annotated, Generic, TypeVar
 import tyro
 
 import envs
-from agents import baselines, evaluation, planner as planners, provenance
+from agents import baselines, evaluation, planner as planners, provenance, xla_flags
 from agents import logdir as logdirs
 from tools import run_cli
 
@@ -347,4 +350,5 @@ def write_video(path: str, policy, env_name: str, env_config, num_envs: int, see
 
 
 if __name__ == "__main__":
+    xla_flags.compilation_cache()  # a second evaluation of the same setting loads its program instead of compiling
     run_cli(main)

@@ -11,6 +11,9 @@ Every option comes from the config dataclasses (`agents.config.TrainConfig`, the
 config and the environment's config), so `--help` lists each with its docstring. The presets are
 in `agents/presets.py`.
 
+Compiled programs go to JAX's persistent compilation cache (`.jax_cache/` in the checkout, or
+$JAX_COMPILATION_CACHE_DIR; set it empty for none), so a rerun or resume of a setting skips compiling.
+
 Exit codes: 0 done (or stopped by --stop-after-steps / --stop-after-seconds), 1 a non-finite learner
 metric or a failed write, 2 bad input (a one-line `error:` message), 130 stopped by Ctrl-C (after its checkpoint).
 """
@@ -22,6 +25,7 @@ import sys
 
 import jax
 
+from agents import xla_flags
 from agents.config import TrainConfig, adopt_saved_config, read_config
 from agents.driver import NonFiniteLossError, train
 from agents.logger import summary_lines
@@ -108,4 +112,5 @@ def cli(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
+    xla_flags.compilation_cache()  # a rerun or resume of the same setting loads its programs instead of compiling
     raise SystemExit(cli())

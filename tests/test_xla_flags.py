@@ -1,5 +1,10 @@
 """agents/xla_flags.py: which XLA_FLAGS the project sets, and when it leaves them alone."""
 
+import pathlib
+
+import jax
+import pytest
+
 from agents import xla_flags
 
 FLAG = "--xla_gpu_command_buffer_scheduling_mode"
@@ -27,3 +32,27 @@ def test_the_users_choice_the_opt_out_and_cpu_machines_leave_xla_flags_alone():
     assert not xla_flags.apply(cpu, gpu=False)
     assert cpu["XLA_FLAGS"] == ""
 
+
+
+@pytest.fixture
+def cache_setting():
+    """Restores JAX's compilation cache folder after the test."""
+    before = jax.config.jax_compilation_cache_dir
+    yield
+    jax.config.update("jax_compilation_cache_dir", before)
+
+
+@pytest.mark.parametrize("path, environ, folder", [
+    (None, {}, xla_flags.DEFAULT_CACHE),  # nothing named: the checkout's .jax_cache/
+    (None, {"JAX_COMPILATION_CACHE_DIR": "/tmp/elsewhere"}, "/tmp/elsewhere"),  # JAX's own variable wins
+    (None, {"JAX_COMPILATION_CACHE_DIR": ""}, None),  # set empty: no cache
+    ("/tmp/given", {"JAX_COMPILATION_CACHE_DIR": "/tmp/elsewhere"}, "/tmp/given"),  # an explicit path wins
+    ("off", {}, None),
+])
+def test_compilation_cache_folder(cache_setting, path, environ, folder):
+    assert xla_flags.compilation_cache(path, environ) == folder
+    assert jax.config.jax_compilation_cache_dir == folder
+
+
+def test_the_default_cache_is_the_checkouts_ignored_folder():
+    assert xla_flags.DEFAULT_CACHE == str(pathlib.Path(__file__).resolve().parents[1] / ".jax_cache")

@@ -23,10 +23,9 @@ import subprocess
 import time
 import traceback
 
-import jax
 import submitit
 
-from agents import driver, provenance
+from agents import driver, provenance, xla_flags
 from agents.checkpoint import write_atomic
 from tools.experiment_state import (
     cross_evaluate, folder_crosses, parse_part, part_state, pending_parts, planners, run_state, select,
@@ -215,17 +214,6 @@ def train_part(key: str, part: str, runs_dir: str, out: str, log=print) -> str:
     return "done"
 
 
-def use_compilation_cache(path: str | None) -> str | None:
-    """Turns on JAX's persistent compilation cache in `path` (None: $JAX_COMPILATION_CACHE_DIR, else `.jax_cache/` in
-    the repository; "off": none): a run's parts, seeds and resumes compile one program, so every start after the
-    first loads it. Returns the folder used."""
-    if path is None:
-        path = os.environ.get("JAX_COMPILATION_CACHE_DIR") or os.path.join(ROOT, ".jax_cache")
-    folder = None if path == "off" else path
-    jax.config.update("jax_compilation_cache_dir", folder)
-    return folder
-
-
 @dataclasses.dataclass
 class PartJob(submitit.helpers.Checkpointable):
     """One part as a submitit job. Requeued by submitit's `checkpoint` (the same job again) after a stop signal;
@@ -246,7 +234,7 @@ class PartJob(submitit.helpers.Checkpointable):
         # driver takes the signal instead, saves a checkpoint and returns; the requeue follows here.
         requeue = signal.getsignal(signal.SIGUSR2)
         try:
-            use_compilation_cache(self.compilation_cache)
+            xla_flags.compilation_cache(self.compilation_cache)
             status = train_part(self.key, self.part, self.runs_dir, self.out)
         except Exception as error:
             last = traceback.format_exception_only(error)[-1].strip()

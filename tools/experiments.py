@@ -23,8 +23,9 @@ import os
 import shlex
 import sys
 
+from agents import xla_flags
 from tools import run_cli
-from tools.experiment_launch import EXECUTORS, LaunchConfig, describe_job, launch, run_parts, use_compilation_cache
+from tools.experiment_launch import EXECUTORS, LaunchConfig, describe_job, launch, run_parts
 from tools.experiment_state import (
     OUT_DIR, RUNS_DIR, RunState, checkpoint_steps, millions, pending_parts, planners, run_state, select, table_built,
     validate_experiment,
@@ -199,7 +200,7 @@ def main(argv=None) -> int:
                 print(f"not finished: {', '.join(left)} (`list` says why; `launch` again continues)", file=sys.stderr)
                 return 1
     else:
-        use_compilation_cache(args.compilation_cache)
+        xla_flags.compilation_cache(args.compilation_cache)
         finished = run_parts(selection, args.runs_dir, args.out, args.max_seeds)
         if not args.no_build:
             build(selection, args.runs_dir, args.out, complete_only=True)
