@@ -282,6 +282,7 @@ class SAC:
         """Nothing in SAC depends on how far the run got."""
         return None
 
+    @jax.named_scope("insert")
     def insert(self, replay: Replay, batch: Transition) -> Replay:
         steps = batch.reward.shape[0]
         rows = (replay.position + jnp.arange(steps)) % self.rows
@@ -291,6 +292,7 @@ class SAC:
         data = jax.tree.map(lambda buf, x: buf.at[rows].set(x), replay.data, new)
         return Replay(data, (replay.position + steps) % self.rows, jnp.minimum(replay.rows + steps, self.rows))
 
+    @jax.named_scope("sample")
     def sample(self, replay: Replay, key, par: Parallel):
         """This device's share of a stratified batch; returns (transitions, global sample ids)."""
         c = self.config
@@ -329,6 +331,7 @@ class SAC:
 
     # -- the objectives (each one overridable) --------------------------------------------------
 
+    @jax.named_scope("critic_target")
     def critic_target(self, s: SACState, mb: dict, next_obs, noise, alpha):
         """The soft Bellman target of the sampled (n-step) transitions (eq. 3 with the clipped
         double-Q minimum): a number per sample, or with the distributional critic the projected
@@ -381,24 +384,30 @@ class SAC:
         alpha = jnp.exp(s.log_alpha)
         target = self.critic_target(s, mb, next_obs, self._noise(k_next, ids), alpha)
 
-        (q_loss, q_mean), q_grads = jax.value_and_grad(self.critic_loss, has_aux=True)(s.q_params, obs, mb["action"], target)
-        q_grads, q_loss, q_mean = par.mean_gradients(q_grads), par.pmean(q_loss), par.pmean(q_mean)
-        q_updates, q_opt = self.optimizer.update(q_grads, s.q_opt, s.q_params)
-        q_params = optax.apply_updates(s.q_params, q_updates)
+        with jax.named_scope("critic_update"):
+            (q_loss, q_mean), q_grads = jax.value_and_grad(self.critic_loss, has_aux=True)(s.q_params, obs, mb["action"],
+                                                                                          target)
+            q_grads, q_loss, q_mean = par.mean_gradients(q_grads), par.pmean(q_loss), par.pmean(q_mean)
+            q_updates, q_opt = self.optimizer.update(q_grads, s.q_opt, s.q_params)
+            q_params = optax.apply_updates(s.q_params, q_updates)
 
-        (pi_loss, log_prob), pi_grads = jax.value_and_grad(self.actor_loss, has_aux=True)(
-            s.policy_params, q_params, obs, self._noise(k_pi, ids), alpha)
-        pi_grads, pi_loss = par.mean_gradients(pi_grads), par.pmean(pi_loss)
-        pi_updates, policy_opt = self.optimizer.update(pi_grads, s.policy_opt, s.policy_params)
-        policy_params = optax.apply_updates(s.policy_params, pi_updates)
+        with jax.named_scope("actor_update"):
+            (pi_loss, log_prob), pi_grads = jax.value_and_grad(self.actor_loss, has_aux=True)(
+                s.policy_params, q_params, obs, self._noise(k_pi, ids), alpha)
+            pi_grads, pi_loss = par.mean_gradients(pi_grads), par.pmean(pi_loss)
+            pi_updates, policy_opt = self.optimizer.update(pi_grads, s.policy_opt, s.policy_params)
+            policy_params = optax.apply_updates(s.policy_params, pi_updates)
 
-        a_loss, a_grad = jax.value_and_grad(self.temperature_loss)(s.log_alpha, log_prob)
-        a_grad, a_loss = par.mean_gradients(a_grad), par.pmean(a_loss)
-        a_updates, alpha_opt = self.optimizer.update(a_grad, s.alpha_opt, s.log_alpha)
-        log_alpha = optax.apply_updates(s.log_alpha, a_updates)
+        with jax.named_scope("temperature_update"):
+            a_loss, a_grad = jax.value_and_grad(self.temperature_loss)(s.log_alpha, log_prob)
+            a_grad, a_loss = par.mean_gradients(a_grad), par.pmean(a_loss)
+            a_updates, alpha_opt = self.optimizer.update(a_grad, s.alpha_opt, s.log_alpha)
+            log_alpha = optax.apply_updates(s.log_alpha, a_updates)
 
+        with jax.named_scope("polyak"):
+            target_q_params = polyak(s.target_q_params, q_params, c.tau)
         s = s.replace(policy_params=policy_params, q_params=q_params, log_alpha=log_alpha,
-                      target_q_params=polyak(s.target_q_params, q_params, c.tau),
+                      target_q_params=target_q_params,
                       policy_opt=policy_opt, q_opt=q_opt, alpha_opt=alpha_opt)
         metrics = {"loss/critic": q_loss, "loss/actor": pi_loss, "loss/temperature": a_loss,
                    "sac/alpha": alpha, "sac/entropy": par.pmean(-jnp.mean(log_prob)), "sac/q_mean": q_mean}
