@@ -78,10 +78,20 @@ class TwinQ(nn.Module):
     out_size: int = 1
     dtype: str = "float32"
     """Compute dtype of both critics (see `MLP.dtype`)."""
+    stacked: bool = False
+    """Both critics as one `nn.vmap` of the MLP, every parameter with a leading axis of 2 (parameters `q`, not `q0` and
+    `q1`): the same two functions, but one batched matrix product, normalisation and activation per layer for both,
+    so a GPU runs half the kernels."""
 
     @nn.compact
     def __call__(self, obs: jax.Array, action: jax.Array) -> jax.Array:
         x = jnp.concatenate([obs, action], axis=-1)
+        if self.stacked:
+            pair = nn.vmap(MLP, variable_axes={"params": 0}, split_rngs={"params": True}, in_axes=None, out_axes=-2,
+                           axis_size=2)
+            q = pair(self.hidden_sizes, self.out_size, self.activation, self.kernel_init, self.layer_norm,
+                     dtype=self.dtype, name="q")(x)  # (..., 2, out_size)
+            return q[..., 0] if self.out_size == 1 else q
         qs = [
             MLP(self.hidden_sizes, self.out_size, self.activation, self.kernel_init, self.layer_norm, dtype=self.dtype,
                 name=f"q{i}")(x)
@@ -104,8 +114,14 @@ def value_network(hidden_sizes, activation="swish", init="lecun_uniform", layer_
 
 
 def q_network(hidden_sizes, activation="swish", init="lecun_uniform", layer_norm=False, out_size=1,
-              dtype="float32") -> TwinQ:
-    return TwinQ(tuple(hidden_sizes), activation, init, layer_norm, out_size, dtype)
+              dtype="float32", stacked=False) -> TwinQ:
+    return TwinQ(tuple(hidden_sizes), activation, init, layer_norm, out_size, dtype, stacked)
+
+
+def unstack_twin_params(params):
+    """The parameters of a stacked `TwinQ` (`q`, leading axis 2) as those of the separate one (`q0`, `q1`)."""
+    stacked = params["params"]["q"]
+    return {"params": {f"q{i}": jax.tree.map(lambda x, i=i: x[i], stacked) for i in range(2)}}
 
 
 def validate_network_fields(hidden_field: str, hidden_sizes, activation: str, init: str, prefix: str = "algo.") -> None:

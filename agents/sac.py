@@ -88,6 +88,9 @@ class SACConfig(networks.NetworkConfig):
     """Dtype of the policy's and critics' hidden layers: float32 or bfloat16 (FastTD3 trains with bf16 autocast
     by default; for large batches on GPUs with bf16 tensor cores). Parameters, output layers, losses and Adam stay
     float32."""
+    stacked_critics: bool = False
+    """The twin critics as one network with stacked parameters (`networks.TwinQ.stacked`): the same functions with
+    half the GPU kernels per gradient step; parameters initialised from other random numbers than separate critics."""
 
     @property
     def env_steps_per_update(self) -> int:
@@ -137,6 +140,8 @@ class SACConfig(networks.NetworkConfig):
             validation.positive("algo." + name, getattr(self, name), strict=False)
         self.validate_networks("q_hidden_sizes")
         validation.choice("algo.compute_dtype", self.compute_dtype, tuple(networks.COMPUTE_DTYPES))
+        if not isinstance(self.stacked_critics, bool):
+            raise ValueError(f"algo.stacked_critics={self.stacked_critics!r} is invalid: allowed are True, False.")
 
 
 # ----------------------------------------------------------------------------------------------
@@ -213,7 +218,7 @@ class SAC:
         self.policy_net = networks.policy_network(action_size, c.policy_hidden_sizes, c.activation, c.kernel_init, c.layer_norm,
                                                   c.compute_dtype)
         self.q_net = networks.q_network(c.q_hidden_sizes, c.activation, c.kernel_init, c.layer_norm,
-                                        c.num_atoms if c.distributional else 1, c.compute_dtype)
+                                        c.num_atoms if c.distributional else 1, c.compute_dtype, c.stacked_critics)
         self.support = offpolicy.categorical_support(c.v_min, c.v_max, c.num_atoms) if c.distributional else None
         clip = [optax.clip_by_global_norm(c.max_grad_norm)] if c.max_grad_norm > 0 else []
         # On one flat vector per network: few large GPU kernels per gradient step (see agents/ppo.py).

@@ -10,6 +10,7 @@ import pytest
 
 from agents import driver, presets
 from agents.loop import Parallel, Transition
+from agents.networks import TwinQ, unstack_twin_params
 from agents.sac import SAC, SACConfig
 
 
@@ -106,6 +107,7 @@ def test_fast_sac_saves_without_its_buffer_and_resumes(tmp_path):
     ("v_max", -20.0, r"algo.v_max=-20.0 is invalid: allowed is a number > algo.v_min=-10.0"),
     ("max_replay_size", 128, r"algo.max_replay_size=128 is invalid with algo.n_step=3"),
     ("compute_dtype", "float16", r"algo.compute_dtype='float16' is invalid: allowed are 'float32', 'bfloat16'"),
+    ("stacked_critics", 1, r"algo.stacked_critics=1 is invalid: allowed are True, False"),
 ])
 def test_fast_sac_fields_reject_bad_values(field, value, message):
     config = dataclasses.replace(SACConfig(num_envs=64, batch_size=64, n_step=3, min_replay_size=0), **{field: value})
@@ -142,3 +144,44 @@ def test_throughput_benchmark_variants_parse_and_name_unknown_fields():
     assert parse_variant("grad-updates-per-step=2", algo) == {"grad_updates_per_step": 2}
     with pytest.raises(ValueError, match="'unroll_length' is not a field of SACConfig"):
         parse_variant("unroll_length=8", algo)
+
+
+@pytest.mark.parametrize("out_size", [1, 11])
+def test_stacked_critics_are_the_two_separate_critics(out_size):
+    """The stacked TwinQ's parameters split into q0 and q1 give the separate TwinQ the same outputs, shape included."""
+    obs = jax.random.normal(jax.random.PRNGKey(0), (32, 7))
+    act = jax.random.uniform(jax.random.PRNGKey(1), (32, 3), minval=-1, maxval=1)
+    kw = dict(hidden_sizes=(16, 16), layer_norm=True, out_size=out_size)
+    stacked = TwinQ(**kw, stacked=True)
+    params = stacked.init(jax.random.PRNGKey(2), obs, act)
+    both, separate = stacked.apply(params, obs, act), TwinQ(**kw).apply(unstack_twin_params(params), obs, act)
+    assert both.shape == separate.shape
+    np.testing.assert_allclose(np.asarray(both), np.asarray(separate), rtol=1e-5, atol=1e-6)
+    assert not np.allclose(np.asarray(both[:, 0]), np.asarray(both[:, 1]))  # two critics, not one twice
+
+
+def test_a_gradient_step_with_stacked_critics_is_the_step_with_separate_ones():
+    """From the same parameters and buffer, one SAC gradient step (n-step, categorical critic) of the stacked critics
+    ends at the separate critics' parameters, and the actor that learns through them at the same policy."""
+    kw = dict(num_envs=8, batch_size=16, max_replay_size=64, min_replay_size=0, n_step=2, distributional=True,
+              num_atoms=11, layer_norm=True, q_hidden_sizes=(16, 16), policy_hidden_sizes=(16,))
+    stacked, separate = SAC(SACConfig(**kw, stacked_critics=True), 5, 2), SAC(SACConfig(**kw), 5, 2)
+    state = stacked.init(jax.random.PRNGKey(0))
+    rng = np.random.default_rng(0)
+    replay = state.replay
+    for _ in range(4):
+        f = lambda *shape: jnp.asarray(rng.normal(size=(1, 8) + shape), jnp.float32)
+        replay = stacked.insert(replay, Transition(obs=f(5), action=jnp.tanh(f(2)), reward=f(), termination=jnp.zeros((1, 8)),
+                                                   truncation=jnp.zeros((1, 8)), next_obs=f(5), extras={}))
+    state = state.replace(replay=replay)
+    q = unstack_twin_params(state.q_params)
+    twin = state.replace(q_params=q, target_q_params=q, q_opt=separate.optimizer.init(q))
+    par = Parallel(8)
+    after_stacked, _ = stacked.sgd_step(state, jax.random.PRNGKey(1), par)
+    after_separate, _ = separate.sgd_step(twin, jax.random.PRNGKey(1), par)
+    moved = jax.tree.leaves(after_separate.q_params)
+    for a, b in zip(jax.tree.leaves(unstack_twin_params(after_stacked.q_params)), moved):
+        np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-4, atol=1e-6)
+    assert not all(np.allclose(a, b) for a, b in zip(moved, jax.tree.leaves(q)))  # the critics did step
+    for a, b in zip(jax.tree.leaves(after_stacked.policy_params), jax.tree.leaves(after_separate.policy_params)):
+        np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-4, atol=1e-6)
