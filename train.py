@@ -46,7 +46,7 @@ def parse(argv: list[str]) -> TrainConfig:
     config = tyro.cli(cls, default=config, args=argv[1:], prog=f"train.py {argv[0]}",
                       description=PRESETS[argv[0]].description)
     saved_path = os.path.join(config.logdir, "config.json")
-    if config.resume and os.path.isfile(saved_path):
+    if config.resume and config.logdir and os.path.isfile(saved_path):  # no logdir: the run refuses --resume
         config = adopt_saved_config(config, read_config(saved_path), explicit_fields(argv[1:]))
     return config
 

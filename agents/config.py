@@ -191,6 +191,13 @@ def validate(config: TrainConfig) -> None:
                          "run in logdir, --overwrite replaces it with a fresh one).")
 
 
+def validate_stored(config: TrainConfig) -> None:
+    """The checks of `validate` that a stored run's config (a checkpoint's) must pass to rebuild its programs here:
+    its env and algorithm configs, on one device (a restore replaces the run fields, such as the device count)."""
+    envs.registry.check_config(config.env_name, config.env)
+    config.algo.validate(1)
+
+
 def validate_logging(config: TrainConfig) -> None:
     """The logger fields of `validate`; with logger="wandb" also that wandb is installed, so a missing package
     stops the run before anything compiles."""

@@ -34,7 +34,7 @@ from agents import export, provenance, registry
 from envs import validation
 from agents.checkpoint import Checkpointer, write_atomic
 from agents.config import (TrainConfig, config_from_json, config_json, env_steps_per_update, merge_resume_config,
-                           num_devices, total_updates, validate)
+                           num_devices, total_updates, validate, validate_stored)
 from agents import logdir as logdirs
 from agents.logger import Logger, cut_rows_after
 from agents.loop import Programs
@@ -53,7 +53,7 @@ def build_programs(env_name: str, env_config, algo_config, seeds: int, devices: 
     """Compiled programs for one setting; cached so repeated runs (tests, resumes) reuse them. The
     learner class is part of the key: a class redefined (e.g. in a notebook cell) is a new object
     and compiles anew."""
-    base = envs.registry.build(env_name, env_config)  # checked once, by `validate` at `train`
+    base = envs.registry.build(env_name, env_config)  # checked by the caller (see `programs_for`)
     env, eval_env = envs.wrap(base, restarts=episode_restarts), envs.wrap(base)  # evaluation always samples
     learner = registry.make_learner(algo_config, env.observation_size, env.action_size, updates, learner_cls)
     return Programs(env, eval_env, learner, algo_config.num_envs, seeds, jax.local_devices()[:devices],
@@ -61,7 +61,8 @@ def build_programs(env_name: str, env_config, algo_config, seeds: int, devices: 
 
 
 def programs_for(config: TrainConfig, learner_cls: type | None = None) -> Programs:
-    """The (cached) programs of `config`, with `learner_cls` in place of the registered learner class."""
+    """The (cached) programs of `config`, with `learner_cls` in place of the registered learner class; `config` is
+    trusted: checked by `validate` (a run) or `validate_stored` (a checkpoint's config)."""
     return build_programs(config.env_name, config.env, config.algo, config.seeds, num_devices(config),
                           total_updates(config), config.eval_envs, config.eval_last_steps,
                           learner_cls or registry.of_config(config.algo).learner_cls, config.multi_device,
@@ -408,7 +409,8 @@ def learner_only_checkpoint(logdir: str, dest_logdir: str) -> int:
 
     def prepare(step, saved):
         config = dataclasses.replace(saved, devices=1)  # a run field: restoring needs no other device
-        return config, programs_for(config)  # an error here is not damage: it propagates
+        validate_stored(config)  # an error here is not damage: it propagates
+        return config, programs_for(config)
 
     def load(step, prepared):  # the learner by tree path: whatever env states (and env version) the run saved
         config, programs = prepared
@@ -438,7 +440,9 @@ def export_checkpoint(step_dir: str) -> str:
     ckpt = Checkpointer(os.path.dirname(step_dir))
     try:
         config_dict = ckpt.restore_config(step)
-        programs = programs_for(config_from_json(config_dict))
+        config = config_from_json(config_dict)
+        validate_stored(config)
+        programs = programs_for(config)
         state = ckpt.restore_matching(step, _learner_only(programs.abstract_state, programs.learner))
     finally:
         ckpt.close()

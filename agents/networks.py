@@ -81,7 +81,7 @@ class TwinQ(nn.Module):
     stacked: bool = False
     """Both critics as one `nn.vmap` of the MLP, every parameter with a leading axis of 2 (parameters `q`, not `q0` and
     `q1`): the same two functions, but one batched matrix product, normalisation and activation per layer for both,
-    so a GPU runs half the kernels."""
+    so a GPU runs half the kernels of the critics' layers."""
 
     @nn.compact
     def __call__(self, obs: jax.Array, action: jax.Array) -> jax.Array:

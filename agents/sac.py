@@ -90,7 +90,7 @@ class SACConfig(networks.NetworkConfig):
     float32."""
     stacked_critics: bool = False
     """The twin critics as one network with stacked parameters (`networks.TwinQ.stacked`): the same functions with
-    half the GPU kernels per gradient step; parameters initialised from other random numbers than separate critics."""
+    fewer GPU kernels in the critics' layers; parameters initialised from other random numbers than separate critics."""
 
     @property
     def env_steps_per_update(self) -> int:

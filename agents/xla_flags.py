@@ -36,6 +36,9 @@ OPT_OUT = "REACH_AVOID_XLA_DEFAULTS"
 CACHE_VARIABLE = "JAX_COMPILATION_CACHE_DIR"
 DEFAULT_CACHE = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), ".jax_cache")
 """The persistent compilation cache's folder when neither a path nor $JAX_COMPILATION_CACHE_DIR names one."""
+CACHE_BYTES = 4 * 2**30
+"""The cache's size limit unless $JAX_COMPILATION_CACHE_MAX_SIZE sets one: past it JAX deletes the least recently
+used programs (its own default is no limit, a folder that grows with every setting compiled)."""
 
 
 def merged_flags(current: str, flags=GPU_FLAGS) -> str:
@@ -83,11 +86,14 @@ def apply(environ=None, gpu: bool | None = None) -> bool:
 
 
 def compilation_cache(path: str | None = None, environ=None) -> str | None:
-    """Turns on JAX's persistent compilation cache in `path`; None: $JAX_COMPILATION_CACHE_DIR where it is set (an
-    empty value turns the cache off), else `DEFAULT_CACHE`; "off": no cache. Returns the folder used, or None."""
+    """Turns on JAX's persistent compilation cache in `path`, at most `CACHE_BYTES`; None: $JAX_COMPILATION_CACHE_DIR
+    where it is set (an empty value turns the cache off), else `DEFAULT_CACHE`; "off": no cache. Returns the folder
+    used, or None."""
     environ = os.environ if environ is None else environ
     if path is None:
         path = environ.get(CACHE_VARIABLE, DEFAULT_CACHE)
     folder = None if path in ("off", "") else path
     jax.config.update("jax_compilation_cache_dir", folder)
+    if "JAX_COMPILATION_CACHE_MAX_SIZE" not in environ:
+        jax.config.update("jax_compilation_cache_max_size", CACHE_BYTES)
     return folder

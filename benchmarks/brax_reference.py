@@ -37,6 +37,7 @@ import jax.numpy as jnp
 
 import envs
 from agents import driver, presets, provenance, registry
+from agents.config import validate
 from agents.loop import make_evaluate
 from benchmarks.train_throughput import trace_chunk
 
@@ -230,6 +231,7 @@ def main(argv=None):
     env = envs.from_config(config.env_name, config.env)
     config = brax_comparable(config, algo_name, env.action_size)
     config = config.__class__(**{**config.__dict__, "num_timesteps": total})
+    validate(config)  # every field before anything compiles
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     device = jax.devices()[0]

@@ -53,8 +53,8 @@ def _raw_key(key):
 
 
 class ArmEnv(Env):
-    """A robot arm that must bring its end effector to a target. See `ReachConfig`. The config is trusted: it
-    was checked where it was made (`envs.make`, `envs.make_config`, `envs.from_config`, `agents.validate`)."""
+    """A robot arm that must bring its end effector to a target. See `ReachConfig`. Build it with `envs.make` or
+    `envs.from_config`, which check the config: the constructor trusts it and checks nothing."""
 
     def __init__(self, robot: Robot, config: ReachConfig):
         self.robot = robot

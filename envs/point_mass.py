@@ -45,10 +45,11 @@ class PointMassConfig:
 
 
 class PointMass(Env):
-    """Velocity-controlled point; observation = (position, goal, goal - position)."""
+    """Velocity-controlled point; observation = (position, goal, goal - position). Build it with `envs.make` or
+    `envs.from_config`, which check the config: the constructor trusts it."""
 
     def __init__(self, config: PointMassConfig = PointMassConfig()):
-        self.config = config  # checked where it was made (envs.make, envs.make_config, envs.from_config)
+        self.config = config
 
     @property
     def observation_size(self) -> int:

@@ -2,8 +2,8 @@
 
 `make(name, **options)` builds the config of that environment with `options` replacing its
 defaults, validates it (a `ValueError` names the field, the value and what is allowed) and returns
-the unwrapped, single environment. A config is checked once, where it enters (`make`, `make_config`,
-`from_config`, or `agents.validate` for a training run); `build` and the env classes trust it.
+the unwrapped, single environment. A config is checked where it enters (`make`, `make_config`,
+`from_config`, or `agents.validate` for a training run); `build` and the env classes below them trust it.
 """
 
 from __future__ import annotations

@@ -295,6 +295,23 @@ def test_a_checkpoint_whose_env_states_another_env_wrote_resumes_its_learner(ear
     assert len((logdir / "metrics.csv").read_text().splitlines()) == rows_before + 2  # 2 rows after SHORT
 
 
+@pytest.mark.parametrize("rebuild", ["export", "learner_only"])
+def test_a_checkpoint_with_an_impossible_stored_config_is_refused_before_compiling(earlier_run, tmp_path, no_compile,
+                                                                                    rebuild):
+    """A checkpoint's config (edited by hand, or from an older version) is checked before its programs are built."""
+    logdir = tmp_path / "run"
+    shutil.copytree(earlier_run, logdir)
+    stored = logdir / "checkpoints" / str(SHORT) / "config" / "metadata"
+    config = json.loads(stored.read_text())
+    config["env"]["goal_radius"] = -1.0
+    stored.write_text(json.dumps(config))
+    with pytest.raises(ValueError, match=r"goal_radius=-1.0 is invalid"):
+        if rebuild == "export":
+            driver.export_checkpoint(str(logdir / "checkpoints" / str(SHORT)))
+        else:
+            driver.learner_only_checkpoint(str(logdir), str(tmp_path / "carried"))
+
+
 def test_resume_with_no_intact_checkpoint_names_them(earlier_run, tmp_path, capsys):
     logdir = tmp_path / "run"
     shutil.copytree(earlier_run, logdir)

@@ -37,9 +37,10 @@ def test_the_users_choice_the_opt_out_and_cpu_machines_leave_xla_flags_alone():
 @pytest.fixture
 def cache_setting():
     """Restores JAX's compilation cache folder after the test."""
-    before = jax.config.jax_compilation_cache_dir
+    before = jax.config.jax_compilation_cache_dir, jax.config.jax_compilation_cache_max_size
     yield
-    jax.config.update("jax_compilation_cache_dir", before)
+    jax.config.update("jax_compilation_cache_dir", before[0])
+    jax.config.update("jax_compilation_cache_max_size", before[1])
 
 
 @pytest.mark.parametrize("path, environ, folder", [
@@ -54,5 +55,16 @@ def test_compilation_cache_folder(cache_setting, path, environ, folder):
     assert jax.config.jax_compilation_cache_dir == folder
 
 
-def test_the_default_cache_is_the_checkouts_ignored_folder():
-    assert xla_flags.DEFAULT_CACHE == str(pathlib.Path(__file__).resolve().parents[1] / ".jax_cache")
+def test_the_default_cache_is_a_folder_git_ignores():
+    root = pathlib.Path(__file__).resolve().parents[1]
+    assert f"/{pathlib.Path(xla_flags.DEFAULT_CACHE).relative_to(root)}/" in (root / ".gitignore").read_text().split()
+
+
+@pytest.mark.parametrize("environ, limit", [
+    ({}, xla_flags.CACHE_BYTES),  # bounded: least recently used programs go first
+    ({"JAX_COMPILATION_CACHE_MAX_SIZE": "123"}, 123),  # JAX's own variable, as JAX read it at import: left alone
+])
+def test_the_cache_has_a_size_limit_unless_one_is_set(cache_setting, environ, limit):
+    jax.config.update("jax_compilation_cache_max_size", int(environ.get("JAX_COMPILATION_CACHE_MAX_SIZE", -1)))
+    xla_flags.compilation_cache("off", environ)
+    assert jax.config.jax_compilation_cache_max_size == limit

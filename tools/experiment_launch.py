@@ -32,7 +32,6 @@ from tools.experiment_state import (
 )
 from tools.experiment_tables import record_parts
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 EXECUTORS = ("slurm", "local")
 """`launch`'s executors: a Slurm cluster, or this machine's GPUs (its CPU where it has none)."""
 CHECKPOINTS_PER_PART = 20

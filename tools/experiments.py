@@ -136,7 +136,7 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--wait", action="store_true", help="launch --executor slurm: wait until the jobs have ended")
     p.add_argument("--jobs-dir", help="launch: submitit's folder for job scripts and logs (default <runs-dir>/jobs)")
     p.add_argument("--compilation-cache", metavar="DIR", help="launch, run: JAX's persistent compilation cache "
-                   "(default: $JAX_COMPILATION_CACHE_DIR, else .jax_cache/ in the repository; 'off' for none)")
+                   "(default: $JAX_COMPILATION_CACHE_DIR, empty for none, else .jax_cache/ in the repository; 'off' for none)")
     p.add_argument("--max-seeds", type=int, help="launch, run, commands: seeds trained together in one process "
                    "(default: all of a run's; 1 trains each seed on its own)")
     p.add_argument("--no-build", action="store_true", help="run: no tables afterwards (finished parts are recorded)")
