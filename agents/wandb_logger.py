@@ -76,7 +76,8 @@ class WandbLogger:
                                 **{EVAL_PREFIX + k: float(v[i]) for k, v in eval_metrics.items()}})
 
     def close(self) -> None:
-        """Finishes the runs (offline: writes their last records); a second call does nothing."""
+        """Finishes the runs (offline, W&B's service may write their last records out after this returns;
+        `wandb.teardown()` waits for it); a second call does nothing."""
         runs, self.runs = self.runs, []
         for run in runs:
             run.finish()

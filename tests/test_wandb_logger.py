@@ -11,6 +11,7 @@ import os
 import struct
 
 import pytest
+import wandb
 from wandb.proto import wandb_internal_pb2
 
 import train as train_cli
@@ -131,6 +132,9 @@ def resumed_run(tmp_path_factory):
     assert first.status == "stopped"
     second = driver.train(presets.make_config("point-mass-ppo", resume=True, **base))
     assert second.status == "done"
+    # `finish` returns before W&B's service has always written the files out (a busy machine showed a file without
+    # its run record); shutting the service down waits for it.
+    wandb.teardown()
     with open(wandb_logger.run_ids_path(logdir)) as f:
         return logdir, {int(seed): run_id for seed, run_id in json.load(f).items()}
 
