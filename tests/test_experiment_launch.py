@@ -18,6 +18,8 @@ from tools import experiment_spec as spec
 from tools import experiment_state as state
 from tools import experiments as ex
 
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))  # the checkout
+
 DEMO = "point-mass-demo"
 PART = os.path.join(DEMO, "ppo", "seeds-0-0")
 TIMING = ("steps_per_second", "wall_seconds")
@@ -31,7 +33,7 @@ def _launch(runs: str, *options: str) -> subprocess.Popen:
     argv = [sys.executable, "-m", "tools.experiments", "launch", DEMO, "--runs-dir", os.path.join(runs, "runs"),
             "--out", os.path.join(runs, "out"), "--compilation-cache", os.path.join(runs, "jax_cache"), *options]
     with open(os.path.join(runs, "launch.log"), "w") as log:
-        return subprocess.Popen(argv, cwd=launch.ROOT, stdout=log, stderr=subprocess.STDOUT, text=True)
+        return subprocess.Popen(argv, cwd=ROOT, stdout=log, stderr=subprocess.STDOUT, text=True)
 
 
 def _ended(process: subprocess.Popen, runs: str) -> str:

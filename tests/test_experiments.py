@@ -24,6 +24,8 @@ from tools import experiment_state as state
 from tools import experiment_tables as tables
 from tools import experiments as ex
 
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))  # the checkout
+
 TOY_RUN = dict(eval_envs=16, tensorboard=False, progress=False)
 # point-mass-ppo trains 5,120 env steps per update: two updates per run. The runs differ in their seeds
 # only, so they share one compiled program (the test takes a minute on a loaded 2-core CPU, not two).
@@ -77,7 +79,7 @@ def test_every_recorded_part_still_reads_as_its_registry_run():
     checked = 0
     for exp in spec.EXPERIMENTS.values():
         for run in exp.runs:
-            folder = state.record_folder(os.path.join(launch.ROOT, state.OUT_DIR), exp.name, run.name)
+            folder = state.record_folder(os.path.join(ROOT, state.OUT_DIR), exp.name, run.name)
             for name in sorted(os.listdir(folder)) if os.path.isdir(folder) else ():
                 span = state.parse_part(name)
                 if span is not None:
@@ -704,7 +706,7 @@ def test_toy_experiment_trains_resumes_and_builds(tmp_path, monkeypatch):
 
 def test_the_docs_recipe_for_an_experiment_registers_and_validates():
     """docs/experiments.md's "Add an experiment" block, run as written against a fresh registry."""
-    with open(os.path.join(launch.ROOT, "docs", "experiments.md")) as f:
+    with open(os.path.join(ROOT, "docs", "experiments.md")) as f:
         text = f.read()
     block = text.split("## Add an experiment", 1)[1].split("```python\n", 1)[1].split("```", 1)[0]
     registry = {}
