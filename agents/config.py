@@ -147,11 +147,10 @@ def validate(config: TrainConfig) -> None:
     expected = type(envs.default_config(config.env_name))
     if type(config.env) is not expected:
         raise ValueError(f"env={type(config.env).__name__} does not fit env_name={config.env_name!r}: allowed is {expected.__name__}.")
-    envs.registry.check_config(config.env_name, config.env)
     available = jax.local_device_count()
     if not 0 <= config.devices <= available:
         raise ValueError(f"devices={config.devices} is invalid: allowed are 0 (all) to {available} (local devices).")
-    config.algo.validate(num_devices(config))
+    validate_stored(config, num_devices(config))
     for name, low in (("num_timesteps", 1), ("seeds", 1), ("keep_checkpoints", 1), ("eval_last_steps", 1),
                       ("checkpoint_every", 0), ("log_every", 0), ("stop_after_steps", 0), ("eval_envs", 0)):
         if int(getattr(config, name)) < low:
@@ -191,11 +190,11 @@ def validate(config: TrainConfig) -> None:
                          "run in logdir, --overwrite replaces it with a fresh one).")
 
 
-def validate_stored(config: TrainConfig) -> None:
-    """The checks of `validate` that a stored run's config (a checkpoint's) must pass to rebuild its programs here:
-    its env and algorithm configs, on one device (a restore replaces the run fields, such as the device count)."""
+def validate_stored(config: TrainConfig, devices: int = 1) -> None:
+    """The part of `validate` that a stored run's config (a checkpoint's) must pass to rebuild its programs here: its
+    env and algorithm configs, on `devices` devices (a restore replaces the run fields, such as the device count)."""
     envs.registry.check_config(config.env_name, config.env)
-    config.algo.validate(1)
+    config.algo.validate(devices)
 
 
 def validate_logging(config: TrainConfig) -> None:

@@ -34,6 +34,7 @@ GPU_FLAGS = ("--xla_gpu_command_buffer_scheduling_mode=CONCURRENT",)
 """Added to XLA_FLAGS on machines with a CUDA jaxlib plugin."""
 OPT_OUT = "REACH_AVOID_XLA_DEFAULTS"
 CACHE_VARIABLE = "JAX_COMPILATION_CACHE_DIR"
+CACHE_SIZE_VARIABLE = "JAX_COMPILATION_CACHE_MAX_SIZE"
 DEFAULT_CACHE = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), ".jax_cache")
 """The persistent compilation cache's folder when neither a path nor $JAX_COMPILATION_CACHE_DIR names one."""
 CACHE_BYTES = 4 * 2**30
@@ -94,6 +95,6 @@ def compilation_cache(path: str | None = None, environ=None) -> str | None:
         path = environ.get(CACHE_VARIABLE, DEFAULT_CACHE)
     folder = None if path in ("off", "") else path
     jax.config.update("jax_compilation_cache_dir", folder)
-    if "JAX_COMPILATION_CACHE_MAX_SIZE" not in environ:
+    if CACHE_SIZE_VARIABLE not in environ:
         jax.config.update("jax_compilation_cache_max_size", CACHE_BYTES)
     return folder

@@ -309,7 +309,7 @@ def test_a_checkpoint_with_an_impossible_stored_config_is_refused_before_compili
         if rebuild == "export":
             driver.export_checkpoint(str(logdir / "checkpoints" / str(SHORT)))
         else:
-            driver.learner_only_checkpoint(str(logdir), str(tmp_path / "carried"))
+            driver.learner_only_checkpoint(str(logdir), str(tmp_path / "learner_only"))
 
 
 def test_resume_with_no_intact_checkpoint_names_them(earlier_run, tmp_path, capsys):
