@@ -310,6 +310,34 @@ def test_wrist_3_variant_resizes_the_capsule_of_that_env_only():
     assert envs.make("ur5e-reach").robot.geom_half[g] == np.float32(0.02)  # a new env has the model's size
 
 
+def test_damping_variant_scales_the_damping_the_gpu_model_steps_with():
+    built = envs.make("ur5e-reach")
+    before = np.array(built.robot.mj_model.dof_damping)
+    fidelity.apply_variants(built, ["damping=0.5"])
+    np.testing.assert_allclose(np.asarray(built.robot.mjx_model.dof_damping), 0.5 * before, rtol=1e-6)
+
+
+def test_position_servos_variant_sets_the_older_gains_on_both_models():
+    built = fidelity.apply_variants(envs.make("ur5e-reach"), ["position_servos"])
+    mjx_model = built.robot.mjx_model
+    np.testing.assert_allclose(np.asarray(mjx_model.dof_damping), [200, 200, 200, 15, 15, 15])
+    np.testing.assert_allclose(np.asarray(mjx_model.actuator_gainprm[:, 0]), [3500] * 3 + [3000] * 3)
+    np.testing.assert_allclose(np.asarray(mjx_model.actuator_biasprm[:, 1]), [-3500] * 3 + [-3000] * 3)
+    np.testing.assert_allclose(np.asarray(mjx_model.actuator_biasprm[:, 2]), 0.0)
+
+
+def test_position_servos_variant_turns_the_base_at_force_limit_over_damping():
+    """A 1 rad command to the base joint (vertical axis, no gravity torque) saturates the servo at 150 Nm, so the
+    joint settles at 150 / 200 = 0.75 rad/s (hand-computed) long before it arrives."""
+    model = fidelity.apply_variants(envs.make("ur5e-reach"), ["position_servos"]).robot.mj_model
+    data = mujoco.MjData(model)
+    data.qpos[:] = data.ctrl[:] = np.array([0.0, -1.57, 1.57, -1.57, -1.57, 0.0])
+    data.ctrl[0] = 1.0
+    for _ in range(150):  # 0.3 s: the base has turned about 0.2 rad, still saturated
+        mujoco.mj_step(model, data)
+    assert data.qvel[0] == pytest.approx(0.75, rel=0.02)
+
+
 def test_training_with_variants_applies_them_to_every_ur5e_env_built(monkeypatch):
     monkeypatch.setattr(envs.registry, "build", envs.registry.build)  # restored after the test
     fidelity_train.patch_env_builders(["wrist_3=0"])

@@ -26,6 +26,7 @@ import jax
 import jax.numpy as jnp
 import mujoco
 import numpy as np
+from mujoco import mjx
 
 import envs
 from agents import baselines, provenance
@@ -67,6 +68,7 @@ def _step_end(env, value):
 def _contacts(env, value):
     """Contact forces on the model's pairs (the paper's MJX model kept contacts on; combine with step_end)."""
     env.robot.mj_model.opt.disableflags &= ~int(mujoco.mjtDisableBit.mjDSBL_CONTACT)
+    _refresh_mjx(env.robot)
 
 
 def _target_limited(env, value):
@@ -106,9 +108,30 @@ def _wrist_3(env, value):
         robot.geom_radius[g] = radius[0]
 
 
+def _refresh_mjx(robot):
+    """Rebuilds the MJX model from the edited MuJoCo model (the robot put it on the device when it was built)."""
+    robot.mjx_model = mjx.put_model(robot.mj_model)
+    robot.data_template = mjx.make_data(robot.mjx_model)
+
+
+def _damping(env, value):
+    """Joint damping x v, or x v_i per joint for a comma-separated list (0: Menagerie's, no damping)."""
+    env.robot.mj_model.dof_damping *= np.array(value.split(","), float)
+    _refresh_mjx(env.robot)
+
+
+def _position_servos(env, value):
+    """Older Menagerie revisions' UR5e servos (the reference model's comment): <position> kp 3500 (shoulder, elbow)
+    and 3000 (wrists) without a velocity gain, joint damping 200 and 15 in place of ours; forces limited as before."""
+    m = env.robot.mj_model
+    kp, damping = np.array([3500.0] * 3 + [3000.0] * 3), np.array([200.0] * 3 + [15.0] * 3)
+    m.actuator_gainprm[:, 0], m.actuator_biasprm[:, 1], m.actuator_biasprm[:, 2] = kp, -kp, 0.0
+    m.dof_damping[:] = damping
+    _refresh_mjx(env.robot)
+
+
 VARIANTS = {  # name -> apply(env, value string); on the command line NAME or NAME=VALUE
-    # joint damping x v, or x v_i per joint for a comma-separated list (0: Menagerie's, no damping)
-    "damping": lambda env, v: env.robot.mj_model.dof_damping.__imul__(np.array(v.split(","), float)),
+    "damping": _damping, "position_servos": _position_servos,
     "no_base": _no_base, "floor": _floor, "step_end": _step_end, "contacts": _contacts, "ee_wrist_3": _ee_at_wrist_3,
     "target_limited": _target_limited, "elbow_2pi": _elbow_2pi, "ctrl_pi": _ctrl_pi,
     "wrist_3": _wrist_3}
