@@ -75,9 +75,11 @@ def summary(rows: list[dict]) -> dict:
             "wall_max": float(wall.max()), "reached": int(sum(r["reached_target"] for r in rows))}
 
 
-def markdown(preset: str, target: float, rows: list[dict]) -> str:
+def markdown(preset: str, target: float, rows: list[dict], stamp: dict) -> str:
+    """The table of `rows` under a line naming the command, code version, device and date of `stamp`."""
     s = summary(rows)
     lines = [f"`{preset}` to {100 * target:.1f} % reached", "",
+             f"Command: `{stamp['command']}`; code {stamp['code']}; {stamp['device']}; {stamp['date']}.", "",
              "| seed | wall clock (s) | env steps | training success at the stop | evaluation reached | target met |",
              "|---:|---:|---:|---:|---:|---|"]
     for r in rows:
@@ -117,13 +119,14 @@ def main(argv: list[str] | None = None) -> int:
                                  args.cache_dir))
             print(f"seed {seed}: {rows[-1]['wall_seconds']:.0f} s, {rows[-1]['env_steps']:,} env steps, "
                   f"evaluation {100 * rows[-1]['eval_success']:.1f} %", flush=True)
-            report = {**provenance.stamp(), "preset": args.preset, "target": args.target, "train_options": extra,
+            stamp = provenance.stamp()
+            report = {**stamp, "preset": args.preset, "target": args.target, "train_options": extra,
                       "cache_dir": args.cache_dir, "seeds": rows, "summary": summary(rows)}
             with open(args.out + ".json", "w") as f:  # after every seed: a run cut short keeps what it finished
                 json.dump(jsonable(report), f, indent=2)
             with open(args.out + ".md", "w") as f:
-                f.write(markdown(args.preset, args.target, rows))
-    print(markdown(args.preset, args.target, rows))
+                f.write(markdown(args.preset, args.target, rows, stamp))
+    print(markdown(args.preset, args.target, rows, stamp))
     return 0
 
 

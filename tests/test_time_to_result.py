@@ -41,6 +41,11 @@ def test_the_table_is_written(one_seed):
     assert "| 100 |" in (out / "pm.md").read_text()
 
 
+def test_the_table_names_the_code_version(one_seed):
+    out, report = one_seed
+    assert f"code {report['code']};" in (out / "pm.md").read_text()
+
+
 def test_the_summary_uses_the_sample_std():
     rows = [{"wall_seconds": w, "reached_target": r} for w, r in ((100.0, True), (120.0, False), (140.0, True))]
     s = time_to_result.summary(rows)

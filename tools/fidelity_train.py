@@ -16,6 +16,7 @@ import sys
 
 import envs
 import train
+from agents import provenance
 from tools import run_cli
 from tools.fidelity import VARIANTS, apply_variants
 
@@ -52,7 +53,7 @@ def main(argv: list[str] | None = None):
     patch_env_builders(args.variant)
     result = train.main(rest)
     with open(os.path.join(result.logdir, "variants.json"), "w") as f:
-        json.dump({"variants": args.variant, "train_args": rest}, f, indent=2)
+        json.dump({**provenance.stamp(), "variants": args.variant, "train_args": rest}, f, indent=2)
     print(f"trained with the variants {' '.join(args.variant)}")
 
 
