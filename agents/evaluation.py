@@ -31,7 +31,7 @@ import numpy as np
 import envs
 from agents import baselines, driver, export, planner as planners, registry
 from envs import physics
-from agents.loop import make_evaluate
+from agents.loop import make_evaluate, make_evaluate_stacked
 from agents.networks import COMPUTE_DTYPES
 from agents.eval_stats import (collided_distances, fmt, jsonable, pooled, reached_precision,  # noqa: F401 (evaluation.fmt, ...)
                                 summarize)
@@ -284,9 +284,8 @@ def _evaluator(env_name: str, env_config, algo_config, obs_size: int, act_size: 
                            record=_record)
         return _Program(env, jax.jit(fn))
     learner = registry.make_learner(algo_config, obs_size, act_size)
-    act = (lambda ls, state, start, key: learner.stochastic_policy(ls, state.obs, key)) if stochastic else None
-    fn = make_evaluate(env, learner, num_envs, length, last_steps, act=act, per_env=True, record=_record)
-    return _Program(env, jax.jit(jax.vmap(fn, in_axes=(0, None))))
+    fn = make_evaluate_stacked(env, learner, num_envs, length, last_steps, stochastic, per_env=True, record=_record)
+    return _Program(env, jax.jit(fn))
 
 
 def _program(policy: Policy, env_name: str, env_config, num_envs: int, last_steps: int, stochastic: bool,

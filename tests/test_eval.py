@@ -25,7 +25,7 @@ import envs
 import eval as eval_cli
 from agents import baselines, driver, evaluation, export, presets, registry
 from agents.config import config_json
-from agents.loop import episode_metrics
+from agents.loop import episode_metrics, make_evaluate, make_evaluate_stacked
 from mujoco_reference import colliding_configuration, colliding_pairs, contact_model, ee_position
 from limits import HANG_GUARD_S
 
@@ -163,6 +163,26 @@ def test_driver_writes_policy_exports_that_reproduce_its_evaluation(point_run):
     assert older.export.env_steps == 5120
     assert not np.allclose(older.export.state.params["policy"]["params"]["out"]["kernel"],
                            policy.export.state.params["policy"]["params"]["out"]["kernel"])
+
+
+def test_trained_seeds_side_by_side_act_as_each_seed_alone(point_run):
+    """`make_evaluate_stacked` steps the trained seeds' envs as one batch: each seed's episode returns and observed
+    trajectories equal that seed's own evaluation (`make_evaluate` on its state alone), on the same episodes."""
+    policy = evaluation.checkpoint_policy(str(point_run))
+    learner, states, config = policy.export.learner, policy.export.state, policy.train_env_config
+    env = envs.wrap(envs.from_config("point-mass", config), autoreset=False)
+    observe = lambda state: {"obs": state.obs}
+    key = jax.random.PRNGKey(3)
+    out, records = jax.jit(make_evaluate_stacked(env, learner, 16, config.episode_length, per_env=True,
+                                                 record=observe))(states, key)
+    assert out["episode/return"].shape == (2, 16)
+    assert records["obs"].shape[:3] == (2, config.episode_length + 1, 16)
+    assert not np.allclose(out["episode/return"][0], out["episode/return"][1])  # two different policies
+    alone = jax.jit(make_evaluate(env, learner, 16, config.episode_length, per_env=True, record=observe))
+    for unit in range(2):
+        own, own_records = alone(jax.tree.map(lambda x: x[unit], states), key)
+        np.testing.assert_allclose(out["episode/return"][unit], own["episode/return"], rtol=1e-5, atol=1e-6)
+        np.testing.assert_allclose(records["obs"][unit], own_records["obs"], rtol=1e-5, atol=1e-6)
 
 
 def test_checkpoint_without_export_gets_one_from_the_full_state(point_run, tmp_path):
