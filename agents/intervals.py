@@ -8,7 +8,6 @@ import contextlib
 import warnings
 
 import numpy as np
-from rliable import library as rly
 
 CONFIDENCE = 0.95
 """Coverage of the intervals."""
@@ -16,6 +15,14 @@ REPS = 1000
 """Bootstrap resamples per interval (rliable resamples in Python: about 0.1 s each on a CPU core; tables cache them)."""
 SEED = 0
 """Seed of the resampling, so that the same values always give the same interval (tables are regenerated)."""
+
+
+def _rliable():
+    """rliable's library, imported on first use: importing it imports arch and scipy.stats (about 3 s on a 2-core
+    CPU), which every `train.py` and `eval.py` would otherwise pay at start-up, before any interval is asked for."""
+    from rliable import library
+
+    return library
 
 
 @contextlib.contextmanager
@@ -40,7 +47,7 @@ def mean_ci(values, confidence: float = CONFIDENCE, reps: int = REPS, seed: int 
     if values.size < 2:
         return None
     with seeded_numpy(seed):
-        _, intervals = rly.get_interval_estimates({"runs": values.reshape(-1, 1)}, lambda s: np.array([np.mean(s)]),
+        _, intervals = _rliable().get_interval_estimates({"runs": values.reshape(-1, 1)}, lambda s: np.array([np.mean(s)]),
                                                   reps=reps, confidence_interval_size=confidence)
     low, high = intervals["runs"][:, 0]
     return [float(low), float(high)]

@@ -1,6 +1,10 @@
 """agents/intervals.py and the tables' "mean ± std [CI]" cells: rliable's bootstrap interval of the mean over seeds
 against hand-computed bootstrap distributions and a plain NumPy bootstrap."""
 
+import os
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
@@ -84,3 +88,11 @@ def test_the_eval_table_leaves_out_the_spread_of_one_unit():
 def test_the_interval_holds_the_mean(values):
     low, high = intervals.mean_ci(values)
     assert low <= np.mean(values) <= high
+
+
+def test_train_and_eval_start_without_importing_rliable():
+    """rliable (with arch and scipy.stats) is imported when an interval is first asked for, not at start-up."""
+    code = "import sys, train, eval; print('rliable' in sys.modules, 'arch' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                         cwd=os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    assert out.stdout.split()[-2:] == ["False", "False"]
