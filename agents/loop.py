@@ -237,12 +237,21 @@ def make_chunk(env, learner: Learner, par: Parallel):
 
         return jax.lax.scan(step, carry, jax.random.split(key, steps))
 
+    def batch_like(ls, env_state, key):
+        """A rollout's batch of transitions in shape and dtype, made from the env state without stepping the env:
+        the update's metric shapes follow from it, and tracing a rollout only for them doubled the chunk's tracing."""
+        action, extras = learner.act(ls, env_state.obs, key, par)
+        done = env_state.done * (1.0 - env_state.info["truncation"])
+        one = Transition(obs=env_state.obs, action=action, reward=env_state.reward, termination=done,
+                         truncation=env_state.info["truncation"], next_obs=env_state.obs, extras=extras)
+        return jax.tree.map(lambda x: jnp.broadcast_to(x, (steps,) + x.shape), one)
+
     def chunk(state: TrainState, n_updates: jax.Array):
         names = episode_metric_names(state.env_state)
         acc0 = {k: jnp.zeros(()) for k in ["episodes", "episode/return", "episode/length"] + ["episode/" + n for n in names]}
         carry0 = (state.env_state, state.episode_return, state.episode_length, acc0)
         metrics_shape = jax.eval_shape(
-            lambda st: learner.update(st.learner, rollout(st.learner, carry0, st.key)[1], st.key, par)[1], state
+            lambda st: learner.update(st.learner, batch_like(st.learner, st.env_state, st.key), st.key, par)[1], state
         )
         lm0 = jax.tree.map(lambda x: jnp.zeros(x.shape, x.dtype), metrics_shape)
 

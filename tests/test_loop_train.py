@@ -17,7 +17,7 @@ import pytest
 
 import envs
 import train as train_cli
-from agents import driver, logger, presets
+from agents import driver, logger, loop, presets
 from agents.config import config_from_json, config_json, num_devices, total_updates, validate
 from agents.checkpoint import Checkpointer
 from agents.ppo import PPO, PPOConfig
@@ -245,6 +245,20 @@ def _stored_leaf_names(step_dir: str) -> list[str]:
     """Names of the arrays an orbax checkpoint holds (its tree metadata; the files are OCDBT shards)."""
     with open(os.path.join(step_dir, "state", "_METADATA")) as f:
         return list(json.load(f)["tree_metadata"])
+
+
+def test_tracing_a_chunk_steps_the_env_once():
+    """The chunk learns its update's metric shapes from a batch made without stepping the env: tracing it runs the
+    env's step function once (inside the rollout's scan), not twice."""
+    env = envs.wrap(envs.make("point-mass"))
+    learner = PPO(PPOConfig(num_envs=4, batch_size=4, num_minibatches=1, unroll_length=5), env.observation_size,
+                  env.action_size, total_updates=1)
+    state = loop.init_train_state(jax.random.PRNGKey(0), env, learner, 4)
+    step, calls = env.step, []
+    env.step = lambda *args: calls.append(1) or step(*args)
+    chunk = loop.make_chunk(env, learner, loop.Parallel(4))
+    jax.jit(chunk).lower(state, 1)
+    assert len(calls) == 1
 
 
 def test_checkpoint_without_envs_resumes_the_learner_with_fresh_episodes(tmp_path):
