@@ -249,7 +249,6 @@ def make_chunk(env, learner: Learner, par: Parallel):
     def chunk(state: TrainState, n_updates: jax.Array):
         names = episode_metric_names(state.env_state)
         acc0 = {k: jnp.zeros(()) for k in ["episodes", "episode/return", "episode/length"] + ["episode/" + n for n in names]}
-        carry0 = (state.env_state, state.episode_return, state.episode_length, acc0)
         metrics_shape = jax.eval_shape(
             lambda st: learner.update(st.learner, batch_like(st.learner, st.env_state, st.key), st.key, par)[1], state
         )
