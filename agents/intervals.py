@@ -18,8 +18,8 @@ SEED = 0
 
 
 def _rliable():
-    """rliable's library, imported on first use: importing it imports arch and scipy.stats (about 3 s on a 2-core
-    CPU), which every `train.py` and `eval.py` would otherwise pay at start-up, before any interval is asked for."""
+    """rliable's library, imported when an interval is first asked for (a summary over two or more seeds): it imports
+    arch and scipy.stats, which a one-seed run or a baseline evaluation never needs."""
     from rliable import library
 
     return library
@@ -47,7 +47,7 @@ def mean_ci(values, confidence: float = CONFIDENCE, reps: int = REPS, seed: int 
     if values.size < 2:
         return None
     with seeded_numpy(seed):
-        _, intervals = _rliable().get_interval_estimates({"runs": values.reshape(-1, 1)}, lambda s: np.array([np.mean(s)]),
-                                                  reps=reps, confidence_interval_size=confidence)
+        _, intervals = _rliable().get_interval_estimates(
+            {"runs": values.reshape(-1, 1)}, lambda s: np.array([np.mean(s)]), reps=reps, confidence_interval_size=confidence)
     low, high = intervals["runs"][:, 0]
     return [float(low), float(high)]

@@ -239,7 +239,7 @@ def make_chunk(env, learner: Learner, par: Parallel):
 
     def batch_like(ls, env_state, key):
         """A rollout's batch of transitions in shape and dtype, made from the env state without stepping the env:
-        the update's metric shapes follow from it, and tracing a rollout only for them doubled the chunk's tracing."""
+        the update's metric shapes follow from it, so tracing the chunk traces the env's step once, not twice."""
         action, extras = learner.act(ls, env_state.obs, key, par)
         done = env_state.done * (1.0 - env_state.info["truncation"])
         one = Transition(obs=env_state.obs, action=action, reward=env_state.reward, termination=done,
@@ -363,8 +363,8 @@ def make_evaluate_stacked(env, learner: Learner, num_envs: int, episode_length: 
     """`evaluate(learner_states, key)`: `make_evaluate`'s evaluation of every learner state along a leading axis
     (trained seeds), each on the same `num_envs` episodes, outputs stacked along that axis (records: `(units, T + 1,
     num_envs, ...)`). The units' envs run side by side as one batch in one scan; `jax.vmap` over the units gives the
-    same numbers, but batching a scan traces its body again (and the physics' substep scan inside it): on a CPU
-    that doubled the time to trace the evaluation. `stochastic`: actions drawn from the policy (one key per step,
+    same numbers, but batching a scan traces its body again (and the physics' substep scan inside it).
+    `stochastic`: actions drawn from the policy (one key per step,
     the same for every unit, as a `vmap` with a shared key)."""
 
     def evaluate(states, key):

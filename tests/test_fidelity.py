@@ -317,6 +317,11 @@ def test_damping_variant_scales_the_damping_the_gpu_model_steps_with():
     np.testing.assert_allclose(np.asarray(built.robot.mjx_model.dof_damping), 0.5 * before, rtol=1e-6)
 
 
+def test_elbow_2pi_variant_widens_the_range_the_gpu_model_clamps_to():
+    built = fidelity.apply_variants(envs.make("ur5e-reach"), ["elbow_2pi"])
+    np.testing.assert_allclose(np.asarray(built.robot.mjx_model.jnt_range[2]), [-2 * np.pi, 2 * np.pi], rtol=1e-6)
+
+
 def test_position_servos_variant_sets_the_older_gains_on_both_models():
     built = fidelity.apply_variants(envs.make("ur5e-reach"), ["position_servos"])
     mjx_model = built.robot.mjx_model

@@ -40,6 +40,12 @@ LIMIT_MARGINS = (0.1, 0.5)  # distances (rad) from a joint limit counted as "nea
 SPEED_STEPS = 25  # env steps (1 s) of the speed scenarios
 
 
+def _refresh_mjx(robot):
+    """Rebuilds the MJX model from the edited MuJoCo model (the robot put it on the device when it was built)."""
+    robot.mjx_model = mjx.put_model(robot.mj_model)
+    robot.data_template = mjx.make_data(robot.mjx_model)
+
+
 def _no_base(env, value):
     """Menagerie's UR5e has no base collision geom: drop our base sphere's pairs."""
     robot, base = env.robot, env.robot.mj_model.geom("base").id
@@ -83,6 +89,7 @@ def _elbow_2pi(env, value):
     m, robot = env.robot.mj_model, env.robot
     m.jnt_range[2], m.actuator_ctrlrange[2] = (-2 * np.pi, 2 * np.pi), (-2 * np.pi, 2 * np.pi)
     robot.joint_low[2], robot.joint_high[2] = -2 * np.pi, 2 * np.pi  # the arrays the env's ranges share
+    _refresh_mjx(robot)
 
 
 def _ctrl_pi(env, value):
@@ -96,6 +103,7 @@ def _ctrl_pi(env, value):
 def _ee_at_wrist_3(env, value):
     """The end effector at wrist_3's frame origin (on the wrist axis) instead of the tool flange 0.1 m out."""
     env.robot.mj_model.site_pos[env.robot.ee_site] = 0.0  # before the first kinematics call caches the model
+    _refresh_mjx(env.robot)
 
 
 def _wrist_3(env, value):
@@ -106,12 +114,6 @@ def _wrist_3(env, value):
     robot.geom_half[g] = half  # in place, before the first distance call is traced
     if radius:
         robot.geom_radius[g] = radius[0]
-
-
-def _refresh_mjx(robot):
-    """Rebuilds the MJX model from the edited MuJoCo model (the robot put it on the device when it was built)."""
-    robot.mjx_model = mjx.put_model(robot.mj_model)
-    robot.data_template = mjx.make_data(robot.mjx_model)
 
 
 def _damping(env, value):
