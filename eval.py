@@ -57,6 +57,8 @@ automatically, or set MUJOCO_GL). Needs the `viz` extra (imageio, imageio-ffmpeg
 
 Compiled programs go to JAX's persistent compilation cache (`.jax_cache/` in the checkout, or
 $JAX_COMPILATION_CACHE_DIR; set it empty for none): a second evaluation of a setting skips compiling.
+The JSON's `wall_seconds` says where the time went: before the evaluations (imports, devices, loading), in them
+(compiling and running), and in all.
 
 Exit codes: 0 done, 2 bad input (a one-line `error:` message: missing or corrupt checkpoint,
 another robot, unknown policy or option).
@@ -71,14 +73,18 @@ import json
 import os
 import shlex
 import sys
+import time
 from typing import Annotated, Generic, TypeVar
 
-import tyro
+IMPORTED = time.perf_counter()
+"""When this module started importing the project (and jax, MuJoCo, MJX): the JSON's `wall_seconds` count from here."""
 
-import envs
-from agents import baselines, evaluation, planner as planners, provenance, xla_flags
-from agents import logdir as logdirs
-from tools import run_cli
+import tyro  # noqa: E402
+
+import envs  # noqa: E402
+from agents import baselines, evaluation, planner as planners, provenance, xla_flags  # noqa: E402
+from agents import logdir as logdirs  # noqa: E402
+from tools import run_cli  # noqa: E402
 
 EnvConfigT = TypeVar("EnvConfigT")
 
@@ -219,7 +225,7 @@ def main(argv: list[str] | None = None) -> list:
 
     for policy, config in zip(policies, configs):  # every bad combination refused before anything runs
         evaluation.check(policy, env_name, config, args.allow_env_mismatch)
-    results = []
+    results, first_evaluation = [], time.perf_counter()
     for i, (policy, config) in enumerate(zip(policies, configs)):
         trained = f"{len(policy.units)} trained seed(s) x " if policy.export else ""
         _progress(f"[{i + 1}/{len(policies)}] {policy.name} on {env_name}: {trained}{len(eval_seeds)} eval seed(s) x "
@@ -239,6 +245,10 @@ def main(argv: list[str] | None = None) -> list:
         "eval_seeds": eval_seeds,
         "evaluations": [r.to_json() for r in results],
         "pooled": evaluation.pooled(results) if len(results) > 1 else None,
+        "wall_seconds": {  # where a run's time goes: start-up (imports, devices, loading), evaluations, the rest
+            "before_evaluations": round(first_evaluation - IMPORTED, 2),
+            "evaluations": round(sum(r.seconds for r in results), 2),
+            "total": round(time.perf_counter() - IMPORTED, 2)},
     }
     if args.json:
         _replace_atomically(args.json, lambda f: json.dump(evaluation.jsonable(report), f, indent=2, allow_nan=False))

@@ -404,6 +404,9 @@ def test_cli_baseline_json_csv(baseline_runs):
     assert ev["summary"]["distance"]["mean"] == pytest.approx(result.summary()["distance"]["mean"])
     assert len(ev["units"]) == 1
     assert ev["units"][0]["metrics"]["target_reached"] == 0
+    wall = report["wall_seconds"]  # where the process's time went
+    assert wall["evaluations"] == pytest.approx(ev["seconds"], abs=0.01)
+    assert wall["before_evaluations"] + wall["evaluations"] <= wall["total"] + 0.01
     rows = table.read_text().splitlines()
     assert len(rows) == 2
     assert "target_reached" in rows[0]
