@@ -6,8 +6,9 @@
 Each seed is one `train.py PRESET --seed S --stop-at-success TARGET` process of its own, timed from its start to its
 exit: importing, compiling (no persistent compilation cache unless `--cache-dir`), training until every training
 episode batch reaches the target (or the preset's budget ends) and the final evaluation on fresh episodes. Options
-after `--` go to train.py unchanged. Reported per seed: the wall clock, the env steps trained, the training success
-at the stop and the evaluation's success; a seed counts as a result when its evaluation reaches the target.
+after `--` go to train.py unchanged. Reported per seed: the wall clock, the training's own clock (its first log,
+compiling included, and its end; the rest is start-up and the final evaluation), the env steps trained, the training
+success at the stop and the evaluation's success; a seed counts as a result when its evaluation reaches the target.
 
 Writes `--out`.json (every seed, command, code version, device, date) and `--out`.md (the table).
 """
@@ -58,6 +59,7 @@ def run_seed(preset: str, seed: int, target: float, logdir: str, extra: list[str
     evaluated = float(report["mean"]["episode/target_reached"])
     return {"seed": seed, "wall_seconds": seconds, "env_steps": int(report["env_steps"]), "training_success": training,
             "eval_success": evaluated, "reached_target": evaluated >= target,
+            **training_clock(os.path.join(logdir, "metrics.csv")),
             "command": " ".join(shlex.quote(c) for c in command[1:])}
 
 
@@ -66,6 +68,18 @@ def last_training_success(path: str) -> float:
     with open(path) as f:
         rows = list(csv.DictReader(f))
     return float(rows[-1]["episode/target_reached"])
+
+
+def training_clock(path: str) -> dict:
+    """Where the training's time went, from metrics.csv's `wall_seconds` (since training started): the first log
+    (compiling included), the last, and the env steps per second between them (compiled)."""
+    with open(path) as f:
+        rows = list(csv.DictReader(f))
+    first, last = rows[0], rows[-1]
+    span = float(last["wall_seconds"]) - float(first["wall_seconds"])
+    steps = float(last["env_steps"]) - float(first["env_steps"])
+    return {"first_log_seconds": float(first["wall_seconds"]), "first_log_env_steps": int(float(first["env_steps"])),
+            "training_seconds": float(last["wall_seconds"]), "steps_per_second_after_first_log": steps / span if span > 0 else None}
 
 
 def summary(rows: list[dict]) -> dict:
@@ -80,11 +94,15 @@ def markdown(preset: str, target: float, rows: list[dict], stamp: dict) -> str:
     s = summary(rows)
     lines = [f"`{preset}` to {100 * target:.1f} % reached", "",
              f"Command: `{stamp['command']}`; code {stamp['code']}; {stamp['device']}; {stamp['date']}.", "",
-             "| seed | wall clock (s) | env steps | training success at the stop | evaluation reached | target met |",
-             "|---:|---:|---:|---:|---:|---|"]
+             "| seed | wall clock (s) | training (s) | first log (s, compiling included) | env steps | training success at the stop "
+             "| evaluation reached | target met |",
+             "|---:|---:|---:|---:|---:|---:|---:|---|"]
     for r in rows:
-        lines.append(f"| {r['seed']} | {r['wall_seconds']:.0f} | {r['env_steps']:,} | {100 * r['training_success']:.1f} % "
-                     f"| {100 * r['eval_success']:.1f} % | {'yes' if r['reached_target'] else 'no'} |")
+        clock = (f"{r['training_seconds']:.0f} | {r['first_log_seconds']:.0f} at {r['first_log_env_steps']:,} steps"
+                 if "training_seconds" in r else " | ")  # files written before these were recorded
+        lines.append(f"| {r['seed']} | {r['wall_seconds']:.0f} | {clock} | {r['env_steps']:,} | "
+                     f"{100 * r['training_success']:.1f} % | {100 * r['eval_success']:.1f} % | "
+                     f"{'yes' if r['reached_target'] else 'no'} |")
     std = "" if s["wall_std"] is None else f" ± {s['wall_std']:.0f}"
     lines += ["", f"Wall clock {s['wall_mean']:.0f}{std} s (mean ± sample std over {s['seeds']} seeds), at most "
                   f"{s['wall_max']:.0f} s; {s['reached']} of {s['seeds']} seeds' evaluations reached the target."]

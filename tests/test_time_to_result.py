@@ -1,5 +1,6 @@
 """benchmarks/time_to_result.py: one fresh process per seed, stopped at the target success, timed and evaluated."""
 
+import csv
 import json
 
 import pytest
@@ -29,6 +30,20 @@ def test_the_reported_evaluation_is_the_runs_own(one_seed):
 def test_the_stop_came_at_the_target_training_success(one_seed):
     _, report = one_seed
     assert report["seeds"][0]["training_success"] >= 0.8
+
+
+def test_the_training_clock_is_the_runs_own_log(one_seed):
+    out, report = one_seed
+    with open(out / "runs" / "seed100" / "metrics.csv") as f:
+        rows = list(csv.DictReader(f))
+    seed = report["seeds"][0]
+    assert seed["first_log_seconds"] == float(rows[0]["wall_seconds"])
+    assert seed["training_seconds"] == float(rows[-1]["wall_seconds"])
+
+
+def test_the_training_is_part_of_the_seeds_wall_clock(one_seed):
+    _, report = one_seed
+    assert report["seeds"][0]["training_seconds"] < report["seeds"][0]["wall_seconds"]
 
 
 def test_the_report_names_what_made_it(one_seed):
