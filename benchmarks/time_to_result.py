@@ -6,9 +6,10 @@
 Each seed is one `train.py PRESET --seed S --stop-at-success TARGET` process of its own, timed from its start to its
 exit: importing, compiling (no persistent compilation cache unless `--cache-dir`), training until every training
 episode batch reaches the target (or the preset's budget ends) and the final evaluation on fresh episodes. Options
-after `--` go to train.py unchanged. Reported per seed: the wall clock, the training's own clock (its first log,
-compiling included, and its end; the rest is start-up and the final evaluation), the env steps trained, the training
-success at the stop and the evaluation's success; a seed counts as a result when its evaluation reaches the target.
+after `--` go to train.py unchanged. Reported per seed: the wall clock, the training's own clock (its chunks of
+updates, the first with compiling; the rest is start-up, checkpoints and the final evaluation), the env steps trained,
+the training success at the stop and the evaluation's success; a seed counts as a result when its evaluation reaches
+the target.
 
 Writes `--out`.json (every seed, command, code version, device, date) and `--out`.md (the table).
 """
@@ -71,15 +72,15 @@ def last_training_success(path: str) -> float:
 
 
 def training_clock(path: str) -> dict:
-    """Where the training's time went, from metrics.csv's `wall_seconds` (since training started): the first log
-    (compiling included), the last, and the env steps per second between them (compiled)."""
+    """Where a one-seed run's training time went, from metrics.csv's `wall_seconds` (each log's chunk of updates, the
+    first one's compiling included): the first chunk, all chunks, and the env steps per second after the first."""
     with open(path) as f:
         rows = list(csv.DictReader(f))
-    first, last = rows[0], rows[-1]
-    span = float(last["wall_seconds"]) - float(first["wall_seconds"])
-    steps = float(last["env_steps"]) - float(first["env_steps"])
-    return {"first_log_seconds": float(first["wall_seconds"]), "first_log_env_steps": int(float(first["env_steps"])),
-            "training_seconds": float(last["wall_seconds"]), "steps_per_second_after_first_log": steps / span if span > 0 else None}
+    seconds = [float(r["wall_seconds"]) for r in rows]
+    steps = float(rows[-1]["env_steps"]) - float(rows[0]["env_steps"])
+    return {"first_log_seconds": seconds[0], "first_log_env_steps": int(float(rows[0]["env_steps"])),
+            "training_seconds": sum(seconds),
+            "steps_per_second_after_first_log": steps / sum(seconds[1:]) if len(seconds) > 1 else None}
 
 
 def summary(rows: list[dict]) -> dict:
@@ -94,7 +95,7 @@ def markdown(preset: str, target: float, rows: list[dict], stamp: dict) -> str:
     s = summary(rows)
     lines = [f"`{preset}` to {100 * target:.1f} % reached", "",
              f"Command: `{stamp['command']}`; code {stamp['code']}; {stamp['device']}; {stamp['date']}.", "",
-             "| seed | wall clock (s) | training (s) | first log (s, compiling included) | env steps | training success at the stop "
+             "| seed | wall clock (s) | training chunks (s) | first chunk (s, compiling included) | env steps | training success at the stop "
              "| evaluation reached | target met |",
              "|---:|---:|---:|---:|---:|---:|---:|---|"]
     for r in rows:
