@@ -56,26 +56,19 @@ def run_seed(preset: str, seed: int, target: float, logdir: str, extra: list[str
         raise RuntimeError(f"seed {seed}: train.py exited with {done.returncode}: {done.stderr.strip()[-2000:]}")
     with open(os.path.join(logdir, "eval.json")) as f:
         report = json.load(f)
-    training = last_training_success(os.path.join(logdir, "metrics.csv"))
+    with open(os.path.join(logdir, "metrics.csv")) as f:
+        log = list(csv.DictReader(f))
     evaluated = float(report["mean"]["episode/target_reached"])
-    return {"seed": seed, "wall_seconds": seconds, "env_steps": int(report["env_steps"]), "training_success": training,
-            "eval_success": evaluated, "reached_target": evaluated >= target,
-            **training_clock(os.path.join(logdir, "metrics.csv")),
+    return {"seed": seed, "wall_seconds": seconds, "env_steps": int(report["env_steps"]),
+            "training_success": float(log[-1]["episode/target_reached"]),  # the training episodes at the last log
+            "eval_success": evaluated, "reached_target": evaluated >= target, **training_clock(log),
             "command": " ".join(shlex.quote(c) for c in command[1:])}
 
 
-def last_training_success(path: str) -> float:
-    """The training episodes' success rate at the last log of a one-seed run's metrics.csv."""
-    with open(path) as f:
-        rows = list(csv.DictReader(f))
-    return float(rows[-1]["episode/target_reached"])
-
-
-def training_clock(path: str) -> dict:
-    """Where a one-seed run's training time went, from metrics.csv's `wall_seconds` (each log's chunk of updates, the
-    first one's compiling included): the first chunk, all chunks, and the env steps per second after the first."""
-    with open(path) as f:
-        rows = list(csv.DictReader(f))
+def training_clock(rows: list[dict]) -> dict:
+    """Where a one-seed run's training time went, from its metrics.csv `rows`' `wall_seconds` (each log's chunk of
+    updates, the first one's compiling included): the first chunk, all chunks, and the env steps per second after
+    the first."""
     seconds = [float(r["wall_seconds"]) for r in rows]
     steps = float(rows[-1]["env_steps"]) - float(rows[0]["env_steps"])
     return {"first_log_seconds": seconds[0], "first_log_env_steps": int(float(rows[0]["env_steps"])),
@@ -99,9 +92,8 @@ def markdown(preset: str, target: float, rows: list[dict], stamp: dict) -> str:
              "| evaluation reached | target met |",
              "|---:|---:|---:|---:|---:|---:|---:|---|"]
     for r in rows:
-        clock = (f"{r['training_seconds']:.0f} | {r['first_log_seconds']:.0f} at {r['first_log_env_steps']:,} steps"
-                 if "training_seconds" in r else " | ")  # files written before these were recorded
-        lines.append(f"| {r['seed']} | {r['wall_seconds']:.0f} | {clock} | {r['env_steps']:,} | "
+        lines.append(f"| {r['seed']} | {r['wall_seconds']:.0f} | {r['training_seconds']:.0f} | "
+                     f"{r['first_log_seconds']:.0f} at {r['first_log_env_steps']:,} steps | {r['env_steps']:,} | "
                      f"{100 * r['training_success']:.1f} % | {100 * r['eval_success']:.1f} % | "
                      f"{'yes' if r['reached_target'] else 'no'} |")
     std = "" if s["wall_std"] is None else f" ± {s['wall_std']:.0f}"

@@ -26,7 +26,6 @@ import jax
 import jax.numpy as jnp
 import mujoco
 import numpy as np
-from mujoco import mjx
 
 import envs
 from agents import baselines, provenance
@@ -38,12 +37,6 @@ ACTIONS = ("absolute", "relative")
 AGENTS = ("random", "standstill", "pseudo_ik")
 LIMIT_MARGINS = (0.1, 0.5)  # distances (rad) from a joint limit counted as "near the limit"
 SPEED_STEPS = 25  # env steps (1 s) of the speed scenarios
-
-
-def _refresh_mjx(robot):
-    """Rebuilds the MJX model from the edited MuJoCo model (the robot put it on the device when it was built)."""
-    robot.mjx_model = mjx.put_model(robot.mj_model)
-    robot.data_template = mjx.make_data(robot.mjx_model)
 
 
 def _no_base(env, value):
@@ -74,7 +67,6 @@ def _step_end(env, value):
 def _contacts(env, value):
     """Contact forces on the model's pairs (the paper's MJX model kept contacts on; combine with step_end)."""
     env.robot.mj_model.opt.disableflags &= ~int(mujoco.mjtDisableBit.mjDSBL_CONTACT)
-    _refresh_mjx(env.robot)
 
 
 def _target_limited(env, value):
@@ -89,7 +81,6 @@ def _elbow_2pi(env, value):
     m, robot = env.robot.mj_model, env.robot
     m.jnt_range[2], m.actuator_ctrlrange[2] = (-2 * np.pi, 2 * np.pi), (-2 * np.pi, 2 * np.pi)
     robot.joint_low[2], robot.joint_high[2] = -2 * np.pi, 2 * np.pi  # the arrays the env's ranges share
-    _refresh_mjx(robot)
 
 
 def _ctrl_pi(env, value):
@@ -103,7 +94,6 @@ def _ctrl_pi(env, value):
 def _ee_at_wrist_3(env, value):
     """The end effector at wrist_3's frame origin (on the wrist axis) instead of the tool flange 0.1 m out."""
     env.robot.mj_model.site_pos[env.robot.ee_site] = 0.0  # before the first kinematics call caches the model
-    _refresh_mjx(env.robot)
 
 
 def _wrist_3(env, value):
@@ -119,7 +109,6 @@ def _wrist_3(env, value):
 def _damping(env, value):
     """Joint damping x v, or x v_i per joint for a comma-separated list (0: Menagerie's, no damping)."""
     env.robot.mj_model.dof_damping *= np.array(value.split(","), float)
-    _refresh_mjx(env.robot)
 
 
 def _position_servos(env, value):
@@ -129,7 +118,6 @@ def _position_servos(env, value):
     kp, damping = np.array([3500.0] * 3 + [3000.0] * 3), np.array([200.0] * 3 + [15.0] * 3)
     m.actuator_gainprm[:, 0], m.actuator_biasprm[:, 1], m.actuator_biasprm[:, 2] = kp, -kp, 0.0
     m.dof_damping[:] = damping
-    _refresh_mjx(env.robot)
 
 
 VARIANTS = {  # name -> apply(env, value string); on the command line NAME or NAME=VALUE
@@ -155,6 +143,7 @@ def apply_variants(env, variants: list[str]):
             VARIANTS[name](env, value)
         except ValueError as error:  # a malformed value (damping=x, damping=1,2): numpy's message names neither
             raise ValueError(f"--variant {item!r} is invalid: {str(error).strip()}.") from error
+    env.robot.put_on_device()  # MJX steps the MuJoCo model as the variants left it
     return env
 
 

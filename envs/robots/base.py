@@ -115,10 +115,14 @@ class Robot(abc.ABC):
         self.workspace_center = np.array([0.0, 0.0, data.xanchor[1, 2]], np.float32)
 
         # Built here, outside any trace, so jitted functions close over concrete arrays.
-        self.mjx_model = mjx.put_model(model)
-        """The MJX model (on the default device)."""
+        self.put_on_device()
+
+    def put_on_device(self) -> None:
+        """Builds `mjx_model` (the MJX model, on the default device) and `data_template` (an empty `mjx.Data` that
+        `reset` fills in) from `mj_model`: when the robot is made, and again after `mj_model` is edited in place
+        (an experiment's variant), so that MJX steps the edited model."""
+        self.mjx_model = mjx.put_model(self.mj_model)
         self.data_template = mjx.make_data(self.mjx_model)
-        """An empty `mjx.Data` that `reset` fills in."""
 
     # ----------------------------------------------------------------------------------------
     # Kinematics and collision geometry (pure JAX)
