@@ -82,7 +82,7 @@ IMPORTED = time.perf_counter()
 import tyro  # noqa: E402
 
 import envs  # noqa: E402
-from agents import baselines, evaluation, planner as planners, provenance, xla_flags  # noqa: E402
+from agents import baselines, evaluation, intervals, planner as planners, provenance, xla_flags  # noqa: E402
 from agents import logdir as logdirs  # noqa: E402
 from tools import run_cli  # noqa: E402
 
@@ -179,6 +179,7 @@ def check(args: EvalConfig) -> None:
         missing = [name for name in needed if importlib.util.find_spec(name) is None]
         if missing:
             raise ValueError(f"--video={args.video!r} needs {' and '.join(missing)}: pip install -e '.[viz]'")
+    intervals.check_installed()  # the summary's intervals come after the evaluations
     for option in ("json", "csv", "video"):
         if getattr(args, option):
             check_output(f"--{option}", getattr(args, option), args.force)

@@ -419,7 +419,10 @@ def _seed_line(k: int, n: int, eval_seed: int, units: list, seconds: float) -> s
                        ("obstacle_collision", "obstacle collision")):
         if name in units[0]["metrics"]:
             parts.append(f"{100 * np.mean([u['metrics'][name] for u in units]):.1f} % {what}")
-    over = f" (mean over {len(units)} trained seeds)" if len(units) > 1 else ""
+    over = ""
+    if len(units) > 1 and "target_reached" in units[0]["metrics"]:  # per trained seed too: the log alone keeps them
+        each = ", ".join(f"{100 * u['metrics']['target_reached']:.1f}" for u in units)
+        over = f" (mean over {len(units)} trained seeds; reached % each: {each})"
     return f"eval seed {k + 1} of {n} ({eval_seed}): {', '.join(parts)}{over}; {seconds:.0f} s elapsed"
 
 

@@ -5,6 +5,7 @@ standard for comparisons over few seeds, reported beside the sample std."""
 from __future__ import annotations
 
 import contextlib
+import importlib.util
 import warnings
 
 import numpy as np
@@ -15,6 +16,19 @@ REPS = 1000
 """Bootstrap resamples per interval (rliable resamples in Python: about 0.1 s each on a CPU core; tables cache them)."""
 SEED = 0
 """Seed of the resampling, so that the same values always give the same interval (tables are regenerated)."""
+
+
+NEEDS = ("rliable", "arch")
+"""The packages an interval imports: rliable and its bootstrap."""
+
+
+def check_installed() -> None:
+    """ImportError before any work when a package of NEEDS is missing: intervals are computed after the evaluations,
+    where a missing package would lose their results."""
+    missing = [name for name in NEEDS if importlib.util.find_spec(name) is None]
+    if missing:
+        raise ImportError(f"{' and '.join(missing)} is not installed; confidence intervals over seeds need it: "
+                          "pip install -e .")
 
 
 def _rliable():

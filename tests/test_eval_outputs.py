@@ -1,6 +1,6 @@
 """eval.py's output files: refused before any work when writing them would fail or destroy something (a run's or
 an export's own files, an existing file without --force, a directory, a folder that cannot be written, a video
-format whose writer is not installed), and written atomically; so are policy exports."""
+format whose writer is not installed, a missing package of the intervals), and written atomically; so are policy exports."""
 
 import importlib.util
 import json
@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import eval as eval_cli
-from agents import export
+from agents import export, intervals
 
 STANDSTILL = ["--env", "ur5e-reach", "--policy", "standstill", "--num-envs", "2", "--env.episode-length", "3",
               "--env.substeps", "2"]
@@ -122,6 +122,16 @@ def test_an_mp4_without_its_writer_is_refused_before_the_evaluation(tmp_path, mo
         eval_cli.main(STANDSTILL + ["--video", str(tmp_path / "x.mp4")])
 
 
+def test_a_missing_interval_package_is_refused_before_the_evaluation(monkeypatch):
+    """The summary's confidence intervals come after the evaluations; without rliable they would fail there and lose
+    the evaluations' results."""
+    real = importlib.util.find_spec
+    monkeypatch.setattr(intervals.importlib.util, "find_spec", lambda name: None if name == "rliable" else real(name))
+    monkeypatch.setattr(eval_cli.evaluation, "run", lambda *a, **k: pytest.fail("evaluated before refusing"))
+    with pytest.raises(ImportError, match="rliable is not installed"):
+        eval_cli.main(STANDSTILL)
+
+
 def _export_files(directory):
     return {name: (directory / name).read_bytes() for name in sorted(os.listdir(directory))}
 
@@ -149,3 +159,15 @@ def test_an_export_write_replaces_both_files(tmp_path):
     with np.load(tmp_path / "policy.npz") as data:
         np.testing.assert_array_equal(data["w"], np.arange(5.0))
     assert sorted(os.listdir(tmp_path)) == ["policy.json", "policy.npz"]
+
+
+def test_the_progress_line_keeps_each_trained_seeds_rate():
+    units = [{"metrics": {"target_reached": r, "self_collision": 0.02}} for r in (0.75, 0.79)]
+    line = eval_cli.evaluation._seed_line(0, 1, 7, units, 3.0)
+    assert "77.0 % reached" in line  # the mean of 75.0 and 79.0
+    assert "reached % each: 75.0, 79.0" in line
+
+
+def test_the_progress_line_of_one_trained_seed_names_no_other():
+    line = eval_cli.evaluation._seed_line(0, 1, 7, [{"metrics": {"target_reached": 0.75}}], 3.0)
+    assert "trained seeds" not in line
