@@ -30,8 +30,11 @@ REACH_OBSERVATIONS = (
 BACKENDS = ("auto", "mjx", "mujoco")
 JOINT_NOISE_MODELS = ("angles", "encoders")
 # Observation parts computed from the joint angles: with joint_noise_model="encoders" they come from the noisy ones.
-KINEMATIC_OBSERVATIONS = ("ee_pos", "ee_to_target", "self_dist", "link_obstacle_dist")
-OBSTACLE_OBSERVATIONS = ("obstacle_pos", "obstacle_size", "link_obstacle_dist", "obstacle_radius", "obstacle_vel")
+KINEMATIC_OBSERVATIONS = ("ee_pos", "ee_to_target", "self_dist", "link_obstacle_dist", "link_obstacle_ahead")
+MAX_LOOKAHEADS = 8
+"""Most horizons of the link_obstacle_ahead observation (each adds one number per link)."""
+OBSTACLE_OBSERVATIONS = ("obstacle_pos", "obstacle_size", "link_obstacle_dist", "obstacle_radius", "obstacle_vel",
+                         "link_obstacle_ahead")
 
 
 def _observed_if_set(field: str, std: float, observation: tuple[str, ...], noisy_parts: tuple[str, ...]) -> None:
@@ -268,6 +271,10 @@ class ReachAvoidConfig(ReachConfig):
     obstacles the link_obstacle_dist observation gives each link's distance to the nearest one: one
     number per link whatever num_obstacles is, and the nearest obstacle is the one to avoid first;
     the penalty sums eq. (3) over every (link, obstacle) pair."""
+    obstacle_lookahead: tuple[float, ...] = (0.5, 1.0)
+    """Horizons (s) of the link_obstacle_ahead observation (not in the paper): per horizon and link, the distance
+    link_obstacle_dist would have if every obstacle moved on at its current velocity for that long (the arm held
+    still; a bounce off the cube's faces is not foreseen). A prediction of where a moving obstacle meets the arm."""
 
     @property
     def radius_bounds(self) -> tuple[float, float]:
@@ -309,7 +316,12 @@ class ReachAvoidConfig(ReachConfig):
         positive("obstacle_period", self.obstacle_period)
         positive("obstacle_noise_std", self.obstacle_noise_std, strict=False)
         _observed_if_set("obstacle_noise_std", self.obstacle_noise_std, self.observation,
-                         ("obstacle_pos", "link_obstacle_dist"))
+                         ("obstacle_pos", "link_obstacle_dist", "link_obstacle_ahead"))
+        if not (isinstance(self.obstacle_lookahead, tuple) and 1 <= len(self.obstacle_lookahead) <= MAX_LOOKAHEADS):
+            raise ValueError(f"obstacle_lookahead={self.obstacle_lookahead!r} is invalid: allowed is a tuple of 1 to "
+                             f"{MAX_LOOKAHEADS} horizons (s).")
+        for i, horizon in enumerate(self.obstacle_lookahead):
+            positive(f"obstacle_lookahead[{i}]", horizon)
 
     def validate_for_robot(self, robot: str, reach: float, joint_range_width: float) -> None:
         """ReachConfig's bounds plus the obstacle's: a radius below the robot's reach (a larger one

@@ -26,7 +26,7 @@ SENSING_N = 32
 MOVING = dict(num_obstacles=3, obstacle_motion="linear", obstacle_radius_range=(0.05, 0.15), substeps=2,
               obstacle_speed_range=(0.05, 0.2),
               observation=("joint_pos", "ee_pos", "target_pos", "obstacle_pos", "obstacle_size", "obstacle_radius",
-                           "obstacle_vel", "link_obstacle_dist"))
+                           "obstacle_vel", "link_obstacle_dist", "link_obstacle_ahead"), obstacle_lookahead=(0.5, 2.0))
 SENSING = dict(joint_noise_std=0.01, obstacle_noise_std=0.02, action_latency=1, substeps=2)
 BORDERLINE = 1e-4  # closer than this to touching: float32 against float64, skipped
 
@@ -97,6 +97,7 @@ def test_defaults_are_the_paper_and_motion_names_match_the_registry():
     (dict(joint_noise_std=0.01, observation=("ee_pos", "target_pos")), "joint_noise_std", "joint_pos, joint_sin_cos"),
     (dict(obstacle_noise_std=0.01, observation=("joint_pos", "obstacle_vel")), "obstacle_noise_std",
      "obstacle_pos, link_obstacle_dist"),
+    (dict(obstacle_lookahead=()), "obstacle_lookahead", "a tuple of 1 to 8 horizons"),
     (dict(joint_noise_model="kalman"), "joint_noise_model", "'angles', 'encoders'"),
     (dict(joint_noise_model="encoders"), "joint_noise_model", "'angles' unless joint_noise_std > 0"),
     (dict(joint_noise_model="encoders", joint_noise_std=0.01, observation=("joint_pos", "ee_vel")), "joint_noise_model",
@@ -110,6 +111,16 @@ def test_bad_values_are_refused_naming_the_field(options, field, allowed):
     with pytest.raises(ValueError, match=rf"^{field}={value.replace('(', '[(]').replace(')', '[)]')} is invalid: "
                                          rf"allowed (is|are).*{allowed}"):
         envs.make_config("ur5e-reach-avoid", **options)
+
+
+@pytest.mark.parametrize("horizons, message", [
+    ((0.5, 0.0), r"^obstacle_lookahead\[1\]=0.0 is invalid: allowed is a finite number > 0"),
+    ((float("nan"),), r"^obstacle_lookahead\[0\]=nan is invalid: allowed is a finite number > 0"),
+    ((0.5,) * 9, r"^obstacle_lookahead=.* is invalid: allowed is a tuple of 1 to 8 horizons"),
+])
+def test_bad_lookahead_horizons_are_refused_naming_the_horizon(horizons, message):
+    with pytest.raises(ValueError, match=message):
+        envs.make_config("ur5e-reach-avoid", obstacle_lookahead=horizons)
 
 
 def test_constant_observation_parts_are_named_with_their_setting():
@@ -321,7 +332,7 @@ def test_observations_and_penalty_of_several_moving_obstacles(moving):
     env, cfg, robot = moving.env, moving.env.config, moving.env.robot
     state = moving.start(seed=5)
     nlinks = len(robot.link_bodies)
-    assert env.observation_size == 6 + 3 + 3 + 9 + 9 + 3 + 9 + nlinks
+    assert env.observation_size == 6 + 3 + 3 + 9 + 9 + 3 + 9 + nlinks + 2 * nlinks  # 2 look-ahead horizons
     after = moving.step(state, standstill(env))
     for s in (state, after):
         parts = split_obs(env, s.obs)
@@ -336,6 +347,14 @@ def test_observations_and_penalty_of_several_moving_obstacles(moving):
         links = np.asarray(s.pipeline_state.xpos)[:, robot.link_bodies]
         d = np.linalg.norm(links[:, None] - pos.reshape(N, 3, 1, 3), axis=-1) - radii[..., None]
         np.testing.assert_allclose(parts["link_obstacle_dist"], d.min(axis=1), atol=1e-5)
+        # Looking ahead: each obstacle moved on by its velocity times 0.5 s, then 2 s, in a straight line.
+        vel = np.asarray(s.info["obstacle_vel"]).reshape(N, 3, 1, 3)
+        for k, horizon in enumerate((0.5, 2.0)):
+            moved = np.linalg.norm(links[:, None] - (pos.reshape(N, 3, 1, 3) + horizon * vel), axis=-1) - radii[..., None]
+            np.testing.assert_allclose(parts["link_obstacle_ahead"][:, k * nlinks:(k + 1) * nlinks], moved.min(axis=1),
+                                       atol=1e-5)
+    # Obstacles of 0.05-0.2 m/s moved on for 2 s: the prediction differs from the present by centimetres or more.
+    assert np.max(np.abs(parts["link_obstacle_ahead"][:, nlinks:] - parts["link_obstacle_dist"])) > 0.05
     # Radii and velocities vary between episodes here, so no part is constant (what evaluation checks use).
     assert cfg.constant_observations() == {}
     assert np.ptp(parts["obstacle_radius"]) > 0.01

@@ -128,5 +128,14 @@ class ReachAvoid(Reach):
             obstacle_vel=lambda: info["obstacle_vel"] if "obstacle_vel" in info else jnp.zeros(3 * n),
             # Per link, the nearest obstacle: one number per link whatever num_obstacles is.
             link_obstacle_dist=lambda: jnp.min(self.link_distances(data, xpos, info), axis=0),
+            link_obstacle_ahead=lambda: self.link_distances_ahead(data, xpos, info),
         )
         return parts
+
+    def link_distances_ahead(self, data, xpos, info):
+        """Per horizon of `obstacle_lookahead`, each link's distance to the nearest obstacle moved on at its current
+        velocity for that long (the arm held still): `[horizons * nlinks]`, horizon-major."""
+        velocity = info["obstacle_vel"] if "obstacle_vel" in info else jnp.zeros_like(info["obstacle_pos"])
+        ahead = [{**info, "obstacle_pos": info["obstacle_pos"] + horizon * velocity}
+                 for horizon in self.config.obstacle_lookahead]
+        return jnp.concatenate([jnp.min(self.link_distances(data, xpos, moved), axis=0) for moved in ahead])
