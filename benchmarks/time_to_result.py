@@ -2,9 +2,10 @@
 
     python -m benchmarks.time_to_result ur5e-reach-ppo --seeds 5 --target 0.96 --out results/time_to_result/ur5e_reach_ppo
     python -m benchmarks.time_to_result point-mass-ppo --seeds 2 --target 0.8 --out /tmp/ttr -- --eval-envs 64
+    python -m benchmarks.time_to_result ur5e-reach-ppo-plus --target 0.96 --stop-at 0.97 --out ...  # stop above the bar
 
-Each seed is one `train.py PRESET --seed S --stop-at-success TARGET` process of its own, timed from its start to its
-exit: importing, compiling (no persistent compilation cache unless `--cache-dir`), training until every training
+Each seed is one `train.py PRESET --seed S --stop-at-success STOP` process of its own (STOP: `--stop-at`, by default
+the target), timed from its start to its exit: importing, compiling (no persistent compilation cache unless `--cache-dir`), training until every training
 episode batch reaches the target (or the preset's budget ends) and the final evaluation on fresh episodes. Options
 after `--` go to train.py unchanged. Reported per seed: the wall clock, the training's own clock (its chunks of
 updates, the first with compiling; the rest is start-up, checkpoints and the final evaluation), the env steps trained,
@@ -42,13 +43,15 @@ def train_command(preset: str, seed: int, target: float, logdir: str, extra: lis
             "--stop-at-success", str(target), "--logdir", logdir, "--no-progress", "--no-tensorboard", *extra]
 
 
-def run_seed(preset: str, seed: int, target: float, logdir: str, extra: list[str], cache_dir: str | None) -> dict:
-    """One seed's process: its wall clock and what its eval.json and metrics.csv say."""
+def run_seed(preset: str, seed: int, target: float, logdir: str, extra: list[str], cache_dir: str | None,
+             stop_at: float | None = None) -> dict:
+    """One seed's process, stopped at the training success `stop_at` (default `target`): its wall clock and what its
+    eval.json and metrics.csv say; its evaluation is held against `target`."""
     env = dict(os.environ)
     env.pop("JAX_COMPILATION_CACHE_DIR", None)
     if cache_dir:
         env["JAX_COMPILATION_CACHE_DIR"] = cache_dir
-    command = train_command(preset, seed, target, logdir, extra)
+    command = train_command(preset, seed, target if stop_at is None else stop_at, logdir, extra)
     start = time.perf_counter()
     done = subprocess.run(command, env=env, capture_output=True, text=True)
     seconds = time.perf_counter() - start
@@ -83,10 +86,11 @@ def summary(rows: list[dict]) -> dict:
             "wall_max": float(wall.max()), "reached": int(sum(r["reached_target"] for r in rows))}
 
 
-def markdown(preset: str, target: float, rows: list[dict], stamp: dict) -> str:
+def markdown(preset: str, target: float, rows: list[dict], stamp: dict, stop_at: float | None = None) -> str:
     """The table of `rows` under a line naming the command, code version, device and date of `stamp`."""
     s = summary(rows)
-    lines = [f"`{preset}` to {100 * target:.1f} % reached", "",
+    stop = "" if stop_at is None or stop_at == target else f" (training stopped at {100 * stop_at:.1f} % success)"
+    lines = [f"`{preset}` to {100 * target:.1f} % reached{stop}", "",
              f"Command: `{stamp['command']}`; code {stamp['code']}; {stamp['device']}; {stamp['date']}.", "",
              "| seed | wall clock (s) | training chunks (s) | first chunk (s, compiling included) | env steps | training success at the stop "
              "| evaluation reached | target met |",
@@ -110,7 +114,10 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("preset")
     p.add_argument("--seeds", type=int, default=5, help="fresh seeds, one process each")
     p.add_argument("--first-seed", type=int, default=100, help="the first seed (seeds the presets' runs did not use)")
-    p.add_argument("--target", type=float, required=True, help="success rate to stop at and to reach in evaluation")
+    p.add_argument("--target", type=float, required=True, help="success rate the evaluation must reach")
+    p.add_argument("--stop-at", type=float, default=None,
+                   help="training success to stop at (default: the target; sampled actions on training episodes "
+                        "succeed less or more often than the evaluation's deterministic policy)")
     p.add_argument("--out", required=True, help="path prefix of the .json and .md written")
     p.add_argument("--cache-dir", default=None, help="a persistent compilation cache (default: none, a cold start)")
     p.add_argument("--logdir", default=None, help="where the runs go (default: a temporary folder, removed)")
@@ -121,23 +128,26 @@ def main(argv: list[str] | None = None) -> int:
         raise ValueError(f"--seeds={args.seeds} is invalid: allowed is an integer >= 1.")
     if not 0.0 < args.target <= 1.0:
         raise ValueError(f"--target={args.target} is invalid: allowed is a success rate in (0, 1].")
+    if args.stop_at is not None and not 0.0 < args.stop_at <= 1.0:
+        raise ValueError(f"--stop-at={args.stop_at} is invalid: allowed is a success rate in (0, 1].")
     os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         base = args.logdir or tmp
         for seed in range(args.first_seed, args.first_seed + args.seeds):
             rows.append(run_seed(args.preset, seed, args.target, os.path.join(base, f"seed{seed}"), extra,
-                                 args.cache_dir))
+                                 args.cache_dir, args.stop_at))
             print(f"seed {seed}: {rows[-1]['wall_seconds']:.0f} s, {rows[-1]['env_steps']:,} env steps, "
                   f"evaluation {100 * rows[-1]['eval_success']:.1f} %", flush=True)
             stamp = provenance.stamp()
-            report = {**stamp, "preset": args.preset, "target": args.target, "train_options": extra,
+            report = {**stamp, "preset": args.preset, "target": args.target,
+                      "stop_at": args.target if args.stop_at is None else args.stop_at, "train_options": extra,
                       "cache_dir": args.cache_dir, "seeds": rows, "summary": summary(rows)}
             with open(args.out + ".json", "w") as f:  # after every seed: a run cut short keeps what it finished
                 json.dump(jsonable(report), f, indent=2)
             with open(args.out + ".md", "w") as f:
-                f.write(markdown(args.preset, args.target, rows, stamp))
-    print(markdown(args.preset, args.target, rows, stamp))
+                f.write(markdown(args.preset, args.target, rows, stamp, args.stop_at))
+    print(markdown(args.preset, args.target, rows, stamp, args.stop_at))
     return 0
 
 

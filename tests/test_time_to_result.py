@@ -11,7 +11,7 @@ from benchmarks import time_to_result
 @pytest.fixture(scope="module")
 def one_seed(tmp_path_factory):
     out = tmp_path_factory.mktemp("ttr")
-    time_to_result.main(["point-mass-ppo", "--seeds", "1", "--target", "0.8", "--out", str(out / "pm"),
+    time_to_result.main(["point-mass-ppo", "--seeds", "1", "--target", "0.75", "--stop-at", "0.8", "--out", str(out / "pm"),
                          "--logdir", str(out / "runs"), "--", "--eval-envs", "64", "--log-every", "5000"])
     return out, json.loads((out / "pm.json").read_text())
 
@@ -30,6 +30,22 @@ def test_the_reported_evaluation_is_the_runs_own(one_seed):
 def test_the_stop_came_at_the_target_training_success(one_seed):
     _, report = one_seed
     assert report["seeds"][0]["training_success"] >= 0.8
+
+
+def test_the_run_stopped_at_the_stop_at_success(one_seed):
+    _, report = one_seed
+    assert "--stop-at-success 0.8" in report["seeds"][0]["command"]
+
+
+def test_the_evaluation_is_held_against_the_target_not_the_stop(one_seed):
+    _, report = one_seed
+    seed = report["seeds"][0]
+    assert seed["reached_target"] == (seed["eval_success"] >= 0.75)
+
+
+def test_the_table_names_the_stop(one_seed):
+    out, _ = one_seed
+    assert "to 75.0 % reached (training stopped at 80.0 % success)" in (out / "pm.md").read_text()
 
 
 def test_the_training_clock_is_the_runs_own_log(one_seed):
@@ -69,6 +85,7 @@ def test_the_summary_uses_the_sample_std():
 
 @pytest.mark.parametrize("args, field", [(["nope", "--target", "0.9"], "preset="),
                                          (["point-mass-ppo", "--target", "0"], "--target="),
+                                         (["point-mass-ppo", "--target", "0.9", "--stop-at", "1.5"], "--stop-at="),
                                          (["point-mass-ppo", "--target", "0.9", "--seeds", "0"], "--seeds=")])
 def test_bad_options_are_refused_naming_them(args, field, tmp_path):
     with pytest.raises(ValueError, match=field):
