@@ -29,7 +29,7 @@ import jax
 import numpy as np
 
 import envs
-from agents import baselines, driver, export, planner as planners, registry
+from agents import baselines, driver, export, intervals, planner as planners, registry
 from envs import physics
 from agents.loop import make_evaluate, make_evaluate_stacked
 from agents.networks import COMPUTE_DTYPES
@@ -379,6 +379,7 @@ def run(policy: Policy, env_name: str, env_config, num_envs: int = 4096, eval_se
         raise ValueError(f"num_envs={num_envs!r} is invalid: allowed is an integer >= 1.")
     if not eval_seeds:
         raise ValueError("eval_seeds=[] is invalid: allowed is at least one seed.")
+    intervals.check_installed()  # the summary's intervals come after the evaluation
     program = _program(policy, env_name, env_config, num_envs, last_steps, stochastic, allow_env_mismatch)
     params = act_params(policy)
     batch = len(policy.units) if policy.export else 0
@@ -419,10 +420,8 @@ def _seed_line(k: int, n: int, eval_seed: int, units: list, seconds: float) -> s
                        ("obstacle_collision", "obstacle collision")):
         if name in units[0]["metrics"]:
             parts.append(f"{100 * np.mean([u['metrics'][name] for u in units]):.1f} % {what}")
-    over = ""
-    if len(units) > 1 and "target_reached" in units[0]["metrics"]:  # per trained seed too: the log alone keeps them
-        each = ", ".join(f"{100 * u['metrics']['target_reached']:.1f}" for u in units)
-        over = f" (mean over {len(units)} trained seeds; reached % each: {each})"
+    each = ", ".join(f"{100 * u['metrics'].get('target_reached', np.nan):.1f}" for u in units)  # the log keeps them
+    over = f" (mean over {len(units)} trained seeds; reached % each: {each})" if len(units) > 1 else ""
     return f"eval seed {k + 1} of {n} ({eval_seed}): {', '.join(parts)}{over}; {seconds:.0f} s elapsed"
 
 

@@ -132,6 +132,16 @@ def test_a_missing_interval_package_is_refused_before_the_evaluation(monkeypatch
         eval_cli.main(STANDSTILL)
 
 
+def test_an_evaluation_is_refused_before_it_runs_without_the_interval_packages(monkeypatch):
+    """The same for every caller of agents.evaluation.run (the planner table, the experiments' cross-evaluations)."""
+    real = importlib.util.find_spec
+    monkeypatch.setattr(intervals.importlib.util, "find_spec", lambda name: None if name == "arch" else real(name))
+    monkeypatch.setattr(eval_cli.evaluation, "_program", lambda *a, **k: pytest.fail("built the program before refusing"))
+    config = eval_cli.envs.make_config("ur5e-reach", episode_length=3, substeps=2)
+    with pytest.raises(ImportError, match="arch is not installed"):
+        eval_cli.evaluation.run(eval_cli.evaluation.baseline_policy("standstill"), "ur5e-reach", config, num_envs=2)
+
+
 def _export_files(directory):
     return {name: (directory / name).read_bytes() for name in sorted(os.listdir(directory))}
 

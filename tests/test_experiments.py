@@ -16,7 +16,7 @@ import pytest
 
 import train
 from agents import presets
-from agents import driver
+from agents import driver, intervals
 from agents.config import config_json
 from tools import experiment_launch as launch
 from tools import experiment_spec as spec
@@ -724,3 +724,13 @@ def test_build_with_nothing_finished_says_so_and_exits_1(tmp_path, capsys):
     assert code == 1
     assert "nothing built: no run of action-space has a finished part" in capsys.readouterr().err
     assert not (tmp_path / "out").exists()
+
+
+def test_a_part_is_refused_before_training_without_the_interval_packages(tmp_path, monkeypatch):
+    """Its cross-evaluations' intervals come after the training: without rliable a part would train, then fail."""
+    real = importlib.util.find_spec
+    monkeypatch.setattr(intervals.importlib.util, "find_spec", lambda name: None if name == "rliable" else real(name))
+    monkeypatch.setattr(driver, "train", lambda *a, **k: pytest.fail("trained before refusing"))
+    monkeypatch.setitem(spec.EXPERIMENTS, "toy", TOY)
+    with pytest.raises(ImportError, match="rliable is not installed"):
+        launch.train_part("toy/b", "seeds-0-1", str(tmp_path / "runs"), str(tmp_path / "out"))

@@ -25,7 +25,7 @@ import traceback
 
 import submitit
 
-from agents import driver, provenance, xla_flags
+from agents import driver, intervals, provenance, xla_flags
 from agents.checkpoint import write_atomic
 from tools.experiment_state import (
     cross_evaluate, folder_crosses, parse_part, part_state, pending_parts, planners, run_state, select,
@@ -177,6 +177,7 @@ def train_part(key: str, part: str, runs_dir: str, out: str, log=print) -> str:
     then evaluates its cross settings and records its files in `out`. Returns "done", "interrupted" (a stop signal:
     a checkpoint was saved), or "taken" (another process holds the part). ValueError for a part whose stored
     config differs from the registry's run."""
+    intervals.check_installed()  # the cross-evaluations' intervals come after the training
     experiment, run = find_run(key)
     span = parse_part(part)
     if span is None:
