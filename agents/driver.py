@@ -3,11 +3,10 @@
 `train(config)` checks the logdir (`agents.logdir`: an earlier run is refused unless `resume` or `overwrite`),
 runs compiled chunks (`agents.loop`) and, between them, logs (`agents.logger`; with logger="wandb" also
 `agents.wandb_logger`), checkpoints (`agents.checkpoint`, plus the policy export of `agents.export`), honours Ctrl-C
-(checkpoint, then exit) and stops on a non-finite learner metric (keeping the last good checkpoint;
-a resume skips damaged checkpoints, moving them aside). At the
-end it evaluates the deterministic policy and stores the metrics as JSON next to the final
-checkpoint. The config and its validation live in `agents.config`; the algorithm comes from
-`agents.registry`.
+(checkpoint, then exit) and stops on a non-finite learner metric (keeping the last good checkpoint; a resume skips
+damaged checkpoints, moving them aside). At the end it evaluates the deterministic policy (compiled while it trained,
+on a GPU) and stores the metrics as JSON next to the final checkpoint. The config and its validation live in
+`agents.config`; the algorithm comes from `agents.registry`.
 """
 
 from __future__ import annotations
@@ -73,10 +72,6 @@ def seed_keys(config: TrainConfig) -> jax.Array:
     return jnp.stack([jax.random.PRNGKey(config.seed + i) for i in range(config.seeds)])
 
 
-# ----------------------------------------------------------------------------------------------
-# The driver.
-
-
 @dataclasses.dataclass
 class TrainResult:
     state: object
@@ -123,6 +118,13 @@ def compile_ahead(programs: Programs, state) -> float:
     return time.perf_counter() - t0
 
 
+def evaluates_ahead(config: TrainConfig, stop_updates: int, updates_total: int) -> bool:
+    """Whether the final evaluation compiles in a thread while the run trains: on an accelerator (on a CPU the thread
+    would take the training's cores), when the run is to end with its evaluation (no time or step limit)."""
+    return (config.eval_envs > 0 and stop_updates == updates_total and not config.stop_after_seconds
+            and jax.default_backend() != "cpu")
+
+
 def _train(config: TrainConfig, learner_cls: type | None = None) -> TrainResult:
     started = time.perf_counter()
     logdir = config.logdir or os.path.join("runs", config.preset or config.env_name,
@@ -167,7 +169,7 @@ def _train(config: TrainConfig, learner_cls: type | None = None) -> TrainResult:
     interrupted = {"flag": False}
     previous_handler = _install_sigint(interrupted)
     last_saved = start_step
-    last_metrics = None
+    last_metrics, ahead = None, None  # ahead: the final evaluation compiling in a thread (evaluates_ahead)
     per_update = None  # seconds per update of the last chunk, compilation left out
     # With a time limit the chunk is compiled ahead (jit keeps the executable), so that the first chunk's speed
     # is not mistaken for the compilation's: judged by it, a run started with less than twice its compile time
@@ -186,6 +188,8 @@ def _train(config: TrainConfig, learner_cls: type | None = None) -> TrainResult:
                 break
             t0 = time.perf_counter()
             state, metrics = programs.chunk(state, jnp.int32(n))
+            if first_chunk and evaluates_ahead(config, stop_updates, updates_total):  # placed as the chunk places it
+                ahead = programs.evaluation_ahead(state.learner)
             metrics = jax.device_get(metrics)
             seconds = time.perf_counter() - t0
             per_update = seconds / n
@@ -225,6 +229,8 @@ def _train(config: TrainConfig, learner_cls: type | None = None) -> TrainResult:
             logger.say(f"[{logger.label}] evaluating the deterministic policy: {config.eval_envs} episodes per seed "
                        "(compiled on first use) ...")
             t0 = time.perf_counter()
+            if ahead is not None:
+                ahead.join()
             eval_metrics = evaluate(programs, state, config)
             logger.say(f"[{logger.label}] evaluation done in {time.perf_counter() - t0:.0f} s")
             # What made it (command, code, device, date); tables show the device beside speeds, which compare only
@@ -243,6 +249,8 @@ def _train(config: TrainConfig, learner_cls: type | None = None) -> TrainResult:
             _undo_start(logdir, prepared)
         raise
     finally:
+        if ahead is not None:  # a stopped run's compile ends with it
+            ahead.thread.join()
         logger.close()
         ckpt.close()
         _restore_sigint(previous_handler)

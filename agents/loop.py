@@ -28,6 +28,8 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import threading
+import warnings
 from typing import Any, NamedTuple, Protocol
 
 import jax
@@ -402,6 +404,30 @@ def over_seeds(fn, num_seeds: int):
     return lambda state, x: expand(fn(squeeze(state), x))
 
 
+class Ahead:
+    """`fn()` run at once in a thread of its own, for compiling a program on the host while the device works (XLA
+    compiles without holding Python's GIL). `join()` waits for it; an error it raised becomes a warning, since the
+    program is then compiled again where it is called, which reports the error if it persists."""
+
+    def __init__(self, fn, what: str):
+        self.error, self.what = None, what
+
+        def run():
+            try:
+                fn()
+            except Exception as error:  # compiled again on use
+                self.error = error
+
+        self.thread = threading.Thread(target=run, name=f"ahead: {what}")
+        self.thread.start()
+
+    def join(self) -> None:
+        self.thread.join()
+        if self.error is not None:
+            warnings.warn(f"compiling {self.what} ahead failed ({self.error!r}); it is compiled on use", stacklevel=2)
+            self.error = None
+
+
 class Programs:
     """The compiled pieces of one run: `init(keys)`, `chunk(state, n)`, `evaluate(state, keys)`.
 
@@ -445,3 +471,10 @@ class Programs:
             self.chunk = jax.jit(chunk, donate_argnums=0)
 
         self.evaluate = jax.jit(make_evaluate_stacked(eval_env, learner, eval_envs, episode_length, eval_last_steps))
+
+    def evaluation_ahead(self, learner_states) -> Ahead:
+        """Compiles `evaluate` in a thread for learner states shaped and placed like `learner_states` (read now: the
+        arrays may be donated to a chunk meanwhile), so that calling it later runs at once."""
+        like = jax.tree.map(lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype, sharding=x.sharding), learner_states)
+        key = jax.ShapeDtypeStruct((2,), jnp.uint32)
+        return Ahead(lambda: self.evaluate.lower(like, key).compile(), "the evaluation")
