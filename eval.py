@@ -179,7 +179,6 @@ def check(args: EvalConfig) -> None:
         missing = [name for name in needed if importlib.util.find_spec(name) is None]
         if missing:
             raise ValueError(f"--video={args.video!r} needs {' and '.join(missing)}: pip install -e '.[viz]'")
-    intervals.check_installed()  # the summary's intervals come after the evaluations
     for option in ("json", "csv", "video"):
         if getattr(args, option):
             check_output(f"--{option}", getattr(args, option), args.force)
@@ -226,6 +225,8 @@ def main(argv: list[str] | None = None) -> list:
 
     for policy, config in zip(policies, configs):  # every bad combination refused before anything runs
         evaluation.check(policy, env_name, config, args.allow_env_mismatch)
+    if sum(len(policy.units) for policy in policies) * len(eval_seeds) > 1:
+        intervals.check_installed()  # intervals over the units come after the evaluations
     results, first_evaluation = [], time.perf_counter()
     for i, (policy, config) in enumerate(zip(policies, configs)):
         trained = f"{len(policy.units)} trained seed(s) x " if policy.export else ""

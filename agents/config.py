@@ -101,6 +101,11 @@ class TrainConfig(Generic[EnvConfigT, AlgoConfigT]):
     """Seed of the evaluation episodes (the same episodes for every seed and checkpoint)."""
     eval_last_steps: int = 10
     """The evaluation also reports each metric averaged over an episode's last this many steps."""
+    compile_eval_ahead: bool = True
+    """On a GPU or TPU, compile the final evaluation in a thread while the run trains (after its first chunk), so it
+    runs at once at the end; only for runs set to end with it (no stop_after_steps or stop_after_seconds). False
+    compiles it at the end: for runs near the device's memory limit (compiling tunes kernels on the device) or
+    timings of training alone."""
     matmul_precision: Literal["default", "high", "highest"] = "default"
     """float32 matmul precision: "default" lets NVIDIA GPUs use TF32 (fast, ~1e-3 relative error),
     "highest" computes in full float32. Stored with the run so results state what they used."""
@@ -124,6 +129,7 @@ class TrainConfig(Generic[EnvConfigT, AlgoConfigT]):
 
 RUN_FIELDS = ("num_timesteps", "devices", "multi_device", "logdir", "resume", "overwrite", "checkpoint_every", "keep_checkpoints",
               "checkpoint_envs", "log_every", "stop_after_steps", "stop_after_seconds", "stop_at_success", "eval_envs", "eval_seed", "eval_last_steps",
+              "compile_eval_ahead",
               "tensorboard", "progress", "logger", "wandb_mode", "wandb_project")
 """Fields that may differ between a checkpoint's config and a resuming command line."""
 
@@ -180,6 +186,8 @@ def validate(config: TrainConfig) -> None:
     if config.episode_restarts not in envs.wrappers.RESTARTS:
         raise ValueError(f"episode_restarts={config.episode_restarts!r} is unknown: allowed are "
                          f"{', '.join(envs.wrappers.RESTARTS)}.")
+    if not isinstance(config.compile_eval_ahead, bool):
+        raise ValueError(f"compile_eval_ahead={config.compile_eval_ahead!r} is invalid: allowed are True, False.")
     if config.matmul_precision not in PRECISIONS:
         raise ValueError(f"matmul_precision={config.matmul_precision!r} is unknown: allowed are {', '.join(PRECISIONS)}.")
     validate_logging(config)

@@ -119,10 +119,10 @@ def compile_ahead(programs: Programs, state) -> float:
 
 
 def evaluates_ahead(config: TrainConfig, stop_updates: int, updates_total: int) -> bool:
-    """Whether the final evaluation compiles in a thread while the run trains: on an accelerator (on a CPU the thread
-    would take the training's cores), when the run is to end with its evaluation (no time or step limit)."""
-    return (config.eval_envs > 0 and stop_updates == updates_total and not config.stop_after_seconds
-            and jax.default_backend() != "cpu")
+    """Whether the final evaluation compiles in a thread while the run trains (`compile_eval_ahead`): on an accelerator
+    (on a CPU the thread would take the training's cores), when the run is to end with its evaluation."""
+    return (config.compile_eval_ahead and config.eval_envs > 0 and stop_updates == updates_total
+            and not config.stop_after_seconds and jax.default_backend() != "cpu")
 
 
 def _train(config: TrainConfig, learner_cls: type | None = None) -> TrainResult:
@@ -226,8 +226,8 @@ def _train(config: TrainConfig, learner_cls: type | None = None) -> TrainResult:
         _keep_new_run(prepared)
         eval_metrics = None
         if status == "done" and config.eval_envs > 0:
-            logger.say(f"[{logger.label}] evaluating the deterministic policy: {config.eval_envs} episodes per seed "
-                       "(compiled on first use) ...")
+            logger.say(f"[{logger.label}] evaluating the deterministic policy: {config.eval_envs} episodes per seed"
+                       f"{' (compiled while training)' if ahead else ' (compiled on first use)'} ...")
             t0 = time.perf_counter()
             if ahead is not None:
                 ahead.join()
@@ -249,11 +249,12 @@ def _train(config: TrainConfig, learner_cls: type | None = None) -> TrainResult:
             _undo_start(logdir, prepared)
         raise
     finally:
-        if ahead is not None:  # a stopped run's compile ends with it
-            ahead.thread.join()
         logger.close()
         ckpt.close()
         _restore_sigint(previous_handler)
+        if ahead is not None and ahead.thread.is_alive():  # a run that ends early waits for its compile
+            print("waiting for the evaluation's compile to end ...", file=sys.stderr, flush=True)
+            ahead.thread.join()
     note = programs.learner.progress_note(updates_done)
     return TrainResult(state, updates_done * spu, status, logdir, config, eval_metrics, last_metrics, note)
 

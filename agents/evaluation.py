@@ -379,7 +379,8 @@ def run(policy: Policy, env_name: str, env_config, num_envs: int = 4096, eval_se
         raise ValueError(f"num_envs={num_envs!r} is invalid: allowed is an integer >= 1.")
     if not eval_seeds:
         raise ValueError("eval_seeds=[] is invalid: allowed is at least one seed.")
-    intervals.check_installed()  # the summary's intervals come after the evaluation
+    if len(policy.units) * len(eval_seeds) > 1:
+        intervals.check_installed()  # the summary's intervals come after the evaluation
     program = _program(policy, env_name, env_config, num_envs, last_steps, stochastic, allow_env_mismatch)
     params = act_params(policy)
     batch = len(policy.units) if policy.export else 0

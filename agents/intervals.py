@@ -5,7 +5,7 @@ standard for comparisons over few seeds, reported beside the sample std."""
 from __future__ import annotations
 
 import contextlib
-import importlib.util
+import importlib
 import warnings
 
 import numpy as np
@@ -18,17 +18,27 @@ SEED = 0
 """Seed of the resampling, so that the same values always give the same interval (tables are regenerated)."""
 
 
-NEEDS = ("rliable", "arch")
-"""The packages an interval imports: rliable and its bootstrap."""
+NEEDS = ("rliable.library", "arch.bootstrap")
+"""The modules an interval imports: rliable's and its bootstrap's (arch)."""
+
+
+def load(module: str) -> None:
+    """Imports `module` (where tests stand in a failing import)."""
+    importlib.import_module(module)
 
 
 def check_installed() -> None:
-    """ImportError before any work when a package of NEEDS is missing: intervals are computed after the evaluations,
-    where a missing package would lose their results."""
-    missing = [name for name in NEEDS if importlib.util.find_spec(name) is None]
-    if missing:
-        raise ImportError(f"{' and '.join(missing)} is not installed; confidence intervals over seeds need it: "
-                          "pip install -e .")
+    """ValueError before any work when a module of NEEDS does not import (missing, or broken by a dependency):
+    intervals are computed after the evaluations, where the error would lose their results."""
+    broken = []
+    for name in NEEDS:
+        try:
+            load(name)
+        except ImportError as error:
+            broken.append(f"{name.split('.')[0]} ({error})")
+    if broken:
+        raise ValueError(f"confidence intervals over seeds need {' and '.join(broken)}: allowed is an install where "
+                         "they import (pip install -e .).")
 
 
 def _rliable():

@@ -405,9 +405,9 @@ def over_seeds(fn, num_seeds: int):
 
 
 class Ahead:
-    """`fn()` run at once in a thread of its own, for compiling a program on the host while the device works (XLA
-    compiles without holding Python's GIL). `join()` waits for it; an error it raised becomes a warning, since the
-    program is then compiled again where it is called, which reports the error if it persists."""
+    """`fn()` run at once in a thread of its own, for compiling a program on the host while the device works (XLA's
+    compiler releases Python's GIL; tracing and lowering hold it). `join()` waits for it; an error it raised becomes a
+    warning, since the program is then compiled again where it is called, which reports the error if it persists."""
 
     def __init__(self, fn, what: str):
         self.error, self.what = None, what
@@ -476,5 +476,11 @@ class Programs:
         """Compiles `evaluate` in a thread for learner states shaped and placed like `learner_states` (read now: the
         arrays may be donated to a chunk meanwhile), so that calling it later runs at once."""
         like = jax.tree.map(lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype, sharding=x.sharding), learner_states)
-        key = jax.ShapeDtypeStruct((2,), jnp.uint32)
-        return Ahead(lambda: self.evaluate.lower(like, key).compile(), "the evaluation")
+        key = jax.eval_shape(jax.random.PRNGKey, 0)
+        precision = jax.config.jax_default_matmul_precision  # a context of this thread: the compile's thread enters it
+
+        def compile_it():
+            with jax.default_matmul_precision(precision):
+                self.evaluate.lower(like, key).compile()
+
+        return Ahead(compile_it, "the evaluation")

@@ -5,12 +5,12 @@
     python -m benchmarks.time_to_result ur5e-reach-ppo-plus --target 0.96 --stop-at 0.97 --out ...  # stop above the bar
 
 Each seed is one `train.py PRESET --seed S --stop-at-success STOP` process of its own (STOP: `--stop-at`, by default
-the target), timed from its start to its exit: importing, compiling (no persistent compilation cache unless `--cache-dir`), training until every training
-episode batch reaches the target (or the preset's budget ends) and the final evaluation on fresh episodes. Options
-after `--` go to train.py unchanged. Reported per seed: the wall clock, the training's own clock (its chunks of
-updates, the first with compiling; the rest is start-up, checkpoints and the final evaluation), the env steps trained,
-the training success at the stop and the evaluation's success; a seed counts as a result when its evaluation reaches
-the target.
+the target), timed from its start to its exit: importing, compiling (no persistent compilation cache unless
+`--cache-dir`), training until every training episode batch reaches STOP (or the preset's budget ends) and the final
+evaluation on fresh episodes. Options after `--` go to train.py unchanged. Reported per seed: the wall clock, the
+training's own clock (its chunks of updates, the first with compiling; the rest is start-up, checkpoints and the final
+evaluation), the env steps trained, the training success at the stop and the evaluation's success; a seed counts as a
+result when its evaluation reaches the target.
 
 Writes `--out`.json (every seed, command, code version, device, date) and `--out`.md (the table).
 """

@@ -728,9 +728,10 @@ def test_build_with_nothing_finished_says_so_and_exits_1(tmp_path, capsys):
 
 def test_a_part_is_refused_before_training_without_the_interval_packages(tmp_path, monkeypatch):
     """Its cross-evaluations' intervals come after the training: without rliable a part would train, then fail."""
-    real = importlib.util.find_spec
-    monkeypatch.setattr(intervals.importlib.util, "find_spec", lambda name: None if name == "rliable" else real(name))
+    real = intervals.load
+    monkeypatch.setattr(intervals, "load",
+                        lambda name: (_ for _ in ()).throw(ImportError(name)) if name == "rliable.library" else real(name))
     monkeypatch.setattr(driver, "train", lambda *a, **k: pytest.fail("trained before refusing"))
     monkeypatch.setitem(spec.EXPERIMENTS, "toy", TOY)
-    with pytest.raises(ImportError, match="rliable is not installed"):
+    with pytest.raises(ValueError, match="need rliable"):
         launch.train_part("toy/b", "seeds-0-1", str(tmp_path / "runs"), str(tmp_path / "out"))

@@ -27,7 +27,9 @@ MOVING = dict(num_obstacles=3, obstacle_motion="linear", obstacle_radius_range=(
               obstacle_speed_range=(0.05, 0.2),
               observation=("joint_pos", "ee_pos", "target_pos", "obstacle_pos", "obstacle_size", "obstacle_radius",
                            "obstacle_vel", "link_obstacle_dist", "link_obstacle_ahead"), obstacle_lookahead=(0.5, 2.0))
-SENSING = dict(joint_noise_std=0.01, obstacle_noise_std=0.02, action_latency=1, substeps=2)
+SENSING = dict(joint_noise_std=0.01, obstacle_noise_std=0.02, action_latency=1, substeps=2,
+               observation=("joint_pos", "ee_pos", "target_pos", "ee_to_target", "obstacle_pos", "link_obstacle_dist",
+                            "link_obstacle_ahead"))
 BORDERLINE = 1e-4  # closer than this to touching: float32 against float64, skipped
 
 
@@ -407,6 +409,7 @@ def test_noise_is_seeded_fresh_each_step_and_only_in_the_observation(sensing):
     links = np.asarray(state.pipeline_state.xpos)[:, robot.link_bodies]
     d = np.linalg.norm(links - parts["obstacle_pos"][:, None], axis=-1) - env.config.obstacle_radius
     np.testing.assert_allclose(parts["link_obstacle_dist"], d, atol=1e-5)
+    np.testing.assert_allclose(parts["link_obstacle_ahead"], np.tile(d, 2), atol=1e-5)  # static: both horizons alike
     actions = jax.random.uniform(jax.random.PRNGKey(8), (SENSING_N, env.action_size), minval=-1, maxval=1)
     after = sensing.step(state, actions)
     np.testing.assert_array_equal(after.obs, sensing.step(again, actions).obs)  # reproducible through a step
@@ -417,11 +420,12 @@ def test_noise_is_seeded_fresh_each_step_and_only_in_the_observation(sensing):
     assert not np.allclose(step_obstacle, obstacle)  # fresh every step
 
 
-ENCODER_PARTS = ("joint_pos", "ee_pos", "target_pos", "ee_to_target", "self_dist", "obstacle_pos", "link_obstacle_dist")
+ENCODER_PARTS = ("joint_pos", "ee_pos", "target_pos", "ee_to_target", "self_dist", "obstacle_pos", "link_obstacle_dist",
+                 "link_obstacle_ahead")
 
 
 def test_encoder_noise_reaches_every_part_computed_from_the_joints():
-    """joint_noise_model="encoders": ee_pos, ee_to_target, self_dist and link_obstacle_dist are those of the noisy
+    """joint_noise_model="encoders": ee_pos, ee_to_target, self_dist, link_obstacle_dist and _ahead are those of the noisy
     angles that joint_pos reports, by CPU MuJoCo's kinematics at those angles; the state keeps the true pose. With
     "angles" (the default) the same key gives the same noisy angles and the true end effector. Reset only: it
     compiles no physics."""
@@ -454,6 +458,7 @@ def test_encoder_noise_reaches_every_part_computed_from_the_joints():
         links = data.xpos[robot.link_bodies]
         d = np.linalg.norm(links - parts["obstacle_pos"][i], axis=-1) - radius  # the paper's d_i, from link origins
         np.testing.assert_allclose(parts["link_obstacle_dist"][i], d, atol=2e-5)
+        np.testing.assert_allclose(parts["link_obstacle_ahead"][i], np.tile(d, 2), atol=2e-5)  # static obstacle
 
 
 def test_action_latency_applies_the_previous_action(sensing):

@@ -2,6 +2,8 @@
 
 import csv
 import json
+import os
+import subprocess
 
 import pytest
 
@@ -27,7 +29,7 @@ def test_the_reported_evaluation_is_the_runs_own(one_seed):
     assert report["seeds"][0]["eval_success"] == run["mean"]["episode/target_reached"]
 
 
-def test_the_stop_came_at_the_target_training_success(one_seed):
+def test_the_stop_came_at_the_stop_at_training_success(one_seed):
     _, report = one_seed
     assert report["seeds"][0]["training_success"] >= 0.8
 
@@ -37,10 +39,31 @@ def test_the_run_stopped_at_the_stop_at_success(one_seed):
     assert "--stop-at-success 0.8" in report["seeds"][0]["command"]
 
 
-def test_the_evaluation_is_held_against_the_target_not_the_stop(one_seed):
-    _, report = one_seed
-    seed = report["seeds"][0]
-    assert seed["reached_target"] == (seed["eval_success"] >= 0.75)
+def fake_train(evaluated: float):
+    """subprocess.run standing in for train.py: a run whose evaluation reached `evaluated`, its training 0.9."""
+    def run(command, env, capture_output, text):
+        logdir = command[command.index("--logdir") + 1]
+        os.makedirs(logdir)
+        with open(os.path.join(logdir, "eval.json"), "w") as f:
+            json.dump({"env_steps": 5120, "mean": {"episode/target_reached": evaluated}}, f)
+        with open(os.path.join(logdir, "metrics.csv"), "w") as f:
+            f.write("env_steps,wall_seconds,episode/target_reached\n2560,3.0,0.5\n5120,1.0,0.9\n")
+        return subprocess.CompletedProcess(command, 0, "", "")
+    return run
+
+
+@pytest.mark.parametrize("target, met", [(0.75, True), (0.8, False)])
+def test_the_evaluation_is_held_against_the_target_not_the_stop(target, met, tmp_path, monkeypatch):
+    """An evaluation of 77 % with training stopped at 70 %: it meets a target of 75 %, not one of 80 %."""
+    monkeypatch.setattr(time_to_result.subprocess, "run", fake_train(0.77))
+    row = time_to_result.run_seed("point-mass-ppo", 7, target, str(tmp_path / "run"), [], None, stop_at=0.7)
+    assert row["reached_target"] is met
+
+
+def test_without_a_stop_the_run_stops_at_the_target(tmp_path, monkeypatch):
+    monkeypatch.setattr(time_to_result.subprocess, "run", fake_train(0.77))
+    row = time_to_result.run_seed("point-mass-ppo", 7, 0.75, str(tmp_path / "run"), [], None)
+    assert "--stop-at-success 0.75" in row["command"]
 
 
 def test_the_table_names_the_stop(one_seed):

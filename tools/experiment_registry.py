@@ -324,7 +324,8 @@ register(Experiment(
          "(agents.evaluation.unseen_constants; results/experiments/README.md)."))
 
 # Screening of levers for agents that dodge moving obstacles: one seed a row against the presets' five
-# (obstacles-moving3), the winners to be trained at five seeds. Budgets stay within 20 minutes a seed on one H200.
+# (obstacles-moving3), the winners to be trained at five seeds. The longer budgets are 3-4x the presets', whose
+# curves were still rising at their end.
 _AHEAD = ("link_obstacle_ahead",)
 register(Experiment(
     "obstacles-dodge", "Among 3 moving obstacles: predicted link distances and longer training (screening, 1 seed)",
