@@ -72,6 +72,14 @@ def test_the_registry_spells_the_plus_observations_as_the_presets_do():
     assert make_config("ur5e-reach-avoid-ppo-moving3").env.observation == reg._MOVING3_PLUS_OBS
 
 
+@pytest.mark.parametrize("field", ["num_obstacles", "obstacle_motion", "obstacle_radius_range", "obstacle_speed_range"])
+def test_the_registry_spells_the_moving_obstacles_as_the_presets_do(field):
+    from agents.presets import make_config
+    from tools import experiment_registry as reg
+
+    assert reg._MOVING3["env." + field] == getattr(make_config("ur5e-reach-avoid-ppo-moving3").env, field)
+
+
 def test_every_recorded_part_still_reads_as_its_registry_run():
     """A preset edited after its runs trained must leave those rows overrides that keep their config: every part
     recorded under results/experiments (finished ones only) reads as its run's and done, not `changed` (a field a
