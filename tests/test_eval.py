@@ -940,6 +940,52 @@ def test_failure_report_names_the_colliding_pair_and_bins_the_misses(monkeypatch
     assert failure_report.summarize(rows, near_limit=0.1)["end"]["missed"]["near_limit"] == 0.5  # 0.01 only
 
 
+def _clearances(robot, qpos, centre, radius):
+    """CPU MuJoCo's distance from each of the robot's obstacle geoms to a sphere (`mj_geomDistance`)."""
+    import mujoco
+
+    model = contact_model(robot, obstacle_radius=radius)
+    data = mujoco.MjData(model)
+    data.qpos[:] = qpos
+    data.mocap_pos[robot.obstacle_mocap] = centre
+    mujoco.mj_kinematics(model, data)
+    return np.array([mujoco.mj_geomDistance(model, data, model.geom("obstacle").id, int(g), 1.0, None)
+                     for g in robot.obstacle_geoms])
+
+
+def test_failure_report_follows_several_moving_obstacles_of_their_own_radii():
+    """Two obstacles of radius 0.05 and 0.12 m that move: env 0's small one sits on the straight line to the target
+    at the start and leaves it, the large one ends near the arm; env 1's large one ends on a link (an obstacle
+    collision). The nearest surfaces at the end come from CPU MuJoCo, one sphere at a time."""
+    from tools import failure_report
+
+    robot = envs.make("ur5e-reach-avoid").robot
+    free = np.zeros(robot.nq, np.float32)
+    free[1], free[2] = -1.2, 1.0
+    ee = ee_position(robot.mj_model, free)
+    steps, n = 4, 2
+    target = np.tile(ee + [0.4, 0.0, 0.0], (steps + 1, n, 1))
+    small = np.tile(ee + [0.2, 0.0, 0.0], (steps + 1, n, 1))
+    small[1:] += [0.0, 0.5, 0.0]  # off the line from step 1
+    large = np.tile(ee + [0.0, 0.0, 0.5], (steps + 1, n, 1))
+    large[steps, 0] = ee + [0.0, 0.0, 0.2]  # 0.2 m above the end effector at the end
+    large[2:, 1] = ee  # env 1: on the end effector from step 2, where its episode ends
+    radii = np.tile([0.05, 0.12], (steps + 1, n, 1))
+    metrics = {"episode/self_collision": np.zeros(n), "episode/obstacle_collision": np.array([0.0, 1.0]),
+               "episode/target_reached": np.zeros(n), "episode/distance": np.array([0.4, 0.4])}
+    records = {"qpos": np.tile(free, (steps + 1, n, 1)), "target_pos": target,
+               "obstacle_pos": np.concatenate([small, large], axis=-1), "obstacle_radius": radii,
+               "length": np.array([steps, 2]), "metrics": metrics}
+    rows = failure_report.classify(robot, records)
+    assert [r["outcome"] for r in rows] == ["missed", "obstacle collision"]
+    assert rows[0]["obstacle_between"] == {"start": True, "end": False}
+    for i, last in enumerate((steps, 2)):
+        expected = np.minimum(_clearances(robot, free, small[last, i], 0.05), _clearances(robot, free, large[last, i], 0.12))
+        np.testing.assert_allclose(rows[i]["final_obstacle_clearance"], expected.min(), atol=1e-4)
+    nearest = robot.obstacle_geoms[int(np.argmin(_clearances(robot, free, ee, 0.12)))]
+    assert rows[1]["what"] == robot.mj_model.geom(int(nearest)).name
+
+
 def test_point_segment_distance_on_hand_computed_geometry():
     """What failure_report's obstacle_between measures: a sphere's clearance from the end effector's
     straight line to the target (`envs.collision.point_segment_distance` minus the radius)."""

@@ -10,10 +10,11 @@ target reached, self collision, obstacle collision, or missed (neither). For col
 geom pair that is closest (most penetrating) at the end of the colliding step, the step, and the
 start pose's clearance (its smallest self-collision distance); for misses the final distance.
 Every episode also lists the joints that end it at a range limit (a UR5e joint that turns 720° can
-pin there: reaching on may need a full turn back the other way) and, with an obstacle, whether the
-straight line from the end effector to the target crosses the obstacle's sphere at the start and,
-for misses, at the end (`obstacle_between`: the obstacle in the end effector's way), and how close
-the robot's geoms end to the obstacle's surface (`final_obstacle_clearance`). Outcomes are also
+pin there: reaching on may need a full turn back the other way) and, with obstacles (one or several,
+static or moving, each where it is at that step), whether the straight line from the end effector to
+the target crosses an obstacle's sphere at the start and, for misses, at the end (`obstacle_between`:
+an obstacle in the end effector's way), and how close the robot's geoms end to the nearest obstacle's
+surface (`final_obstacle_clearance`). Outcomes are also
 binned by the target's height above the robot's mounting plane (`by_target_height`), and each
 episode records how far its end effector starts from the target (`start_distance`), how far it moved
 over the episode's last `END_STEPS` steps (`end_motion`: near 0 when the arm has stopped) and the
@@ -56,8 +57,8 @@ def _names(robot, geoms) -> list[str]:
 def classify(robot, records: dict, obstacle_radius: float | None = None) -> list[dict]:
     """One dict per env: outcome, step (episode length), start clearance and, by outcome, the
     colliding pair / geom or the final distance. `records` as `evaluation.rollout` returns them;
-    with `obstacle_radius` and an obstacle in them, also whether the obstacle lies between the end
-    effector and the target at the start (and, for misses, at the end)."""
+    with obstacles in them and their radii (`obstacle_radius`, or recorded per episode), also whether
+    one lies between the end effector and the target at the start (and, for misses, at the end)."""
     import jax
     import jax.numpy as jnp
 
@@ -73,19 +74,30 @@ def classify(robot, records: dict, obstacle_radius: float | None = None) -> list
     end_motion = np.linalg.norm(np.asarray(kin_end.ee_pos) - np.asarray(before_end.ee_pos), axis=-1)
     self_start = np.asarray(robot.self_distances(kin_start.geom_xpos, kin_start.geom_xmat))
     self_end = np.asarray(robot.self_distances(kin_end.geom_xpos, kin_end.geom_xmat))
+    between = "obstacle_pos" in records and (obstacle_radius is not None or "obstacle_radius" in records)
     if "obstacle_pos" in records:
-        # Distances to the obstacle's centre: its radius shifts them all alike, so the geom that
-        # collided (the nearest) does not depend on it.
-        obstacle = jnp.asarray(np.asarray(records["obstacle_pos"])[0])
-        obstacle_end = np.asarray(jax.vmap(lambda c, x, m: robot.obstacle_distances(x, m, c, 0.0))(
-            obstacle, kin_end.geom_xpos, kin_end.geom_xmat))
-    between = obstacle_radius is not None and "obstacle_pos" in records
+        # Every obstacle where it is at each env's last recorded step (moving ones move), with its radius (recorded
+        # where it is drawn per episode, else `obstacle_radius`): the robot geoms' distances to each surface.
+        positions = np.asarray(records["obstacle_pos"])
+        count = positions.shape[-1] // 3
+        radii = (np.asarray(records["obstacle_radius"]) if "obstacle_radius" in records
+                 else np.full(positions.shape[:-1] + (count,), obstacle_radius or 0.0))
+        last = np.minimum(length, positions.shape[0] - 1)
+        centres, radius_end = positions[last, np.arange(n)].reshape(n, count, 3), radii[last, np.arange(n)]
+        surface = np.stack([np.asarray(jax.vmap(lambda c, x, m: robot.obstacle_distances(x, m, c, 0.0))(
+            jnp.asarray(centres[:, j]), kin_end.geom_xpos, kin_end.geom_xmat)) - radius_end[:, j, None]
+            for j in range(count)], axis=1)  # (env, obstacle, geom)
+        obstacle_end = surface.min(axis=1)  # each geom's distance to the nearest obstacle's surface
     if between:
-        # the obstacle's sphere on the segment from the end effector to the target
+        # an obstacle's sphere on the segment from the end effector to the target (any of them)
         target = jnp.asarray(np.asarray(records["target_pos"])[0])
-        blocked_start, blocked_end = (
-            np.asarray(collision.point_segment_distance(obstacle, kin.ee_pos, target)) < obstacle_radius
-            for kin in (kin_start, kin_end))
+
+        def blocked(kin, step):
+            where = positions[step, np.arange(n)].reshape(n, count, 3)
+            return np.any([np.asarray(collision.point_segment_distance(jnp.asarray(where[:, j]), kin.ee_pos, target))
+                           < radii[step, np.arange(n), j] for j in range(count)], axis=0)
+
+        blocked_start, blocked_end = blocked(kin_start, np.zeros(n, int)), blocked(kin_end, last)
     target_height = start_distance = None
     if "target_pos" in records:
         target0 = np.asarray(records["target_pos"])[0]
@@ -105,7 +117,7 @@ def classify(robot, records: dict, obstacle_radius: float | None = None) -> list
             row["start_distance"] = float(start_distance[i])
         if between:
             row["obstacle_between"] = {"start": bool(blocked_start[i])}
-            row["final_obstacle_clearance"] = float(obstacle_end[i].min() - obstacle_radius)
+            row["final_obstacle_clearance"] = float(obstacle_end[i].min())
         if metrics["episode/self_collision"][i] > 0:
             row.update(outcome="self collision", what=pair_names[int(np.argmin(self_end[i]))])
         elif metrics.get("episode/obstacle_collision", np.zeros(n))[i] > 0:
@@ -306,11 +318,6 @@ def main(argv: list[str] | None = None) -> dict:
         raise ValueError(f"--num-envs {args.num_envs} is invalid: allowed is an integer >= 1.")
     env_name = args.env or policy.train_env_name
     config = envs.make_config(env_name, policy.train_env_config)
-    if getattr(config, "num_obstacles", 1) > 1 or getattr(config, "obstacle_motion", "static") != "static" \
-            or getattr(config, "obstacle_radius_range", None) is not None:
-        raise ValueError(f"env {env_name!r} with num_obstacles={config.num_obstacles}, obstacle_motion="
-                         f"{config.obstacle_motion!r}, obstacle_radius_range={config.obstacle_radius_range!r} is invalid "
-                         "here: allowed is the paper's one static obstacle of a fixed radius (the report's geometry).")
     records = evaluation.rollout(policy, env_name, config, num_envs=args.num_envs, eval_seed=args.seed, unit=args.unit)
     rows = classify(envs.from_config(env_name, config).robot, records, getattr(config, "obstacle_radius", None))
     summary = summarize(rows, getattr(config, "joint_limit_margin", NEAR_LIMIT))
