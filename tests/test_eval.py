@@ -940,6 +940,16 @@ def test_failure_report_names_the_colliding_pair_and_bins_the_misses(monkeypatch
     assert failure_report.summarize(rows, near_limit=0.1)["end"]["missed"]["near_limit"] == 0.5  # 0.01 only
 
 
+def _free_arm_and_target(steps: int = 4, n: int = 2):
+    """The UR5e reach-avoid robot, a pose clear of itself (elbow bent), its end effector (CPU MuJoCo) and a target
+    0.4 m beside it, recorded for `steps` + 1 steps of `n` envs."""
+    robot = envs.make("ur5e-reach-avoid").robot
+    free = np.zeros(robot.nq, np.float32)
+    free[1], free[2] = -1.2, 1.0
+    ee = ee_position(robot.mj_model, free)
+    return robot, free, ee, np.tile(ee + [0.4, 0.0, 0.0], (steps + 1, n, 1))
+
+
 def _clearances(robot, qpos, centre, radius):
     """CPU MuJoCo's distance from each of the robot's obstacle geoms to a sphere (`mj_geomDistance`)."""
     import mujoco
@@ -959,12 +969,8 @@ def test_failure_report_follows_several_moving_obstacles_of_their_own_radii():
     collision). The nearest surfaces at the end come from CPU MuJoCo, one sphere at a time."""
     from tools import failure_report
 
-    robot = envs.make("ur5e-reach-avoid").robot
-    free = np.zeros(robot.nq, np.float32)
-    free[1], free[2] = -1.2, 1.0
-    ee = ee_position(robot.mj_model, free)
+    robot, free, ee, target = _free_arm_and_target()
     steps, n = 4, 2
-    target = np.tile(ee + [0.4, 0.0, 0.0], (steps + 1, n, 1))
     small = np.tile(ee + [0.2, 0.0, 0.0], (steps + 1, n, 1))
     small[1:] += [0.0, 0.5, 0.0]  # off the line from step 1
     large = np.tile(ee + [0.0, 0.0, 0.5], (steps + 1, n, 1))
@@ -1005,12 +1011,8 @@ def test_failure_report_tells_when_the_obstacle_is_in_the_way():
 
     from tools import failure_report
 
-    robot = envs.make("ur5e-reach-avoid").robot
-    free = np.zeros(robot.nq, np.float32)
-    free[1], free[2] = -1.2, 1.0
-    ee = ee_position(robot.mj_model, free)
+    robot, free, ee, target = _free_arm_and_target()
     steps, n = 4, 2
-    target = np.tile(ee + [0.4, 0.0, 0.0], (steps + 1, n, 1))
     obstacle = np.tile(ee + [0.2, 0.0, 0.0], (steps + 1, n, 1))
     obstacle[:, 0] = ee + [0.2, 0.3, 0.0]  # 0.3 m beside the line: clear of a 0.1 m sphere
     metrics = {"episode/self_collision": np.zeros(n), "episode/obstacle_collision": np.zeros(n),
