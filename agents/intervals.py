@@ -22,18 +22,13 @@ NEEDS = ("rliable.library", "arch.bootstrap")
 """The modules an interval imports: rliable's and its bootstrap's (arch)."""
 
 
-def load(module: str) -> None:
-    """Imports `module` (where tests stand in a failing import)."""
-    importlib.import_module(module)
-
-
 def check_installed() -> None:
     """ValueError before any work when a module of NEEDS does not import (missing, or broken by a dependency):
     intervals are computed after the evaluations, where the error would lose their results."""
     broken = []
     for name in NEEDS:
         try:
-            load(name)
+            importlib.import_module(name)
         except ImportError as error:
             broken.append(f"{name.split('.')[0]} ({error})")
     if broken:

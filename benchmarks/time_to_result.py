@@ -89,7 +89,7 @@ def summary(rows: list[dict]) -> dict:
 def markdown(preset: str, target: float, rows: list[dict], stamp: dict, stop_at: float | None = None) -> str:
     """The table of `rows` under a line naming the command, code version, device and date of `stamp`."""
     s = summary(rows)
-    stop = "" if stop_at is None or stop_at == target else f" (training stopped at {100 * stop_at:.1f} % success)"
+    stop = "" if stop_at in (None, target) else f" (training stopped at {100 * stop_at:.1f} % success)"
     lines = [f"`{preset}` to {100 * target:.1f} % reached{stop}", "",
              f"Command: `{stamp['command']}`; code {stamp['code']}; {stamp['device']}; {stamp['date']}.", "",
              "| seed | wall clock (s) | training chunks (s) | first chunk (s, compiling included) | env steps | training success at the stop "
@@ -130,24 +130,25 @@ def main(argv: list[str] | None = None) -> int:
         raise ValueError(f"--target={args.target} is invalid: allowed is a success rate in (0, 1].")
     if args.stop_at is not None and not 0.0 < args.stop_at <= 1.0:
         raise ValueError(f"--stop-at={args.stop_at} is invalid: allowed is a success rate in (0, 1].")
+    stop_at = args.target if args.stop_at is None else args.stop_at
     os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         base = args.logdir or tmp
         for seed in range(args.first_seed, args.first_seed + args.seeds):
             rows.append(run_seed(args.preset, seed, args.target, os.path.join(base, f"seed{seed}"), extra,
-                                 args.cache_dir, args.stop_at))
+                                 args.cache_dir, stop_at))
             print(f"seed {seed}: {rows[-1]['wall_seconds']:.0f} s, {rows[-1]['env_steps']:,} env steps, "
                   f"evaluation {100 * rows[-1]['eval_success']:.1f} %", flush=True)
             stamp = provenance.stamp()
             report = {**stamp, "preset": args.preset, "target": args.target,
-                      "stop_at": args.target if args.stop_at is None else args.stop_at, "train_options": extra,
+                      "stop_at": stop_at, "train_options": extra,
                       "cache_dir": args.cache_dir, "seeds": rows, "summary": summary(rows)}
             with open(args.out + ".json", "w") as f:  # after every seed: a run cut short keeps what it finished
                 json.dump(jsonable(report), f, indent=2)
             with open(args.out + ".md", "w") as f:
-                f.write(markdown(args.preset, args.target, rows, stamp, args.stop_at))
-    print(markdown(args.preset, args.target, rows, stamp, args.stop_at))
+                f.write(markdown(args.preset, args.target, rows, stamp, stop_at))
+    print(markdown(args.preset, args.target, rows, stamp, stop_at))
     return 0
 
 

@@ -83,7 +83,12 @@ def classify(robot, records: dict, obstacle_radius: float | None = None) -> list
         radii = (np.asarray(records["obstacle_radius"]) if "obstacle_radius" in records
                  else np.full(positions.shape[:-1] + (count,), obstacle_radius or 0.0))
         last = np.minimum(length, positions.shape[0] - 1)
-        centres, radius_end = positions[last, np.arange(n)].reshape(n, count, 3), radii[last, np.arange(n)]
+
+        def at(step):
+            """(centres (env, obstacle, 3), radii (env, obstacle)) at each env's `step`."""
+            return positions[step, np.arange(n)].reshape(n, count, 3), radii[step, np.arange(n)]
+
+        centres, radius_end = at(last)
         surface = np.stack([np.asarray(jax.vmap(lambda c, x, m: robot.obstacle_distances(x, m, c, 0.0))(
             jnp.asarray(centres[:, j]), kin_end.geom_xpos, kin_end.geom_xmat)) - radius_end[:, j, None]
             for j in range(count)], axis=1)  # (env, obstacle, geom)
@@ -93,9 +98,9 @@ def classify(robot, records: dict, obstacle_radius: float | None = None) -> list
         target = jnp.asarray(np.asarray(records["target_pos"])[0])
 
         def blocked(kin, step):
-            where = positions[step, np.arange(n)].reshape(n, count, 3)
+            where, radius = at(step)
             return np.any([np.asarray(collision.point_segment_distance(jnp.asarray(where[:, j]), kin.ee_pos, target))
-                           < radii[step, np.arange(n), j] for j in range(count)], axis=0)
+                           < radius[:, j] for j in range(count)], axis=0)
 
         blocked_start, blocked_end = blocked(kin_start, np.zeros(n, int)), blocked(kin_end, last)
     target_height = start_distance = None
