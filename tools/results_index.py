@@ -150,7 +150,28 @@ def readme_table(ctx: Context) -> list[list[str]]:
     row = next(r for r in sac["rows"] if r["setting"] == "1dev")
     rows.append([f"UR5e reach fast SAC training env steps/s, 1 seed, {row['num_envs']:,} envs ({sac['meta']['date']})", "", "",
                  f"{thousands(row['train_steps_per_s'])} on 1 GPU"])
+    rows.append(_time_to_result_row(ctx, readme))
     return rows
+
+
+def _time_to_result_row(ctx: Context, readme: dict) -> list[str]:
+    """Seconds from `python train.py` to a final evaluation at the target (compiling and evaluating included), per
+    fresh seed of benchmarks/time_to_result.py's reports: with the compilation cache filled, and into an empty one."""
+    reports = [ctx.json(f) for f in readme["time_to_result_files"]]
+    seeds = [s for r in reports for s in r["seeds"]]
+    cold = [s for s in seeds if s["seed"] in readme["cache_cold_seeds"]]
+    warm = [s for s in seeds if s["seed"] not in readme["cache_cold_seeds"]]
+    first = reports[0]
+    met = sum(s["reached_target"] for s in seeds)
+
+    def span(rows):  # "101-114", or one number where all are equal
+        return "-".join(f"{x:.0f}" for x in sorted({min(r["wall_seconds"] for r in rows),
+                                                    max(r["wall_seconds"] for r in rows)}))
+    return [f"UR5e reach, seconds to a policy at >= {100 * first['target']:.0f} % reached, fresh seeds, compiling and the "
+            f"final evaluation included (`{first['preset']}`, training stopped at {100 * first['stop_at']:.1f} %; "
+            f"{first['date']})", "", "",
+            f"{span(warm)} s with the compilation cache ({len(warm)} seeds), {span(cold)} s into an empty one "
+            f"({len(cold)}); {met} of {len(seeds)} evaluations at the target"]
 
 
 def _baseline_rows(ctx: Context) -> dict:
