@@ -161,12 +161,10 @@ def _time_to_result_row(ctx: Context, readme: dict) -> list[str]:
     seeds = [s for r in reports for s in r["seeds"]]
     cold = [s for s in seeds if s["seed"] in readme["cache_cold_seeds"]]
     warm = [s for s in seeds if s["seed"] not in readme["cache_cold_seeds"]]
-    first = reports[0]
-    met = sum(s["reached_target"] for s in seeds)
+    first, met = reports[0], sum(s["reached_target"] for s in seeds)
 
     def span(rows):  # "101-114", or one number where all are equal
-        return "-".join(f"{x:.0f}" for x in sorted({min(r["wall_seconds"] for r in rows),
-                                                    max(r["wall_seconds"] for r in rows)}))
+        return "-".join(f"{x:.0f}" for x in sorted({min(r["wall_seconds"] for r in rows), max(r["wall_seconds"] for r in rows)}))
     return [f"UR5e reach, seconds to a policy at >= {100 * first['target']:.0f} % reached, fresh seeds, compiling and the "
             f"final evaluation included (`{first['preset']}`, training stopped at {100 * first['stop_at']:.1f} %; "
             f"{first['date']})", "", "",
