@@ -29,8 +29,8 @@ def check_installed() -> None:
     for name in NEEDS:
         try:
             importlib.import_module(name)
-        except ImportError as error:
-            broken.append(f"{name.split('.')[0]} ({error})")
+        except Exception as error:  # a dependency's break shows as any error (arch 7.2 under pandas 3: TypeError)
+            broken.append(f"{name.split('.')[0]} ({type(error).__name__}: {error})")
     if broken:
         raise ValueError(f"confidence intervals over seeds need {' and '.join(broken)}: allowed is an install where "
                          "they import (pip install -e .).")

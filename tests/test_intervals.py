@@ -96,3 +96,18 @@ def test_train_and_eval_start_without_importing_rliable():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
                          cwd=os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
     assert out.stdout.split()[-2:] == ["False", "False"]
+
+
+def test_a_dependency_that_breaks_the_import_is_named(monkeypatch):
+    """A package that is installed but fails to import (arch 7.2 under pandas 3 raises a TypeError) is refused like a
+    missing one, by name, before any work."""
+    real = intervals.importlib.import_module
+
+    def breaking(name, *args):
+        if name == "arch.bootstrap":
+            raise TypeError("deprecate_kwarg() missing 1 required positional argument: 'new_arg_name'")
+        return real(name, *args)
+
+    monkeypatch.setattr(intervals.importlib, "import_module", breaking)
+    with pytest.raises(ValueError, match=r"need arch \(TypeError: deprecate_kwarg"):
+        intervals.check_installed()

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import abc
 import functools
+import threading
 from pathlib import Path
 from typing import NamedTuple
 
@@ -39,6 +40,11 @@ class Kinematics(NamedTuple):
     """Site positions, `[..., nsite, 3]`."""
     ee_pos: jax.Array
     """End-effector site position, `[..., 3]`."""
+
+
+_SHARED: dict = {}
+"""(robot class, gravity compensation, integrator, JAX backend) -> (mjx_model, data_template) of the unedited model."""
+_SHARED_LOCK = threading.Lock()
 
 
 @functools.lru_cache(maxsize=None)
@@ -114,15 +120,40 @@ class Robot(abc.ABC):
         mujoco.mj_kinematics(model, data)
         self.workspace_center = np.array([0.0, 0.0, data.xanchor[1, 2]], np.float32)
 
-        # Built here, outside any trace, so jitted functions close over concrete arrays.
-        self.put_on_device()
+        self.integrator = integrator
+        # The MJX model is put on the device when first used (`_on_device`): a robot made only to check a config
+        # never pays for the transfer, and robots built alike share one copy.
+        self._device: tuple | None = None
+
+    @property
+    def mjx_model(self) -> mjx.Model:
+        """The MJX model of `mj_model`, on the default device."""
+        return self._on_device()[0]
+
+    @property
+    def data_template(self) -> mjx.Data:
+        """An empty `mjx.Data` of `mjx_model`, which `reset` fills in."""
+        return self._on_device()[1]
+
+    def _on_device(self) -> tuple:
+        """(mjx_model, data_template): this robot's own after `put_on_device`, else the one shared by the robots of
+        its class, gravity compensation and integrator (their MuJoCo models compile alike), put once a process."""
+        with _SHARED_LOCK:  # the final evaluation may be traced in a thread (agents.loop.Ahead)
+            if self._device is None:
+                key = (type(self), self.gravity_compensation, self.integrator, jax.default_backend())
+                if key not in _SHARED:
+                    self.put_on_device()
+                    _SHARED[key] = self._device
+                self._device = _SHARED[key]
+            return self._device
 
     def put_on_device(self) -> None:
-        """Builds `mjx_model` (the MJX model, on the default device) and `data_template` (an empty `mjx.Data` that
-        `reset` fills in) from `mj_model`: when the robot is made, and again after `mj_model` is edited in place
-        (an experiment's variant), so that MJX steps the edited model."""
-        self.mjx_model = mjx.put_model(self.mj_model)
-        self.data_template = mjx.make_data(self.mjx_model)
+        """Builds `mjx_model` and `data_template` from `mj_model`: on first use, and again after `mj_model` is edited
+        in place (an experiment's variant), so that MJX steps the edited model. Concrete arrays even when first asked
+        for inside a trace, so jitted functions close over constants."""
+        with jax.ensure_compile_time_eval():
+            model = mjx.put_model(self.mj_model)
+            self._device = (model, mjx.make_data(model))
 
     # ----------------------------------------------------------------------------------------
     # Kinematics and collision geometry (pure JAX)
