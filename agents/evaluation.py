@@ -36,14 +36,9 @@ from agents.networks import COMPUTE_DTYPES
 from agents.eval_stats import (collided_distances, fmt, jsonable, pooled, reached_precision,  # noqa: F401 (evaluation.fmt, ...)
                                 summarize)
 
-PAPER_METRICS = {
-    "target_reached": "episode/target_reached",
-    "self_collision": "episode/self_collision",
-    "obstacle_collision": "episode/obstacle_collision",
-    "distance": "episode/distance_last10",
-    "steps_in_target": "episode/steps_in_target",
-    "times_left_target": "episode/times_left_target",
-}
+PAPER_METRICS = {"target_reached": "episode/target_reached", "self_collision": "episode/self_collision",
+                 "obstacle_collision": "episode/obstacle_collision", "distance": "episode/distance_last10",
+                 "steps_in_target": "episode/steps_in_target", "times_left_target": "episode/times_left_target"}
 """The paper's metrics (section "Training and evaluation", tables) and the `make_evaluate` key each
 is read from; all are an episode's values at its last step. `distance` is the mean end-effector to
 target distance over the episode's last 10 steps (the env's `distance_last10`)."""
@@ -336,6 +331,11 @@ class Result:
     """Actions drawn from the policy's distribution instead of its mode (deterministic, the default)."""
 
     def summary(self) -> dict:
+        """Means, stds and intervals of the metrics; computed once (the intervals resample)."""
+        return self._summary
+
+    @functools.cached_property
+    def _summary(self) -> dict:
         return summarize(self.per_env)
 
     def to_json(self) -> dict:

@@ -188,3 +188,14 @@ def test_the_progress_line_keeps_each_trained_seeds_rate():
 def test_the_progress_line_of_one_trained_seed_names_no_other():
     line = eval_cli.evaluation._seed_line(0, 1, 7, [{"metrics": {"target_reached": 0.75}}], 3.0)
     assert "trained seeds" not in line
+
+
+def test_a_result_summarises_once(monkeypatch):
+    """Its summary (intervals over 2 evaluation seeds: bootstrap resampling) is computed once for the table and JSON."""
+    calls = []
+    original = eval_cli.evaluation.summarize
+    monkeypatch.setattr(eval_cli.evaluation, "summarize", lambda per_env: calls.append(1) or original(per_env))
+    result = eval_cli.main(STANDSTILL + ["--seeds", "2"])[0]
+    result.to_json()
+    result.summary()
+    assert len(calls) == 1

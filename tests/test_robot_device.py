@@ -1,5 +1,6 @@
 """The robot's MJX model is put on the device when first used, not when the robot is made (a config check builds
-a robot and costs no transfer), and robots built alike share one put (eval.py builds its env twice)."""
+a robot and costs no transfer), and robots built alike share one put (eval.py builds its env twice); envs built
+alike trace their observation sizes once."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ import pytest
 from mujoco import mjx
 
 import envs
+from envs import arm
 from envs.robots import ROBOTS, base
 
 
@@ -77,3 +79,15 @@ def test_an_edited_robot_leaves_the_shared_model_alone(puts):
     edited.put_on_device()
     fresh = ROBOTS["panda"]()
     assert float(fresh.mjx_model.dof_damping[0]) == pytest.approx(float(fresh.mj_model.dof_damping[0]))
+
+
+def test_observation_sizes_are_traced_once_per_config(monkeypatch):
+    """eval.py builds the evaluated env twice (its check, its program): the reset behind the sizes is traced once."""
+    monkeypatch.setattr(arm, "_PART_SIZES", {})
+    traced = []
+    original = arm.ArmEnv._trace_part_sizes
+    monkeypatch.setattr(arm.ArmEnv, "_trace_part_sizes", lambda self: traced.append(1) or original(self))
+    for _ in range(2):
+        envs.make("panda-reach", substeps=2, episode_length=5, backend="mujoco").observation_size
+    envs.make("panda-reach", substeps=2, episode_length=5, backend="mujoco", observation=("joint_pos",)).observation_size
+    assert len(traced) == 2  # the second env alike traced nothing; the other observation traced its own
