@@ -52,10 +52,6 @@ def _raw_key(key):
     return jax.random.key_data(key) if jax.dtypes.issubdtype(key.dtype, jax.dtypes.prng_key) else key
 
 
-_PART_SIZES: dict = {}
-"""(env class, robot class, config) -> observation part sizes (`ArmEnv.observation_part_sizes`)."""
-
-
 class ArmEnv(Env):
     """A robot arm that must bring its end effector to a target. See `ReachConfig`. Build it with `envs.make` or
     `envs.from_config`, which check the config: the constructor trusts it and checks nothing."""
@@ -76,14 +72,7 @@ class ArmEnv(Env):
     @functools.cached_property
     def observation_part_sizes(self) -> dict[str, int]:
         """Length of each configured observation part, in order: the size of its value in `observation_parts`
-        on a reset state, traced abstractly (nothing runs), so a part's name, value and size are one entry. Traced
-        once per env class, robot class and config: eval.py builds the same env twice."""
-        key = (type(self), type(self.robot), self.config)
-        if key not in _PART_SIZES:
-            _PART_SIZES[key] = self._trace_part_sizes()
-        return dict(_PART_SIZES[key])
-
-    def _trace_part_sizes(self) -> dict[str, int]:
+        on a reset state, traced abstractly (nothing runs), so a part's name, value and size are one entry."""
         def parts(rng):
             state = self._reset(rng)
             data = state.pipeline_state

@@ -220,3 +220,24 @@ def test_tables_show_the_sample_std_of_a_population_std():
     """eval.py's `std_units` is the population std over seeds; the tables show the sample std (ddof 1):
     0.0041 over 5 seeds is 0.0041 * sqrt(5 / 4) = 0.004584."""
     assert rc.sample_std({"std_units": 0.0041, "units": 5}) == pytest.approx(0.0045840, abs=1e-7)
+
+
+def _ttr_report(*walls, preset="ur5e-reach-ppo-plus", target=0.96, first_seed=100):
+    return {"preset": preset, "target": target, "stop_at": 0.975,
+            "seeds": [{"seed": first_seed + i, "wall_seconds": w, "reached_target": w < 150} for i, w in enumerate(walls)]}
+
+
+def test_time_to_result_cell_splits_the_cold_seeds():
+    reports = [_ttr_report(169.7, 103.4, 101.4), _ttr_report(113.9, 107.9, first_seed=103)]
+    assert rc.time_to_result_cell(reports, [100]) == (
+        "101-114 s with the compilation cache (4 seeds), 170 s into an empty one (1 seed); 4 of 5 evaluations at the target")
+
+
+def test_time_to_result_cell_shows_one_number_where_the_bounds_round_alike():
+    assert rc.time_to_result_cell([_ttr_report(101.2, 100.9)], []).startswith(
+        "101 s with the compilation cache (2 seeds);")
+
+
+def test_time_to_result_cell_refuses_reports_of_two_presets():
+    with pytest.raises(ValueError, match="differ in preset"):
+        rc.time_to_result_cell([_ttr_report(100.0), _ttr_report(100.0, preset="ur5e-reach-ppo")], [])

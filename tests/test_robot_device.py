@@ -1,6 +1,5 @@
 """The robot's MJX model is put on the device when first used, not when the robot is made (a config check builds
-a robot and costs no transfer), and robots built alike share one put (eval.py builds its env twice); envs built
-alike trace their observation sizes once."""
+a robot and costs no transfer), and robots built alike share one put (eval.py builds its env twice)."""
 
 from __future__ import annotations
 
@@ -11,7 +10,6 @@ import pytest
 from mujoco import mjx
 
 import envs
-from envs import arm
 from envs.robots import ROBOTS, base
 
 
@@ -53,15 +51,24 @@ def test_envs_built_alike_step_the_same_device_model(puts):
 
 def test_another_integrator_puts_its_own_model(puts):
     ROBOTS["ur5e"]().mjx_model
-    euler = ROBOTS["ur5e"](integrator="euler").mjx_model
+    ROBOTS["ur5e"](integrator="euler").mjx_model
     assert puts[0] == 2
+
+
+def test_another_integrator_steps_with_it(puts):
+    euler = ROBOTS["ur5e"](integrator="euler").mjx_model
     assert int(euler.opt.integrator) == 0  # mjINT_EULER
 
 
-def test_a_model_first_asked_for_inside_jit_is_concrete():
+def test_a_model_first_asked_for_inside_jit_is_concrete(puts):
+    robot = ROBOTS["ur5e"]()
+    jax.jit(lambda x: x + jnp.sum(robot.mjx_model.body_pos))(0.0)
+    assert not isinstance(robot.mjx_model.body_pos, jax.core.Tracer)
+
+
+def test_a_model_first_asked_for_inside_jit_holds_the_models_values(puts):
     robot = ROBOTS["ur5e"]()
     traced = jax.jit(lambda x: x + jnp.sum(robot.mjx_model.body_pos))(0.0)
-    assert not isinstance(robot.mjx_model.body_pos, jax.core.Tracer)
     assert float(traced) == pytest.approx(float(np.sum(robot.mj_model.body_pos)), rel=1e-6)
 
 
@@ -81,13 +88,10 @@ def test_an_edited_robot_leaves_the_shared_model_alone(puts):
     assert float(fresh.mjx_model.dof_damping[0]) == pytest.approx(float(fresh.mj_model.dof_damping[0]))
 
 
-def test_observation_sizes_are_traced_once_per_config(monkeypatch):
-    """eval.py builds the evaluated env twice (its check, its program): the reset behind the sizes is traced once."""
-    monkeypatch.setattr(arm, "_PART_SIZES", {})
-    traced = []
-    original = arm.ArmEnv._trace_part_sizes
-    monkeypatch.setattr(arm.ArmEnv, "_trace_part_sizes", lambda self: traced.append(1) or original(self))
-    for _ in range(2):
-        envs.make("panda-reach", substeps=2, episode_length=5, backend="mujoco").observation_size
-    envs.make("panda-reach", substeps=2, episode_length=5, backend="mujoco", observation=("joint_pos",)).observation_size
-    assert len(traced) == 2  # the second env alike traced nothing; the other observation traced its own
+def test_an_edit_without_put_on_device_does_not_become_the_shared_model(puts):
+    """An in-place edit reaches MJX through `put_on_device` only; the shared copy is put from a robot as built."""
+    edited = ROBOTS["panda"]()
+    default = float(edited.mj_model.dof_damping[0])
+    edited.mj_model.dof_damping[0] = 123.0
+    edited.mjx_model  # first use, no put_on_device: the shared copy is made here
+    assert float(ROBOTS["panda"]().mjx_model.dof_damping[0]) == pytest.approx(default)

@@ -353,7 +353,7 @@ register(Experiment(
     metrics=_AVOID_METRICS, curves=_AVOID_CURVES,
     paper="Not in the paper. The presets at five seeds (obstacles-moving3): UR5e 58.8 % reached with 10.1 % obstacle "
           "collisions (192M steps), Panda 63.3 % with 11.8 % (100M); the target is >= 80 % with <= 5 %.",
-    note="One seed a row (a screening; what works gets five seeds: ur5e-ahead, 73.6 % at its first seed). link_obstacle_ahead (envs/config.py, "
+    note="One seed a row (a screening; what works gets five seeds, as ur5e-ahead). link_obstacle_ahead (envs/config.py, "
          "obstacle_lookahead 0.5 and 1 s): each link's distance to the nearest "
          "obstacle moved on at its current velocity, a prediction the policy otherwise has to learn from the arm's "
          "geometry. Its rows at the presets' budgets isolate the observation; the longer rows ask what more "

@@ -120,6 +120,22 @@ def thousands(rate_per_s: float) -> str:
     return f"{rate_per_s:,.0f}"
 
 
+def time_to_result_cell(reports: list[dict], cold_seeds: list[int]) -> str:
+    """benchmarks/time_to_result.py's `reports` of one setting: the seeds' wall clocks with the compilation cache
+    filled, and those of `cold_seeds` (into an empty cache), and how many evaluations met the target."""
+    if len({(r["preset"], r["target"], r["stop_at"]) for r in reports}) != 1:
+        raise ValueError("time-to-result reports differ in preset, target or stop_at: allowed are reports of one setting.")
+    seeds = [s for r in reports for s in r["seeds"]]
+    cells = []
+    for label, group in (("with the compilation cache", [s for s in seeds if s["seed"] not in cold_seeds]),
+                         ("into an empty one", [s for s in seeds if s["seed"] in cold_seeds])):
+        if group:
+            low, high = (f"{bound(s['wall_seconds'] for s in group):.0f}" for bound in (min, max))
+            cells.append(f"{low if low == high else low + '-' + high} s {label} ({len(group)} "
+                         f"seed{'s' if len(group) > 1 else ''})")
+    return ", ".join(cells) + f"; {sum(s['reached_target'] for s in seeds)} of {len(seeds)} evaluations at the target"
+
+
 def paper_pct(value: float | None) -> str:
     """'96.1 %' from the paper's rate 0.961."""
     return "" if value is None else f"{100 * value:.1f} %"

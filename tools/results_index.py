@@ -35,7 +35,7 @@ from tools.paper_tables import WORKSPACE_NAMES
 from tools.results_cells import (PAPER_BASELINES, PAPER_OBSTACLE, PAPER_ROWS, PAPER_THROUGHPUT,
                                  PAPER_WORKSPACE, ROOT, Context, seed_stats, train_config, collisions,
                                  listed_table, markdown, millions, paper_action_space, paper_collisions, paper_pct,
-                                 pct, rate, runs, thousands)
+                                 pct, rate, runs, thousands, time_to_result_cell)
 
 # ------------------------------------------------------------------------------------------------
 # The studies: the rows of the tables below are listed in results/index.json.
@@ -155,21 +155,12 @@ def readme_table(ctx: Context) -> list[list[str]]:
 
 
 def _time_to_result_row(ctx: Context, readme: dict) -> list[str]:
-    """Seconds from `python train.py` to a final evaluation at the target (compiling and evaluating included), per
-    fresh seed of benchmarks/time_to_result.py's reports: with the compilation cache filled, and into an empty one."""
+    """Seconds from `python train.py` to a final evaluation at the target, per fresh seed (`time_to_result_cell`)."""
     reports = [ctx.json(f) for f in readme["time_to_result_files"]]
-    seeds = [s for r in reports for s in r["seeds"]]
-    cold = [s for s in seeds if s["seed"] in readme["cache_cold_seeds"]]
-    warm = [s for s in seeds if s["seed"] not in readme["cache_cold_seeds"]]
-    first, met = reports[0], sum(s["reached_target"] for s in seeds)
-
-    def span(rows):  # "101-114", or one number where all are equal
-        return "-".join(f"{x:.0f}" for x in sorted({min(r["wall_seconds"] for r in rows), max(r["wall_seconds"] for r in rows)}))
+    first = reports[0]
     return [f"UR5e reach, seconds to a policy at >= {100 * first['target']:.0f} % reached, fresh seeds, compiling and the "
             f"final evaluation included (`{first['preset']}`, training stopped at {100 * first['stop_at']:.1f} %; "
-            f"{first['date']})", "", "",
-            f"{span(warm)} s with the compilation cache ({len(warm)} seeds), {span(cold)} s into an empty one "
-            f"({len(cold)}); {met} of {len(seeds)} evaluations at the target"]
+            f"{first['date']})", "", "", time_to_result_cell(reports, readme["cache_cold_seeds"])]
 
 
 def _baseline_rows(ctx: Context) -> dict:

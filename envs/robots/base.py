@@ -43,7 +43,7 @@ class Kinematics(NamedTuple):
 
 
 _SHARED: dict = {}
-"""(robot class, gravity compensation, integrator, JAX backend) -> (mjx_model, data_template) of the unedited model."""
+"""(robot class, gravity compensation, integrator, JAX backend) -> (mjx_model, data_template) of a robot as built."""
 _SHARED_LOCK = threading.Lock()
 
 
@@ -137,14 +137,17 @@ class Robot(abc.ABC):
 
     def _on_device(self) -> tuple:
         """(mjx_model, data_template): this robot's own after `put_on_device`, else the one shared by the robots of
-        its class, gravity compensation and integrator (their MuJoCo models compile alike), put once a process."""
+        its class, gravity compensation and integrator, put once a process from a freshly built robot (so an
+        in-place edit of this robot's `mj_model` reaches MJX through `put_on_device` only, never the shared copy)."""
+        if self._device is not None:
+            return self._device
         with _SHARED_LOCK:  # the final evaluation may be traced in a thread (agents.loop.Ahead)
-            if self._device is None:
-                key = (type(self), self.gravity_compensation, self.integrator, jax.default_backend())
-                if key not in _SHARED:
-                    self.put_on_device()
-                    _SHARED[key] = self._device
-                self._device = _SHARED[key]
+            key = (type(self), self.gravity_compensation, self.integrator, jax.default_backend())
+            if key not in _SHARED:
+                fresh = type(self)(gravity_compensation=self.gravity_compensation, integrator=self.integrator)
+                fresh.put_on_device()
+                _SHARED[key] = fresh._device
+            self._device = _SHARED[key]
             return self._device
 
     def put_on_device(self) -> None:
