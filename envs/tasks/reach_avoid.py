@@ -120,12 +120,11 @@ class ReachAvoid(Reach):
 
     def observation_parts(self, data, xpos, ee, info):
         parts = super().observation_parts(data, xpos, ee, info)
-        n = self.config.num_obstacles
         parts.update(
             obstacle_pos=lambda: info["obstacle_pos"],
             obstacle_size=lambda: jnp.repeat(self.obstacles(info)[1], 3),  # the paper's 3D size of a sphere
             obstacle_radius=lambda: self.obstacles(info)[1],
-            obstacle_vel=lambda: info["obstacle_vel"] if "obstacle_vel" in info else jnp.zeros(3 * n),
+            obstacle_vel=lambda: _velocity(info),
             # Per link, the nearest obstacle: one number per link whatever num_obstacles is.
             link_obstacle_dist=lambda: jnp.min(self.link_distances(data, xpos, info), axis=0),
             link_obstacle_ahead=lambda: self.link_distances_ahead(data, xpos, info),
@@ -135,7 +134,11 @@ class ReachAvoid(Reach):
     def link_distances_ahead(self, data, xpos, info):
         """Per horizon of `obstacle_lookahead`, each link's distance to the nearest obstacle moved on at its current
         velocity for that long (the arm held still): `[horizons * nlinks]`, horizon-major."""
-        velocity = info["obstacle_vel"] if "obstacle_vel" in info else jnp.zeros_like(info["obstacle_pos"])
-        ahead = [{**info, "obstacle_pos": info["obstacle_pos"] + horizon * velocity}
+        ahead = [{**info, "obstacle_pos": info["obstacle_pos"] + horizon * _velocity(info)}
                  for horizon in self.config.obstacle_lookahead]
         return jnp.concatenate([jnp.min(self.link_distances(data, xpos, moved), axis=0) for moved in ahead])
+
+
+def _velocity(info) -> jax.Array:
+    """Every obstacle's velocity, `[3 n]`: zero for static obstacles, whose info holds none."""
+    return info["obstacle_vel"] if "obstacle_vel" in info else jnp.zeros_like(info["obstacle_pos"])
