@@ -63,10 +63,9 @@ def categorical_projection(next_probs, rewards, discounts, support):
     probs = jnp.broadcast_to(next_probs, shape).reshape(-1, num_atoms)
     lower = jnp.broadcast_to(lower, shape).reshape(-1, num_atoms).astype(jnp.int32)
     upper_weight = jnp.broadcast_to(upper_weight, shape).reshape(-1, num_atoms)
-    rows = jnp.arange(probs.shape[0])[:, None]
-    projected = (jnp.zeros_like(probs).at[rows, lower].add(probs * (1.0 - upper_weight))
-                 .at[rows, lower + 1].add(probs * upper_weight))
-    return projected.reshape(shape)
+    # One scatter per sample, batched: with the batch split over devices, each device scatters its own samples.
+    project = lambda p, low, w: jnp.zeros_like(p).at[low].add(p * (1.0 - w)).at[low + 1].add(p * w)
+    return jax.vmap(project)(probs, lower, upper_weight).reshape(shape)
 
 
 def categorical_cross_entropy(logits, target_probs):

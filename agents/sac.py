@@ -178,6 +178,26 @@ def polyak(target, online, tau: float):
 # ----------------------------------------------------------------------------------------------
 
 
+def _draw(key, sample_ids, draw):
+    """`draw(key)` for each sample with its key folded from the global sample id, shaped like `sample_ids`."""
+    return jax.vmap(draw)(per_env_keys(key, sample_ids.reshape(-1))).reshape(sample_ids.shape)
+
+
+def _take(x, group: int, rows, offset):
+    """Buffer entries by block of `group` neighbouring envs: out[b] = x[rows[b], b * group + offset[b]].
+
+    `x` (buffer rows, local envs, ...); `rows` (blocks, ...) and `offset` broadcastable to it. A gather batched
+    over the block axis, so that with the env axis split over devices each device reads only its own envs
+    (written as plain indexing, XLA's partitioner gathered on every device and summed the batch across them)."""
+    blocks = x.reshape((x.shape[0], x.shape[1] // group, group) + x.shape[2:])
+    return jax.vmap(lambda xb, r, o: xb[r, o], in_axes=(1, 0, 0))(blocks, rows, jnp.broadcast_to(offset, rows.shape))
+
+
+def _flat(x, axis: int):
+    """`x` with its axes `axis` and `axis + 1` merged into one."""
+    return x.reshape(x.shape[:axis] + (-1,) + x.shape[axis + 2:])
+
+
 @struct.dataclass
 class Replay:
     data: dict
@@ -299,38 +319,41 @@ class SAC:
 
     @jax.named_scope("sample")
     def sample(self, replay: Replay, key, par: Parallel):
-        """This device's share of a stratified batch; returns (transitions, global sample ids)."""
+        """This device's share of a stratified batch; returns (transitions, global sample ids).
+
+        The local envs form blocks of `group` neighbours (1 when batch_size >= num_envs); each block gives
+        `per_block` samples, in the order of their global ids, at rows drawn uniformly (and, in a block of
+        several envs, from one env drawn uniformly)."""
         c = self.config
         ids = par.env_ids()
-        n_local = par.local_envs
         k_env, k_row = jax.random.split(key)
         if c.batch_size >= c.num_envs:
-            per_env = c.batch_size // c.num_envs
-            local_env = jnp.repeat(jnp.arange(n_local), per_env)
-            sample_ids = jnp.repeat(ids, per_env) * per_env + jnp.tile(jnp.arange(per_env), n_local)
+            group, per_block = 1, c.batch_size // c.num_envs
+            sample_ids = ids[:, None] * per_block + jnp.arange(per_block)
+            offset = jnp.zeros(sample_ids.shape, jnp.int32)
         else:
-            group = c.num_envs // c.batch_size
-            blocks = jnp.arange(n_local // group)
-            sample_ids = ids[0] // group + blocks
-            offset = jax.vmap(lambda k: jax.random.randint(k, (), 0, group))(per_env_keys(k_env, sample_ids))
-            local_env = blocks * group + offset
+            group, per_block = c.num_envs // c.batch_size, 1
+            sample_ids = (ids[0] // group + jnp.arange(par.local_envs // group))[:, None]
+            offset = _draw(k_env, sample_ids, lambda k: jax.random.randint(k, (), 0, group))
         if c.n_step == 1:
-            rows = jax.vmap(lambda k: jax.random.randint(k, (), 0, replay.rows))(per_env_keys(k_row, sample_ids))
-            mb = jax.tree.map(lambda x: x[rows, local_env], replay.data)
-            return {**mb, "discount": c.discount * (1.0 - mb["termination"])}, sample_ids
-        return self._sample_nstep(replay, local_env, per_env_keys(k_row, sample_ids)), sample_ids
+            rows = _draw(k_row, sample_ids, lambda k: jax.random.randint(k, (), 0, replay.rows))
+            mb = jax.tree.map(lambda x: _flat(_take(x, group, rows, offset), 0), replay.data)
+            return {**mb, "discount": c.discount * (1.0 - mb["termination"])}, sample_ids.reshape(-1)
+        return self._sample_nstep(replay, group, sample_ids, offset, k_row), sample_ids.reshape(-1)
 
-    def _sample_nstep(self, replay: Replay, local_env, keys):
+    def _sample_nstep(self, replay: Replay, group: int, sample_ids, offset, key):
         """n-step transitions: a window of n consecutive rows per sample, its first row uniform over
         the rows whose window is fully written, summed by `offpolicy.nstep_targets`."""
         c = self.config
         oldest = (replay.position - replay.rows) % self.rows
-        first = jax.vmap(lambda k: jax.random.randint(k, (), 0, replay.rows - c.n_step + 1))(keys)
-        rows = (oldest + first[None, :] + jnp.arange(c.n_step)[:, None]) % self.rows  # (n, batch)
-        window = jax.tree.map(lambda x: x[rows, local_env[None, :]], replay.data)
+        first = _draw(key, sample_ids, lambda k: jax.random.randint(k, (), 0, replay.rows - c.n_step + 1))
+        rows = (oldest + first[:, None, :] + jnp.arange(c.n_step)[:, None]) % self.rows  # (blocks, n, per_block)
+        window = jax.tree.map(lambda x: _flat(jnp.moveaxis(_take(x, group, rows, offset[:, None, :]), 1, 0), 1),
+                              replay.data)  # leaves (n, samples, ...)
         returns, discounts, offsets = offpolicy.nstep_targets(window["reward"], window["termination"],
                                                               window["truncation"], c.discount, c.n_step)
-        next_obs = window["next_obs"][offsets[0], jnp.arange(offsets.shape[1])]
+        # Batched over samples like `_take`: no gather across devices.
+        next_obs = jax.vmap(lambda obs, k: obs[k], in_axes=(1, 0))(window["next_obs"], offsets[0])
         return {"obs": window["obs"][0], "action": window["action"][0], "reward": returns[0],
                 "discount": discounts[0], "next_obs": next_obs}
 

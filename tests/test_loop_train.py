@@ -490,18 +490,21 @@ def _leaves(npz: dict) -> list:
 
 
 def test_two_devices_match_one_device(tmp_path, arm_run):
-    """Two updates of PPO (2 seeds) and 36 vector steps of SAC updates (1 seed) on the point mass, on two devices
-    split by shard_map and by GSPMD, end where the same run on one device ends (the one-device runs are this
-    module's probe programs, compiled once here); the UR5e arm (native physics: every device's envs call C
-    MuJoCo) trains one PPO update on two devices split by shard_map to the state that `arm_run` (GSPMD)
+    """Two updates of PPO (2 seeds), 36 vector steps of SAC updates and 24 of fast SAC's (1 seed each) on the point
+    mass, on two devices split by shard_map and by GSPMD, end where the same run on one device ends (the one-device
+    runs are this module's probe programs, compiled once here); the UR5e arm (native physics: every device's envs
+    call C MuJoCo) trains one PPO update on two devices split by shard_map to the state that `arm_run` (GSPMD)
     checkpointed."""
     ppo = presets.make_config("point-mass-ppo", logdir=str(tmp_path / "ppo"), stop_after_steps=2 * 5120, **PROBE)
     sac = presets.make_config("point-mass-sac", logdir=str(tmp_path / "sac"), stop_after_steps=1_600, **SAC_PROBE)
+    # Fast SAC: n-step windows and the categorical projection, 8 updates past its 16-step warm-up.
+    fast = presets.make_config("point-mass-sac-fast", logdir=str(tmp_path / "fast"), stop_after_steps=24 * 64,
+                               num_timesteps=48 * 64, eval_envs=0, log_every=24 * 64, **QUIET)
     arm_config, arm_state = _restored_arm_run(arm_run)
     arm = dataclasses.replace(arm_config, eval_envs=0)  # the evaluation after training changes no state
     two = _two_device_runs(tmp_path, {"ppo": (ppo, TWO_DEVICE_MODES), "sac": (sac, TWO_DEVICE_MODES),
-                                      "arm": (arm, ("shard_map",))})
-    for name, config in (("ppo", ppo), ("sac", sac)):
+                                      "fast": (fast, TWO_DEVICE_MODES), "arm": (arm, ("shard_map",))})
+    for name, config in (("ppo", ppo), ("sac", sac), ("fast", fast)):
         one = driver.train(config)
         assert one.status == "stopped"
         reference = [np.asarray(x) for x in jax.tree.leaves(jax.device_get(one.state.learner))]

@@ -2,6 +2,11 @@
 its probe preset and its checkpoints without the replay buffer."""
 
 import dataclasses
+import json
+import os
+import subprocess
+import sys
+import textwrap
 
 import jax
 import jax.numpy as jnp
@@ -12,6 +17,9 @@ from agents import driver, presets
 from agents.loop import Parallel, Transition
 from agents.networks import TwinQ, unstack_twin_params
 from agents.sac import SAC, SACConfig
+from limits import HANG_GUARD_S
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
 def _plain_nstep(rewards, terms, truncs, t, e, gamma, n):
@@ -185,3 +193,45 @@ def test_a_gradient_step_with_stacked_critics_is_the_step_with_separate_ones():
     assert not all(np.allclose(a, b) for a, b in zip(moved, jax.tree.leaves(q)))  # the critics did step
     for a, b in zip(jax.tree.leaves(after_stacked.policy_params), jax.tree.leaves(after_separate.policy_params)):
         np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-4, atol=1e-6)
+
+
+COLLECTIVE_BYTES = textwrap.dedent("""
+    import dataclasses, json, re
+    import jax, jax.numpy as jnp
+    from agents import driver, presets
+    assert jax.local_device_count() == 2
+    SIZES = {"f32": 4, "s32": 4, "u32": 4, "bf16": 2, "pred": 1}
+    moved = {}
+    for batch in (1024, 2048):
+        config = presets.make_config("point-mass-sac-fast", devices=2, multi_device="gspmd")
+        algo = dataclasses.replace(config.algo, num_envs=256, batch_size=batch, max_replay_size=256 * 40)
+        programs = driver.build_programs(config.env_name, config.env, algo, 1, 2, 10, 16, 10, None, "gspmd")
+        state = jax.eval_shape(programs.init, jax.ShapeDtypeStruct((1, 2), jnp.uint32))
+        state = jax.tree.map(lambda a, s: jax.ShapeDtypeStruct(a.shape, a.dtype, sharding=s), state, programs.shardings)
+        text = programs.chunk.lower(state, jax.ShapeDtypeStruct((), jnp.int32)).compile().as_text()
+        total = 0
+        for line in text.splitlines():
+            op = re.search(r" (all-reduce|all-gather|all-to-all|collective-permute|reduce-scatter)(-start)?\\(", line)
+            if op:  # the result's shapes, between '=' and the op's name
+                for dtype, dims in re.findall(r"(\\w+)\\[([\\d,]*)\\]", line[line.index("=") + 1:op.start()]):
+                    n = 1
+                    for d in filter(None, dims.split(",")):
+                        n *= int(d)
+                    total += n * SIZES.get(dtype, 4)
+        moved[batch] = total
+    print(json.dumps(moved))
+""")
+
+
+def test_two_gspmd_devices_exchange_gradients_not_samples():
+    """Fast SAC's chunk on two devices (GSPMD, two CPU devices): the bytes its collectives carry are the same at a
+    batch of 1,024 and of 2,048, i.e. each device samples its own envs' transitions and learns on them, and only
+    gradients and statistics cross devices (sampling by plain indexing made every device gather the whole batch
+    and learn on all of it, replicated)."""
+    env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=2",
+               PYTHONPATH=os.pathsep.join(p for p in (ROOT, os.environ.get("PYTHONPATH", "")) if p))
+    proc = subprocess.run([sys.executable, "-c", COLLECTIVE_BYTES], cwd=ROOT, env=env, capture_output=True, text=True,
+                          timeout=HANG_GUARD_S)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    moved = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert moved["1024"] == moved["2048"], moved
