@@ -148,8 +148,9 @@ def readme_table(ctx: Context) -> list[list[str]]:
                  + "".join(f", {thousands(r['train_steps_per_s'])} on {r['devices']}" for r in train["rows"] if r["devices"] > 1)])
     sac = ctx.json(readme["sac_fast_throughput_file"])  # benchmarks/train_throughput.py on the fast SAC preset
     row = next(r for r in sac["rows"] if r["setting"] == "1dev")
-    rows.append([f"UR5e reach fast SAC training env steps/s, 1 seed, {row['num_envs']:,} envs ({sac['meta']['date']})", "", "",
-                 f"{thousands(row['train_steps_per_s'])} on 1 GPU"])
+    rows.append([f"UR5e reach fast SAC training env steps/s, 1 seed, {row['num_envs']:,} envs per GPU ({sac['meta']['date']})",
+                 "", "", f"{thousands(row['train_steps_per_s'])} on 1 GPU"
+                 + "".join(f", {thousands(r['train_steps_per_s'])} on {r['devices']}" for r in sac["rows"] if r["devices"] > 1)])
     rows.append(_time_to_result_row(ctx, readme))
     return rows
 
