@@ -45,7 +45,8 @@ def sweep(checkpoint: str, field: str, values: list[str], num_envs: int, seeds: 
     for i, text in enumerate(values):
         config = dataclasses.replace(base, **{field: field_value(base, field, text)})
         t0 = time.perf_counter()
-        result = evaluation.run(policy, env_name, config, num_envs, eval_seeds=list(range(1_000_000, 1_000_000 + seeds)))
+        eval_seeds = [evaluation.DEFAULT_EVAL_SEED + k for k in range(seeds)]
+        result = evaluation.run(policy, env_name, config, num_envs, eval_seeds=eval_seeds)
         wall = time.perf_counter() - (start if i == 0 else t0)
         success = float(sum(u["metrics"][SUCCESS] for u in result.units) / len(result.units))
         rows.append({"value": text, "wall_seconds": round(wall, 2), "evaluation_seconds": round(result.seconds, 2),

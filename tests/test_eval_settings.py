@@ -1,0 +1,42 @@
+"""benchmarks/eval_settings.py: a sweep over one env field in one process, checked against `evaluation.run`."""
+
+import dataclasses
+
+import pytest
+
+from agents import evaluation
+from benchmarks import eval_settings
+
+SHIPPED = "results/checkpoints/panda-reach-avoid-ppo"
+
+
+def test_an_unknown_field_is_refused_by_name():
+    config = evaluation.checkpoint_policy(SHIPPED).train_env_config
+    with pytest.raises(ValueError, match=r"--field 'radius' is invalid: allowed are the env config's fields"):
+        eval_settings.field_value(config, "radius", "0.1")
+
+
+def test_a_value_takes_its_fields_type():
+    config = evaluation.checkpoint_policy(SHIPPED).train_env_config
+    assert eval_settings.field_value(config, "episode_length", "40") == 40
+
+
+@pytest.fixture(scope="module")
+def rows():
+    """Episodes of 1 step (no arm gets to its target) and of the trained 125, 8 episodes each, on the CPU."""
+    return eval_settings.sweep(SHIPPED, "episode_length", ["1", "125"], num_envs=8, seeds=1, log=lambda line: None)
+
+
+def test_a_one_step_episode_reaches_nothing(rows):
+    assert rows[0]["success"] == 0.0
+
+
+def test_each_row_is_the_evaluation_of_its_setting(rows):
+    policy = evaluation.checkpoint_policy(SHIPPED)
+    config = dataclasses.replace(policy.train_env_config, episode_length=125)
+    result = evaluation.run(policy, policy.train_env_name, config, 8, eval_seeds=[evaluation.DEFAULT_EVAL_SEED])
+    assert rows[1]["success"] == result.units[0]["metrics"]["target_reached"]
+
+
+def test_the_trained_setting_reaches_targets(rows):
+    assert rows[1]["success"] > 0.5
