@@ -15,25 +15,32 @@ Writes `--out`.json (every setting, command, code version, device, date) and `--
 from __future__ import annotations
 
 import argparse
-import dataclasses
+import ast
 import json
 import time
 
 import jax
 
+import envs
 from agents import evaluation, provenance
 from agents.eval_stats import jsonable
 
 SUCCESS = "target_reached"
 
 
-def field_value(config, field: str, text: str):
-    """`text` as the type of `config`'s field `field` (a ValueError names an unknown field)."""
-    names = [f.name for f in dataclasses.fields(config)]
-    if field not in names:
-        raise ValueError(f"--field {field!r} is invalid: allowed are the env config's fields {names}.")
-    current = getattr(config, field)
-    return type(current)(text) if isinstance(current, (int, float)) and not isinstance(current, bool) else text
+def parse_value(text: str):
+    """A value as typed on the command line: a Python literal (0.1, 125, True, None, (0.05, 0.1)) or else the text
+    itself (a name such as "front")."""
+    try:
+        return ast.literal_eval(text)
+    except (ValueError, SyntaxError):
+        return text
+
+
+def settings(env_name: str, base, field: str, values: list[str]) -> list:
+    """`base` with `field` set to each value, every one validated before anything is evaluated (a ValueError names
+    the field, the value and what is allowed)."""
+    return [envs.registry.make_config(env_name, base, **{field: parse_value(text)}) for text in values]
 
 
 def sweep(checkpoint: str, field: str, values: list[str], num_envs: int, seeds: int, log=print) -> list[dict]:
@@ -41,11 +48,11 @@ def sweep(checkpoint: str, field: str, values: list[str], num_envs: int, seeds: 
     rows = []
     start = time.perf_counter()
     policy = evaluation.checkpoint_policy(checkpoint)
-    env_name, base = policy.train_env_name, policy.train_env_config
-    for i, text in enumerate(values):
-        config = dataclasses.replace(base, **{field: field_value(base, field, text)})
+    env_name = policy.train_env_name
+    configs = settings(env_name, policy.train_env_config, field, values)
+    eval_seeds = [evaluation.DEFAULT_EVAL_SEED + k for k in range(seeds)]
+    for i, (text, config) in enumerate(zip(values, configs)):
         t0 = time.perf_counter()
-        eval_seeds = [evaluation.DEFAULT_EVAL_SEED + k for k in range(seeds)]
         result = evaluation.run(policy, env_name, config, num_envs, eval_seeds=eval_seeds)
         wall = time.perf_counter() - (start if i == 0 else t0)
         success = float(sum(u["metrics"][SUCCESS] for u in result.units) / len(result.units))
@@ -56,6 +63,7 @@ def sweep(checkpoint: str, field: str, values: list[str], num_envs: int, seeds: 
 
 
 def markdown(meta: dict, rows: list[dict]) -> str:
+    """The table of `sweep`'s rows under a header naming the command, code, device and date."""
     lines = [f"# Evaluation across env settings: {meta['checkpoint']} ({meta['device']}, {meta['date']})", "",
              f"Command: `{meta['command']}`, code {meta['code']}, jax {meta['jax']}; {meta['num_envs']:,} episodes x "
              f"{meta['seeds']} eval seed(s) x {rows[0]['units'] // meta['seeds']} trained seed(s) per setting, in this "
@@ -67,6 +75,7 @@ def markdown(meta: dict, rows: list[dict]) -> str:
 
 
 def main(argv=None) -> None:
+    """Parses the command line, runs the sweep, prints the table and writes --out's files."""
     parser = argparse.ArgumentParser(prog="python -m benchmarks.eval_settings", description=__doc__.split("\n\n")[0])
     parser.add_argument("checkpoint", help="a train.py logdir, checkpoint step directory or policy export")
     parser.add_argument("--field", required=True, help="the env config field swept, e.g. obstacle_radius")

@@ -10,15 +10,28 @@ from benchmarks import eval_settings
 SHIPPED = "results/checkpoints/panda-reach-avoid-ppo"
 
 
+def _base():
+    policy = evaluation.checkpoint_policy(SHIPPED)
+    return policy.train_env_name, policy.train_env_config
+
+
 def test_an_unknown_field_is_refused_by_name():
-    config = evaluation.checkpoint_policy(SHIPPED).train_env_config
-    with pytest.raises(ValueError, match=r"--field 'radius' is invalid: allowed are the env config's fields"):
-        eval_settings.field_value(config, "radius", "0.1")
+    with pytest.raises(ValueError, match=r"option 'radius' does not exist for env 'panda-reach-avoid'"):
+        eval_settings.settings(*_base(), "radius", ["0.1"])
 
 
-def test_a_value_takes_its_fields_type():
-    config = evaluation.checkpoint_policy(SHIPPED).train_env_config
-    assert eval_settings.field_value(config, "episode_length", "40") == 40
+def test_a_value_of_the_wrong_type_is_refused_by_name():
+    with pytest.raises(ValueError, match=r"episode_length=1.5 is invalid: allowed is an integer >= 1"):
+        eval_settings.settings(*_base(), "episode_length", ["40", "1.5"])
+
+
+def test_a_typed_value_is_parsed_as_a_literal():
+    config = eval_settings.settings(*_base(), "gravity_compensation", ["True"])[0]
+    assert config.gravity_compensation is True
+
+
+def test_a_name_stays_text():
+    assert eval_settings.parse_value("front") == "front"
 
 
 @pytest.fixture(scope="module")
