@@ -187,8 +187,8 @@ def _take(x, group: int, rows, offset):
     """Buffer entries by block of `group` neighbouring envs: out[b] = x[rows[b], b * group + offset[b]].
 
     `x` (buffer rows, local envs, ...); `rows` (blocks, ...) and `offset` broadcastable to it. A gather batched
-    over the block axis, so that with the env axis split over devices each device reads only its own envs
-    (written as plain indexing, XLA's partitioner gathered on every device and summed the batch across them)."""
+    over the block axis: with the env axis split over devices, each device reads only its own envs (plain indexing
+    into the split axis makes XLA's partitioner gather the batch on every device and sum it across them)."""
     blocks = x.reshape((x.shape[0], x.shape[1] // group, group) + x.shape[2:])
     return jax.vmap(lambda xb, r, o: xb[r, o], in_axes=(1, 0, 0))(blocks, rows, jnp.broadcast_to(offset, rows.shape))
 

@@ -497,7 +497,7 @@ def test_two_devices_match_one_device(tmp_path, arm_run):
     checkpointed."""
     ppo = presets.make_config("point-mass-ppo", logdir=str(tmp_path / "ppo"), stop_after_steps=2 * 5120, **PROBE)
     sac = presets.make_config("point-mass-sac", logdir=str(tmp_path / "sac"), stop_after_steps=1_600, **SAC_PROBE)
-    # Fast SAC: n-step windows and the categorical projection, 8 updates past its 16-step warm-up.
+    # Fast SAC: n-step windows and the categorical projection, 9 updates after its 15 steps of warm-up.
     fast = presets.make_config("point-mass-sac-fast", logdir=str(tmp_path / "fast"), stop_after_steps=24 * 64,
                                num_timesteps=48 * 64, eval_envs=0, log_every=24 * 64, **QUIET)
     arm_config, arm_state = _restored_arm_run(arm_run)

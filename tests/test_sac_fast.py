@@ -205,7 +205,8 @@ COLLECTIVE_BYTES = textwrap.dedent("""
     for batch in (1024, 2048):
         config = presets.make_config("point-mass-sac-fast", devices=2, multi_device="gspmd")
         algo = dataclasses.replace(config.algo, num_envs=256, batch_size=batch, max_replay_size=256 * 40)
-        programs = driver.build_programs(config.env_name, config.env, algo, 1, 2, 10, 16, 10, None, "gspmd")
+        programs = driver.build_programs(config.env_name, config.env, algo, seeds=1, devices=2, updates=10, eval_envs=16,
+                                         eval_last_steps=10, learner_cls=None, multi_device="gspmd")
         state = jax.eval_shape(programs.init, jax.ShapeDtypeStruct((1, 2), jnp.uint32))
         state = jax.tree.map(lambda a, s: jax.ShapeDtypeStruct(a.shape, a.dtype, sharding=s), state, programs.shardings)
         text = programs.chunk.lower(state, jax.ShapeDtypeStruct((), jnp.int32)).compile().as_text()
@@ -226,12 +227,39 @@ COLLECTIVE_BYTES = textwrap.dedent("""
 def test_two_gspmd_devices_exchange_gradients_not_samples():
     """Fast SAC's chunk on two devices (GSPMD, two CPU devices): the bytes its collectives carry are the same at a
     batch of 1,024 and of 2,048, i.e. each device samples its own envs' transitions and learns on them, and only
-    gradients and statistics cross devices (sampling by plain indexing made every device gather the whole batch
-    and learn on all of it, replicated)."""
+    gradients and statistics cross devices (a sample that crossed them, or a learner replicated on both, would grow
+    with the batch)."""
     env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=2",
                PYTHONPATH=os.pathsep.join(p for p in (ROOT, os.environ.get("PYTHONPATH", "")) if p))
     proc = subprocess.run([sys.executable, "-c", COLLECTIVE_BYTES], cwd=ROOT, env=env, capture_output=True, text=True,
                           timeout=HANG_GUARD_S)
     assert proc.returncode == 0, proc.stderr[-3000:]
     moved = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert moved["1024"] > 0  # the collectives were found: the comparison is not vacuous
     assert moved["1024"] == moved["2048"], moved
+
+
+@pytest.mark.parametrize("n_step", [1, 3])
+def test_a_batch_smaller_than_the_envs_takes_one_sample_per_block_of_envs(n_step):
+    """16 envs, a batch of 4: sample k comes from one of envs 4k .. 4k + 3 (its block), from a written row, and over
+    40 draws every env of a block is chosen at some time (the env inside the block is random)."""
+    num_envs, steps = 16, 6
+    config = SACConfig(num_envs=num_envs, batch_size=4, max_replay_size=8 * num_envs, min_replay_size=0, n_step=n_step)
+    sac = SAC(config, 2, 1)
+    replay = sac.init(jax.random.PRNGKey(0)).replay
+    ids = np.stack(np.meshgrid(np.arange(steps), np.arange(num_envs), indexing="ij"), -1).astype(np.float32)
+    zeros = jnp.zeros((1, num_envs))
+    for t in range(steps):
+        replay = sac.insert(replay, Transition(obs=jnp.asarray(ids[t:t + 1]), action=jnp.zeros((1, num_envs, 1)),
+                                               reward=zeros, termination=zeros, truncation=zeros,
+                                               next_obs=jnp.asarray(ids[t:t + 1]), extras={}))
+    rows, envs = [], []
+    sample = jax.jit(lambda r, key: sac.sample(r, key, Parallel(num_envs))[0])
+    for k in range(40):
+        mb = sample(replay, jax.random.PRNGKey(k))
+        rows.append(np.asarray(mb["obs"][:, 0]))
+        envs.append(np.asarray(mb["obs"][:, 1]))
+    rows, envs = np.stack(rows), np.stack(envs)  # (draws, 4)
+    assert np.all(envs // 4 == np.arange(4))
+    assert np.all((rows >= 0) & (rows <= steps - n_step))
+    assert all(len(set(envs[:, k].tolist())) == 4 for k in range(4))
