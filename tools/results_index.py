@@ -142,17 +142,20 @@ def readme_table(ctx: Context) -> list[list[str]]:
                  f"{thousands(PAPER_THROUGHPUT['ur5e-reach'])} / {thousands(PAPER_THROUGHPUT['ur5e-reach-avoid'])}",
                  "", f"{thousands(env['ur5e-reach']['steps_per_s'])} / {thousands(env['ur5e-reach-avoid']['steps_per_s'])}"])
     train = ctx.json("throughput/train_throughput.json")
-    one = [r for r in train["rows"] if r["devices"] == 1][0]
     rows.append([f"UR5e reach PPO training env steps/s, 1 seed, 8,192 envs per GPU ({train['meta']['date']})", "", "",
-                 f"{thousands(one['train_steps_per_s'])} on 1 GPU"
-                 + "".join(f", {thousands(r['train_steps_per_s'])} on {r['devices']}" for r in train["rows"] if r["devices"] > 1)])
+                 _per_gpu_count(train["rows"])])
     sac = ctx.json(readme["sac_fast_throughput_file"])  # benchmarks/train_throughput.py on the fast SAC preset
     row = next(r for r in sac["rows"] if r["setting"] == "1dev")
     rows.append([f"UR5e reach fast SAC training env steps/s, 1 seed, {row['num_envs']:,} envs per GPU ({sac['meta']['date']})",
-                 "", "", f"{thousands(row['train_steps_per_s'])} on 1 GPU"
-                 + "".join(f", {thousands(r['train_steps_per_s'])} on {r['devices']}" for r in sac["rows"] if r["devices"] > 1)])
+                 "", "", _per_gpu_count(sac["rows"])])
     rows.append(_time_to_result_row(ctx, readme))
     return rows
+
+
+def _per_gpu_count(rows: list[dict]) -> str:
+    """"893,471 on 1 GPU, 1,627,793 on 2": a train_throughput report's training rate per device count (no variants)."""
+    rates = [(r["devices"], thousands(r["train_steps_per_s"])) for r in rows if r.get("variant") is None]
+    return ", ".join(f"{rate} on {n}" + (" GPU" if i == 0 else "") for i, (n, rate) in enumerate(rates))
 
 
 def _time_to_result_row(ctx: Context, readme: dict) -> list[str]:
