@@ -145,3 +145,8 @@ def fast_mjx(enabled: bool | None = None):
         for module, name, previous in reversed(saved):
             if previous is not None:
                 _swap(module, name, previous)
+
+
+def active() -> bool:
+    """Whether the replacements apply now (inside an enabled `fast_mjx()`): a trace made now holds them."""
+    return jax.scipy.linalg.cho_factor is cho_factor
