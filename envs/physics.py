@@ -11,6 +11,7 @@ Both step the same MJCF model with the same options; the task logic around them 
 from __future__ import annotations
 
 import collections
+import contextlib
 import functools
 import threading
 
@@ -38,11 +39,20 @@ def mjx_step(model):
     with _STEPS_LOCK:
         entry = _STEPS.get(key)
         if entry is None or entry[0] is not model:  # the model is kept, so its id is not reused while cached
-            entry = _STEPS[key] = (model, jax.jit(functools.partial(mjx.step, model)))
+            entry = _STEPS[key] = (model, jax.jit(functools.partial(_step, model, key[1])))
             while len(_STEPS) > STEP_CACHE_SIZE:
                 _STEPS.popitem(last=False)
         _STEPS.move_to_end(key)
         return entry[1]
+
+
+def _step(model, fast: bool, data):
+    """`mjx.step` traced with `envs.fast_mjx`'s replacements exactly when `fast` (the cache key says so)."""
+    with fast_mjx.fast_mjx(True) if fast else contextlib.nullcontext():
+        if fast_mjx.active() != fast:
+            raise RuntimeError("mjx_step's step for the plain MJX functions was first called inside fast_mjx(); "
+                               "call it where it was made.")
+        return mjx.step(model, data)
 
 
 def resolve(backend: str) -> str:
@@ -73,7 +83,7 @@ class MjxPhysics:
             closest = jnp.minimum(closest, distances(data.geom_xpos, data.geom_xmat, k))
             return (data, closest), None
 
-        (data, closest), _ = jax.lax.scan(substep, (data, jnp.full(2, jnp.inf)), jnp.arange(self.substeps))
+        (data, closest), _ = jax.lax.scan(substep, (data, jnp.full(2, jnp.inf, jnp.float32)), jnp.arange(self.substeps))
         return data, closest
 
 

@@ -491,14 +491,15 @@ def _leaves(npz: dict) -> list:
 
 def test_two_devices_match_one_device(tmp_path, arm_run):
     """Two updates of PPO (2 seeds), 36 vector steps of SAC updates and 24 of fast SAC's (1 seed each; GSPMD only) on
-    the point mass, on two devices split by shard_map and by GSPMD, end where the same run on one device ends (the one-device
-    runs are this module's probe programs, compiled once here); the UR5e arm (native physics: every device's envs
-    call C MuJoCo) trains one PPO update on two devices split by shard_map to the state that `arm_run` (GSPMD)
-    checkpointed."""
+    the point mass, on two devices split by shard_map and by GSPMD, end where the same run on one device ends (the
+    one-device runs are this module's probe programs, compiled once here); the UR5e arm (native physics: every
+    device's envs call C MuJoCo) trains one PPO update on two devices split by shard_map to the state that `arm_run`
+    (GSPMD) checkpointed."""
     ppo = presets.make_config("point-mass-ppo", logdir=str(tmp_path / "ppo"), stop_after_steps=2 * 5120, **PROBE)
     sac = presets.make_config("point-mass-sac", logdir=str(tmp_path / "sac"), stop_after_steps=1_600, **SAC_PROBE)
     # Fast SAC: n-step windows and the categorical projection, 9 updates after its 15 steps of warm-up; GSPMD only
-    # (the default, whose partitioner the batched sample is written for; shard_map runs the same local code as SAC).
+    # (the default, whose partitioner the batched sample is written for; each device's share of a sample as
+    # shard_map sees it: tests/test_sac_fast.py).
     fast = presets.make_config("point-mass-sac-fast", logdir=str(tmp_path / "fast"), stop_after_steps=24 * 64,
                                num_timesteps=48 * 64, eval_envs=0, log_every=24 * 64, **QUIET)
     arm_config, arm_state = _restored_arm_run(arm_run)

@@ -3,6 +3,7 @@
 import collections
 
 import jax
+import pytest
 from mujoco import mjx
 
 import envs
@@ -27,10 +28,21 @@ def test_a_second_setting_of_the_same_robot_reuses_mujocos_traced_step(monkeypat
     assert len(traced) == 1
 
 
-def test_the_replacements_get_a_step_of_their_own():
-    """A step traced with envs.fast_mjx's replacements is not reused without them (nor the other way round)."""
-    model = envs.make("ur5e-reach", backend="mjx").robot.mjx_model
-    plain = physics.mjx_step(model)
+@pytest.fixture(scope="module")
+def panda_steps():
+    """The Panda's (6-step line search, factorised mass matrix) cached step without and with fast_mjx's
+    replacements, both lowered outside any fast_mjx context, and the program text of each."""
+    robot = envs.make("panda-reach", backend="mjx").robot
+    plain = physics.mjx_step(robot.mjx_model)
     with fast_mjx.fast_mjx(True):
-        replaced = physics.mjx_step(model)
-    assert replaced is not plain
+        replaced = physics.mjx_step(robot.mjx_model)
+    return {name: step.lower(robot.data_template).as_text() for name, step in (("plain", plain), ("fast", replaced))}
+
+
+def test_the_plain_step_factorises_with_the_library(panda_steps):
+    assert "cholesky" in panda_steps["plain"]
+
+
+def test_the_replaced_step_holds_the_replacements_wherever_it_is_traced(panda_steps):
+    """Made inside fast_mjx(True) and traced after it closed: still the written-out factorisation."""
+    assert "cholesky" not in panda_steps["fast"]

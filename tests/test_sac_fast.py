@@ -16,7 +16,7 @@ import pytest
 from agents import driver, presets
 from agents.loop import Parallel, Transition
 from agents.networks import TwinQ, unstack_twin_params
-from agents.sac import SAC, SACConfig
+from agents.sac import SAC, Replay, SACConfig
 from limits import HANG_GUARD_S
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -263,3 +263,27 @@ def test_a_batch_smaller_than_the_envs_takes_one_sample_per_block_of_envs(n_step
     assert np.all(envs // 4 == np.arange(4))
     assert np.all((rows >= 0) & (rows <= steps - n_step))
     assert all(len(set(envs[:, k].tolist())) == 4 for k in range(4))
+
+
+@pytest.mark.parametrize("batch_size", [64, 4])
+def test_each_devices_share_of_an_nstep_sample_is_its_part_of_the_one_device_sample(batch_size):
+    """The buffer's env axis split in two halves, each sampled as one device of two sees it (its env ids offset by
+    its axis index, as under shard_map): the halves' 3-step samples put together are the one-device sample."""
+    num_envs, steps = 8, 7
+    config = SACConfig(num_envs=num_envs, batch_size=batch_size, max_replay_size=6 * num_envs, min_replay_size=0,
+                       n_step=3)
+    sac = SAC(config, 2, 1)
+    replay = sac.init(jax.random.PRNGKey(0)).replay
+    rng = np.random.default_rng(3)
+    for _ in range(steps):  # wraps around the 6 rows
+        f = lambda *shape: jnp.asarray(rng.normal(size=(1, num_envs) + shape).astype(np.float32))  # noqa: E731
+        flag = lambda: jnp.asarray((rng.random((1, num_envs)) < 0.2).astype(np.float32))  # noqa: E731
+        replay = sac.insert(replay, Transition(obs=f(2), action=f(1), reward=f(), termination=flag(), truncation=flag(),
+                                               next_obs=f(2), extras={}))
+    key = jax.random.PRNGKey(5)
+    whole, _ = jax.jit(lambda r: sac.sample(r, key, Parallel(num_envs)))(replay)
+    halves = replay.replace(data=jax.tree.map(lambda x: jnp.stack(jnp.split(x, 2, axis=1)), replay.data))
+    shares, _ = jax.jit(jax.vmap(lambda r: sac.sample(r, key, Parallel(num_envs, 2, "dev")),
+                                 in_axes=(Replay(0, None, None),), axis_name="dev"))(halves)
+    for name in whole:
+        np.testing.assert_array_equal(np.concatenate(np.asarray(shares[name])), np.asarray(whole[name]), err_msg=name)
