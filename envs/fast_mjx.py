@@ -29,6 +29,7 @@ skipped and the rest still applies.
 from __future__ import annotations
 
 import contextlib
+import threading
 
 import jax
 import jax.numpy as jnp
@@ -129,22 +130,36 @@ def _replacements():
             (_mjx_solver, "_while_loop_scan", unrolled_while_loop_scan))
 
 
+_OPEN = {"depth": 0, "saved": []}
+"""How many enabled `fast_mjx()` contexts are open (in any thread) and what the first one replaced."""
+_OPEN_LOCK = threading.Lock()
+
+
 @contextlib.contextmanager
 def fast_mjx(enabled: bool | None = None):
     """Applies this module's replacements while open (re-entrant). `enabled=None`: on when JAX's
-    default backend is a GPU (on a CPU the library calls are faster)."""
+    default backend is a GPU (on a CPU the library calls are faster). The first context opened swaps
+    them in and the last one closed swaps the originals back, also when contexts of two threads
+    overlap in any order (each restoring what it found would leave a later one without them)."""
     if enabled is None:
         enabled = jax.default_backend() in ("gpu", "cuda", "rocm")
     if not enabled:
         yield
         return
-    saved = [(module, name, _swap(module, name, new)) for module, name, new in _replacements()]
+    with _OPEN_LOCK:
+        if _OPEN["depth"] == 0:
+            _OPEN["saved"] = [(module, name, _swap(module, name, new)) for module, name, new in _replacements()]
+        _OPEN["depth"] += 1
     try:
         yield
     finally:
-        for module, name, previous in reversed(saved):
-            if previous is not None:
-                _swap(module, name, previous)
+        with _OPEN_LOCK:
+            _OPEN["depth"] -= 1
+            if _OPEN["depth"] == 0:
+                for module, name, previous in reversed(_OPEN["saved"]):
+                    if previous is not None:
+                        _swap(module, name, previous)
+                _OPEN["saved"] = []
 
 
 def active() -> bool:

@@ -84,6 +84,18 @@ def test_context_restores_what_it_replaced():
         assert jax.scipy.linalg.cho_factor is originals[0]
 
 
+def test_contexts_closed_out_of_order_keep_the_replacements_until_the_last():
+    """Two threads' contexts: A opens, B opens, A closes (B still traces with the replacements), B closes."""
+    originals = jax.scipy.linalg.cho_factor, jax.scipy.linalg.cho_solve, mjx_solver._while_loop_scan
+    first, second = fast_mjx.fast_mjx(True), fast_mjx.fast_mjx(True)
+    first.__enter__()
+    second.__enter__()
+    first.__exit__(None, None, None)
+    assert fast_mjx.active()
+    second.__exit__(None, None, None)
+    assert (jax.scipy.linalg.cho_factor, jax.scipy.linalg.cho_solve, mjx_solver._while_loop_scan) == originals
+
+
 def test_panda_rollout_into_joint_limits_matches_mjx():
     """20 `mjx.step`s of 8 Panda states (2 ms each, the model's Newton solver and 6-step line search), with and
     without the replacements. MJX's step alone, not the env's: the env adds nothing the replacements touch, and
