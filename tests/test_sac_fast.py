@@ -225,7 +225,7 @@ COLLECTIVE_BYTES = textwrap.dedent("""
 
 
 def test_two_gspmd_devices_exchange_gradients_not_samples():
-    """Fast SAC's chunk on two devices (GSPMD, two CPU devices): the bytes its collectives carry are the same at a
+    """Fast SAC's chunk on two devices (GSPMD, two CPU devices): the bytes its collectives move are the same at a
     batch of 1,024 and of 2,048, i.e. each device samples its own envs' transitions and learns on them, and only
     gradients and statistics cross devices (a sample that crossed them, or a learner replicated on both, would grow
     with the batch)."""
