@@ -15,7 +15,6 @@ Writes `--out`.json (every setting, command, code version, device, date) and `--
 from __future__ import annotations
 
 import argparse
-import ast
 import json
 import time
 
@@ -24,23 +23,15 @@ import jax
 import envs
 from agents import evaluation, provenance
 from agents.eval_stats import jsonable
+from tools import literal_or_text, run_cli
 
 SUCCESS = "target_reached"
-
-
-def parse_value(text: str):
-    """A value as typed on the command line: a Python literal (0.1, 125, True, None, (0.05, 0.1)) or else the text
-    itself (a name such as "front")."""
-    try:
-        return ast.literal_eval(text)
-    except (ValueError, SyntaxError):
-        return text
 
 
 def settings(env_name: str, base, field: str, values: list[str]) -> list:
     """`base` with `field` set to each value, every one validated before anything is evaluated (a ValueError names
     the field, the value and what is allowed)."""
-    return [envs.registry.make_config(env_name, base, **{field: parse_value(text)}) for text in values]
+    return [envs.registry.make_config(env_name, base, **{field: literal_or_text(text)}) for text in values]
 
 
 def sweep(checkpoint: str, field: str, values: list[str], num_envs: int, seeds: int, log=print) -> list[dict]:
@@ -99,4 +90,4 @@ def main(argv=None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_cli(main)

@@ -28,7 +28,6 @@ seed count (a `--variant` row: against the preset itself).
 from __future__ import annotations
 
 import argparse
-import ast
 import dataclasses
 import datetime
 import json
@@ -44,6 +43,7 @@ import jax.numpy as jnp
 from agents import config as config_lib, driver, presets, provenance
 from agents.loop import MULTI_DEVICE_MODES
 from benchmarks.env_throughput import env_rollout, time_calls
+from tools import literal_or_text
 
 
 def cell(value, spec: str) -> str:
@@ -111,10 +111,7 @@ def parse_variant(text: str, algo) -> dict:
         if not sep or name not in fields:
             raise ValueError(f"--variant {text!r}: {name!r} is not a field of {type(algo).__name__}: allowed are "
                              f"{', '.join(fields)} (as FIELD=VALUE).")
-        try:
-            out[name] = ast.literal_eval(value.strip())
-        except (ValueError, SyntaxError):
-            out[name] = value.strip()
+        out[name] = literal_or_text(value.strip())
     return out
 
 

@@ -6,6 +6,7 @@ import pytest
 
 from agents import evaluation
 from benchmarks import eval_settings
+from tools import literal_or_text
 
 SHIPPED = "results/checkpoints/panda-reach-avoid-ppo"
 
@@ -31,7 +32,7 @@ def test_a_typed_value_is_parsed_as_a_literal():
 
 
 def test_a_name_stays_text():
-    assert eval_settings.parse_value("front") == "front"
+    assert literal_or_text("front") == "front"
 
 
 @pytest.fixture(scope="module")

@@ -6,6 +6,7 @@ fidelity to the paper (`fidelity`, `fidelity_train`) and the experiments (`exper
 launching, tables). Each runs as
 `python -m tools.<name> --help` from the repository root and imports as `from tools import <name>`."""
 
+import ast
 import sys
 
 
@@ -19,3 +20,12 @@ def run_cli(main) -> None:
         print(f"error: {error}", file=sys.stderr)
         raise SystemExit(2)
     raise SystemExit(code if isinstance(code, int) else 0)
+
+
+def literal_or_text(text: str):
+    """A value as typed on a command line: a Python literal (0.1, 125, True, None, (256, 256)) or else the text
+    itself (a name such as "front" or "bfloat16")."""
+    try:
+        return ast.literal_eval(text)
+    except (ValueError, SyntaxError):
+        return text
