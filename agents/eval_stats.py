@@ -98,3 +98,15 @@ def jsonable(obj):
     if isinstance(obj, float) and not math.isfinite(obj):
         return None
     return obj
+
+
+def seed_line(k: int, n: int, eval_seed: int, units: list, seconds: float) -> str:
+    """"eval seed k of n (seed): x% reached, y% self collision ..., elapsed" over one seed's units."""
+    parts = []
+    for name, what in (("target_reached", "reached"), ("self_collision", "self collision"),
+                       ("obstacle_collision", "obstacle collision")):
+        if name in units[0]["metrics"]:
+            parts.append(f"{100 * np.mean([u['metrics'][name] for u in units]):.1f} % {what}")
+    each = ", ".join(f"{100 * u['metrics'].get('target_reached', np.nan):.1f}" for u in units)  # the log keeps them
+    over = f" (mean over {len(units)} trained seeds; reached % each: {each})" if len(units) > 1 else ""
+    return f"eval seed {k + 1} of {n} ({eval_seed}): {', '.join(parts)}{over}; {seconds:.0f} s elapsed"

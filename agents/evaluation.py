@@ -34,7 +34,7 @@ from envs import physics
 from agents.loop import make_evaluate, make_evaluate_stacked
 from agents.networks import COMPUTE_DTYPES
 from agents.eval_stats import (collided_distances, fmt, jsonable, pooled, reached_precision,  # noqa: F401 (evaluation.fmt, ...)
-                                summarize)
+                                seed_line, summarize)
 
 PAPER_METRICS = {"target_reached": "episode/target_reached", "self_collision": "episode/self_collision",
                  "obstacle_collision": "episode/obstacle_collision", "distance": "episode/distance_last10",
@@ -249,7 +249,7 @@ def _mismatch(allowed: bool, warning: str, refusal: str) -> None:
 
 
 @dataclasses.dataclass
-class _Program:
+class Program:
     """A batched env and its jitted `evaluate(params, key) -> (per-env metrics, records)`."""
 
     env: Any
@@ -259,9 +259,23 @@ class _Program:
     with, i.e. compiled for: progress messages say when a call compiles first."""
 
 
+def evaluate_fn(env, algo_config, obs_size: int, act_size: int, num_envs: int, length: int, last_steps: int,
+                stochastic: bool = False, planner: planners.PlannerConfig | None = None) -> Callable:
+    """The unjitted `evaluate(params, key) -> (per-env metrics, records)` of `policy` on the batched `env` (`_evaluator`
+    and `agents.sweep` jit it)."""
+    if planner is not None:
+        act, memory = planners.make_act(env, planner)
+        return make_evaluate(env, None, num_envs, length, last_steps, act=act, per_env=True, record=_record, memory=memory)
+    if algo_config is None:
+        return make_evaluate(env, None, num_envs, length, last_steps, act=baselines.make_act(env), per_env=True,
+                             record=_record)
+    learner = registry.make_learner(algo_config, obs_size, act_size)
+    return make_evaluate_stacked(env, learner, num_envs, length, last_steps, stochastic, per_env=True, record=_record)
+
+
 @functools.lru_cache(maxsize=16)
 def _evaluator(env_name: str, env_config, algo_config, obs_size: int, act_size: int, num_envs: int, last_steps: int,
-               stochastic: bool = False, planner: planners.PlannerConfig | None = None) -> _Program:
+               stochastic: bool = False, planner: planners.PlannerConfig | None = None) -> Program:
     """The evaluation program, cached per setting so that several checkpoints / seeds / baselines
     (and a video of as many envs) share one compilation. The env is not auto-reset
     (`envs.wrap(..., autoreset=False)`): only each env's first episode counts, and its poses are
@@ -269,28 +283,16 @@ def _evaluator(env_name: str, env_config, algo_config, obs_size: int, act_size: 
     distribution (the learner's `stochastic_policy`, a fresh key per step) instead of its mode. `planner`: the
     MPPI planner with these options acts (`agents.planner.make_act`)."""
     env = envs.wrap(envs.registry.build(env_name, env_config), autoreset=False)  # checked by `_program`
-    length = env_config.episode_length
-    if planner is not None:
-        act, memory = planners.make_act(env, planner)
-        fn = make_evaluate(env, None, num_envs, length, last_steps, act=act, per_env=True, record=_record, memory=memory)
-        return _Program(env, jax.jit(fn))
-    if algo_config is None:
-        fn = make_evaluate(env, None, num_envs, length, last_steps, act=baselines.make_act(env), per_env=True,
-                           record=_record)
-        return _Program(env, jax.jit(fn))
-    learner = registry.make_learner(algo_config, obs_size, act_size)
-    fn = make_evaluate_stacked(env, learner, num_envs, length, last_steps, stochastic, per_env=True, record=_record)
-    return _Program(env, jax.jit(fn))
+    return Program(env, jax.jit(evaluate_fn(env, algo_config, obs_size, act_size, num_envs, env_config.episode_length,
+                                             last_steps, stochastic, planner)))
 
 
 def _program(policy: Policy, env_name: str, env_config, num_envs: int, last_steps: int, stochastic: bool,
-             allow_env_mismatch: bool = False) -> _Program:
+             allow_env_mismatch: bool = False) -> Program:
     """The cached evaluation program (`_evaluator`) for `policy`'s network on this env, after checking
     the env config, that the env fits the policy and that a stochastic evaluation has a distribution to sample."""
     envs.registry.check_config(env_name, env_config)
-    if stochastic and policy.export is None:
-        raise ValueError(f"stochastic=True is invalid for the {policy.kind} {policy.name!r}: allowed only for checkpoints "
-                         f"(the {policy.kind} has no action distribution).")
+    check_request(policy, 1, [DEFAULT_EVAL_SEED], stochastic)
     e = policy.export
     program = _evaluator(env_name, env_config, policy.algo_config, e.observation_size if e else 0,
                          e.action_size if e else 0, int(num_envs), int(last_steps), bool(stochastic), policy.planner)
@@ -367,6 +369,19 @@ def _metric_names(per_step: dict, last_steps: int) -> dict:
     return names
 
 
+def check_request(policy: Policy, num_envs: int, eval_seeds, stochastic: bool) -> None:
+    """ValueError for an impossible evaluation request; ImportError without the packages its intervals need."""
+    if int(num_envs) < 1:
+        raise ValueError(f"num_envs={num_envs!r} is invalid: allowed is an integer >= 1.")
+    if not eval_seeds:
+        raise ValueError("eval_seeds=[] is invalid: allowed is at least one seed.")
+    if stochastic and policy.export is None:
+        raise ValueError(f"stochastic=True is invalid for the {policy.kind} {policy.name!r}: allowed only for checkpoints "
+                         f"(the {policy.kind} has no action distribution).")
+    if len(policy.units) * len(eval_seeds) > 1:
+        intervals.check_installed()  # the summary's intervals come after the evaluation
+
+
 def run(policy: Policy, env_name: str, env_config, num_envs: int = 4096, eval_seeds=(DEFAULT_EVAL_SEED,),
         last_steps: int = 10, stochastic: bool = False, progress: Callable[[str], None] | None = None,
         allow_env_mismatch: bool = False) -> Result:
@@ -375,13 +390,15 @@ def run(policy: Policy, env_name: str, env_config, num_envs: int = 4096, eval_se
     `allow_env_mismatch` evaluates a checkpoint on another observation layout or action mode
     (`check_compatible`) with a warning instead of an error.
     `progress(line)` is told when the program compiles and what each evaluation seed gave."""
-    if int(num_envs) < 1:
-        raise ValueError(f"num_envs={num_envs!r} is invalid: allowed is an integer >= 1.")
-    if not eval_seeds:
-        raise ValueError("eval_seeds=[] is invalid: allowed is at least one seed.")
-    if len(policy.units) * len(eval_seeds) > 1:
-        intervals.check_installed()  # the summary's intervals come after the evaluation
+    check_request(policy, num_envs, eval_seeds, stochastic)
     program = _program(policy, env_name, env_config, num_envs, last_steps, stochastic, allow_env_mismatch)
+    return run_program(policy, program, env_name, env_config, num_envs, eval_seeds, last_steps, stochastic, progress)
+
+
+def run_program(policy: Policy, program: Program, env_name: str, env_config, num_envs: int, eval_seeds, last_steps: int,
+                stochastic: bool, progress: Callable[[str], None] | None) -> Result:
+    """`run` with its checked program (`_program`, or `agents.sweep`'s for one setting of many): every evaluation seed
+    through `program.evaluate(params, key)`, gathered per unit."""
     params = act_params(policy)
     batch = len(policy.units) if policy.export else 0
     t0 = time.perf_counter()
@@ -402,7 +419,7 @@ def run(policy: Policy, env_name: str, env_config, num_envs: int = 4096, eval_se
             for name, v in values.items():
                 per_env.setdefault(name, []).append(v)
         if progress:
-            progress(_seed_line(k, len(eval_seeds), eval_seed, units[-len(policy.units):], time.perf_counter() - t0))
+            progress(seed_line(k, len(eval_seeds), eval_seed, units[-len(policy.units):], time.perf_counter() - t0))
     per_env = {k: np.stack(v) for k, v in per_env.items()}
     derived = {**collided_distances(per_env), **reached_precision(per_env)}
     per_env.update(derived)
@@ -412,18 +429,6 @@ def run(policy: Policy, env_name: str, env_config, num_envs: int = 4096, eval_se
             unit["metrics"].update({name: float(np.nanmean(v[i])) for name, v in derived.items()})
     return Result(policy, env_name, env_config, int(num_envs), [int(s) for s in eval_seeds], int(last_steps), units,
                   per_env, time.perf_counter() - t0, seed_seconds, bool(stochastic))
-
-
-def _seed_line(k: int, n: int, eval_seed: int, units: list, seconds: float) -> str:
-    """"eval seed k of n (seed): x% reached, y% self collision ..., elapsed" over one seed's units."""
-    parts = []
-    for name, what in (("target_reached", "reached"), ("self_collision", "self collision"),
-                       ("obstacle_collision", "obstacle collision")):
-        if name in units[0]["metrics"]:
-            parts.append(f"{100 * np.mean([u['metrics'][name] for u in units]):.1f} % {what}")
-    each = ", ".join(f"{100 * u['metrics'].get('target_reached', np.nan):.1f}" for u in units)  # the log keeps them
-    over = f" (mean over {len(units)} trained seeds; reached % each: {each})" if len(units) > 1 else ""
-    return f"eval seed {k + 1} of {n} ({eval_seed}): {', '.join(parts)}{over}; {seconds:.0f} s elapsed"
 
 
 # ------------------------------------------------------------------------------------------------

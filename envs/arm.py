@@ -12,6 +12,7 @@ collision anywhere inside the step ends the episode.
 
 from __future__ import annotations
 
+import copy
 import functools
 import operator
 
@@ -65,6 +66,17 @@ class ArmEnv(Env):
         self._init_low, self._init_high = robot.joint_range(config.init_range)
         self._backend = physics.resolve(config.backend)
         self.physics = physics.PHYSICS[self._backend](robot, config.substeps)
+        self.candidate_counts = {q: self.count_candidates(q) for q in ("pose", "target", "obstacle")}
+        """Rejection-sampling candidates per quantity, decided here from the config (`count_candidates`): array
+        shapes, so `with_config` keeps them."""
+
+    def with_config(self, config: ReachConfig) -> ArmEnv:
+        """This env reading `config` in its traced functions, with the decisions made at construction kept (candidate
+        counts, physics backend, joint ranges): for a config differing only in its class's `TRACED_FIELDS`, whose
+        values may be traced arrays (one evaluation program for many settings, `agents.sweep`)."""
+        env = copy.copy(self)
+        env.config = config
+        return env
 
     # ----------------------------------------------------------------------------------------
     # Interface
@@ -266,6 +278,10 @@ class ArmEnv(Env):
         return jnp.clip(target, low, high)
 
     def candidates(self, quantity: str) -> int:
+        """Rejection-sampling candidates for "pose", "target" or "obstacle" (`count_candidates` at construction)."""
+        return self.candidate_counts[quantity]
+
+    def count_candidates(self, quantity: str) -> int:
         """Rejection-sampling candidates for "pose", "target" or "obstacle".
 
         Sized from measured acceptance rates (uniform full-range configurations; 20,000 samples

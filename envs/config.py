@@ -8,7 +8,7 @@ anything is traced, and raises a `ValueError` naming the field, the value and wh
 from __future__ import annotations
 
 import dataclasses
-from typing import Literal, Optional
+from typing import ClassVar, Literal, Optional
 
 from envs.obstacles import MAX_OBSTACLES, MOTIONS
 from envs.validation import below, choice, integer, interval, positive
@@ -47,6 +47,9 @@ def _observed_if_set(field: str, std: float, observation: tuple[str, ...], noisy
 @dataclasses.dataclass(frozen=True)
 class ReachConfig:
     """Reach task: move the end effector to a sampled target and stay there."""
+
+    TRACED_FIELDS: ClassVar[tuple[str, ...]] = ()
+    """Fields that may be traced arrays in `ArmEnv.with_config` (see ReachAvoidConfig); none for reach."""
 
     action: Literal["relative", "absolute"] = "relative"
     """Joint position control: `relative` adds `action_scale * action` to the current joint
@@ -222,6 +225,11 @@ class ReachAvoidConfig(ReachConfig):
     """Reach-avoid task: reach the target without touching spherical obstacles (the paper: one, static,
     of a fixed size; the options num_obstacles, obstacle_radius_range, obstacle_motion and
     obstacle_noise_std go beyond it, towards the future work its Discussion names)."""
+
+    TRACED_FIELDS: ClassVar[tuple[str, ...]] = ("obstacle_radius",)
+    """Fields the env reads only inside its traced functions (`ArmEnv.with_config`), so a sweep over them evaluates
+    with one compiled program whose argument they are (`agents.sweep`); tests/test_sweep.py holds each to the
+    program compiled per value."""
 
     observation: tuple[str, ...] = ("joint_pos", "ee_pos", "target_pos", "ee_to_target", "obstacle_pos",
                                     "link_obstacle_dist")

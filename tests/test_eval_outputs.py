@@ -180,13 +180,13 @@ def test_an_export_write_replaces_both_files(tmp_path):
 
 def test_the_progress_line_keeps_each_trained_seeds_rate():
     units = [{"metrics": {"target_reached": r, "self_collision": 0.02}} for r in (0.75, 0.79)]
-    line = eval_cli.evaluation._seed_line(0, 1, 7, units, 3.0)
+    line = eval_cli.evaluation.seed_line(0, 1, 7, units, 3.0)
     assert "77.0 % reached" in line  # the mean of 75.0 and 79.0
     assert "reached % each: 75.0, 79.0" in line
 
 
 def test_the_progress_line_of_one_trained_seed_names_no_other():
-    line = eval_cli.evaluation._seed_line(0, 1, 7, [{"metrics": {"target_reached": 0.75}}], 3.0)
+    line = eval_cli.evaluation.seed_line(0, 1, 7, [{"metrics": {"target_reached": 0.75}}], 3.0)
     assert "trained seeds" not in line
 
 

@@ -38,7 +38,18 @@ def test_a_name_stays_text():
 @pytest.fixture(scope="module")
 def rows():
     """Episodes of 1 step (no arm gets to its target) and of the trained 125, 8 episodes each, on the CPU."""
-    return eval_settings.sweep(SHIPPED, "episode_length", ["1", "125"], num_envs=8, seeds=1, log=lambda line: None)
+    rows, traced = eval_settings.evaluate(SHIPPED, "episode_length", ["1", "125"], num_envs=8, seeds=1,
+                                          log=lambda line: None)
+    return rows
+
+
+def test_a_traced_field_is_said_to_be_one():
+    _, traced = eval_settings.evaluate(SHIPPED, "obstacle_radius", ["0.1"], num_envs=1, seeds=1, log=lambda line: None)
+    assert traced is True
+
+
+def test_a_field_that_shapes_the_program_is_not_traced():
+    assert eval_settings.sweep.traced(_base()[1], "episode_length") is False
 
 
 def test_a_one_step_episode_reaches_nothing(rows):

@@ -30,8 +30,8 @@ class ReachAvoid(Reach):
     def noisy(self) -> bool:
         return super().noisy or self.config.obstacle_noise_std > 0
 
-    def candidates(self, quantity: str) -> int:
-        n = super().candidates(quantity)
+    def count_candidates(self, quantity: str) -> int:
+        n = super().count_candidates(quantity)
         return 2 * n if quantity == "obstacle" and self.config.radius_bounds[1] > 0.15 else n
 
     def sample_task(self, key, kin0, target):
