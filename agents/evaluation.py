@@ -30,6 +30,7 @@ import numpy as np
 
 import envs
 from agents import baselines, driver, export, intervals, planner as planners, registry
+from agents.compatibility import LAYOUT_FIELDS, check, check_compatible, unseen_constants  # noqa: F401 (evaluation.check, ...)
 from envs import physics
 from agents.loop import make_evaluate, make_evaluate_stacked
 from agents.networks import COMPUTE_DTYPES
@@ -166,84 +167,6 @@ def _rebuild_export(step_dir: str, because: str = "") -> export.PolicyExport:
     return export.load(step_dir)
 
 
-def check(policy: Policy, env_name: str, env_config, allow_env_mismatch: bool = False) -> None:
-    """The env config's own checks, then `check_compatible` on the env built from it (cheap: nothing is
-    compiled)."""
-    check_compatible(policy, env_name, envs.from_config(env_name, env_config), allow_env_mismatch)
-
-
-LAYOUT_FIELDS = ("observation", "action")
-"""Env options a network is tied to beyond the sizes: the order of the observation's parts and the
-meaning of its action (relative steps or absolute joint targets)."""
-
-
-def unseen_constants(trained_config, asked_config) -> list[str]:
-    """Observed parts that held one value in every training episode (`constant_observations` of the env config)
-    but vary, or hold another value, under `asked_config`. The network never saw them change, and its
-    observation normaliser, fit to one value (variance 0), divides any other by ~1e-4 and clips it: a static
-    agent evaluated on moving obstacles while observing their velocity reached 0 % where it reached 80 % on
-    static ones (results/experiments/obstacles-moving3)."""
-    trained = getattr(trained_config, "constant_observations", dict)()
-    asked = getattr(asked_config, "constant_observations", dict)()
-    observed = getattr(trained_config, "observation", ())
-    return [f"{part} (trained with {why}, here {asked.get(part, 'varying')})" for part, why in trained.items()
-            if part in observed and asked.get(part) != why]
-
-
-def check_compatible(policy: Policy, env_name: str, env, allow_env_mismatch: bool = False) -> None:
-    """ValueError unless `policy` can act in `env` (same robot, matching observation and action
-    sizes, and the trained observation layout and action mode; with `allow_env_mismatch` a different
-    layout or mode is only warned about)."""
-    if policy.export is None:
-        if policy.planner is None:  # the planner acts on any env: it simulates the env itself
-            baselines.check(policy.name, env)
-        return
-    e = policy.export
-    trained, asked = envs.registry.spec(e.env_name).robot, envs.registry.spec(env_name).robot
-    if trained != asked:
-        allowed = f"the envs of robot {trained}" if trained else "the envs without a robot"
-        raise ValueError(f"checkpoint {policy.name!r} was trained on {e.env_name!r} (robot {trained or 'none'}): "
-                         f"env={env_name!r} is another robot; allowed are {allowed}.")
-    config = getattr(env.unwrapped, "config", None)
-    if env.observation_size != e.observation_size:
-        observation = getattr(config, "observation", None)
-        shown = f" with observation={observation!r}" if observation is not None else ""
-        trained_obs = getattr(e.config.env, "observation", None)
-        allowed = (f"the trained observation {trained_obs!r}" if trained_obs is not None
-                   else f"observations of shape ({e.observation_size},), as trained")
-        raise ValueError(f"the network of checkpoint {policy.name!r} takes observations of shape ({e.observation_size},) but "
-                         f"env {env_name!r}{shown} gives shape ({env.observation_size},): allowed are env options giving "
-                         f"{allowed}.")
-    if env.action_size != e.action_size:
-        raise ValueError(f"the network of checkpoint {policy.name!r} outputs actions of shape ({e.action_size},) but env "
-                         f"{env_name!r} takes shape ({env.action_size},).")
-    differ = [f"{name}={getattr(config, name)!r} (trained: {getattr(e.config.env, name)!r})" for name in LAYOUT_FIELDS
-              if hasattr(config, name) and hasattr(e.config.env, name)
-              and getattr(config, name) != getattr(e.config.env, name)]
-    if differ:
-        _mismatch(allow_env_mismatch,
-                  f"checkpoint {policy.name!r} is evaluated with {'; '.join(differ)}: its network reads and acts as "
-                  "trained, so the numbers describe a mismatched policy (allowed by allow_env_mismatch).",
-                  f"checkpoint {policy.name!r} cannot run with {'; '.join(differ)}: its network reads the observation's "
-                  "parts in the trained order and its actions in the trained mode; allowed are the trained values")
-    unseen = unseen_constants(policy.train_env_config, config)
-    if unseen:
-        _mismatch(allow_env_mismatch,
-                  f"checkpoint {policy.name!r} observes {'; '.join(unseen)}: a value it never saw in training, which "
-                  "its observation normaliser scales to the clip (allowed by allow_env_mismatch).",
-                  f"checkpoint {policy.name!r} cannot be evaluated fairly here: it observes {'; '.join(unseen)}. It saw "
-                  "one value of each in training, and its observation normaliser scales any other to the clip; "
-                  "allowed are the trained settings of those parts, or a policy trained without them in its observation")
-
-
-def _mismatch(allowed: bool, warning: str, refusal: str) -> None:
-    """Warns (the user asked for the mismatch: `allow_env_mismatch`) or raises, naming the escape hatch."""
-    if allowed:
-        warnings.warn(warning, stacklevel=4)
-    else:
-        raise ValueError(refusal + " (or --allow-env-mismatch to evaluate anyway, with a warning).")
-
-
 # ------------------------------------------------------------------------------------------------
 # Running
 
@@ -255,14 +178,13 @@ class Program:
     env: Any
     evaluate: Callable
     compiled: set = dataclasses.field(default_factory=set)
-    """Trained-seed counts (the leading axis of a checkpoint's params; 0 for baselines) it has run
-    with, i.e. compiled for: progress messages say when a call compiles first."""
+    """Trained-seed counts (0 for baselines) it has run with, i.e. compiled for: progress says when a call compiles."""
 
 
 def evaluate_fn(env, algo_config, obs_size: int, act_size: int, num_envs: int, length: int, last_steps: int,
                 stochastic: bool = False, planner: planners.PlannerConfig | None = None) -> Callable:
-    """The unjitted `evaluate(params, key) -> (per-env metrics, records)` of `policy` on the batched `env` (`_evaluator`
-    and `agents.sweep` jit it)."""
+    """The unjitted `evaluate(params, key) -> (per-env metrics, records)` on the batched `env` (`_evaluator`, `agents.sweep`
+    jit it): the planner's, else a baseline's (no `algo_config`), else the network's of `algo_config`."""
     if planner is not None:
         act, memory = planners.make_act(env, planner)
         return make_evaluate(env, None, num_envs, length, last_steps, act=act, per_env=True, record=_record, memory=memory)
@@ -276,12 +198,10 @@ def evaluate_fn(env, algo_config, obs_size: int, act_size: int, num_envs: int, l
 @functools.lru_cache(maxsize=16)
 def _evaluator(env_name: str, env_config, algo_config, obs_size: int, act_size: int, num_envs: int, last_steps: int,
                stochastic: bool = False, planner: planners.PlannerConfig | None = None) -> Program:
-    """The evaluation program, cached per setting so that several checkpoints / seeds / baselines
-    (and a video of as many envs) share one compilation. The env is not auto-reset
-    (`envs.wrap(..., autoreset=False)`): only each env's first episode counts, and its poses are
-    recorded for rendering. `stochastic`: a checkpoint's actions are drawn from its policy's
-    distribution (the learner's `stochastic_policy`, a fresh key per step) instead of its mode. `planner`: the
-    MPPI planner with these options acts (`agents.planner.make_act`)."""
+    """The evaluation program, cached per setting so that several checkpoints / seeds / baselines (and a video of as
+    many envs) share one compilation. The env is not auto-reset (`envs.wrap(..., autoreset=False)`): only each env's
+    first episode counts, and its poses are recorded for rendering. `stochastic`: actions drawn from the policy's
+    distribution (a fresh key per step) instead of its mode; `planner`: the MPPI planner with these options acts."""
     env = envs.wrap(envs.registry.build(env_name, env_config), autoreset=False)  # checked by `_program`
     return Program(env, jax.jit(evaluate_fn(env, algo_config, obs_size, act_size, num_envs, env_config.episode_length,
                                              last_steps, stochastic, planner)))
@@ -289,10 +209,10 @@ def _evaluator(env_name: str, env_config, algo_config, obs_size: int, act_size: 
 
 def _program(policy: Policy, env_name: str, env_config, num_envs: int, last_steps: int, stochastic: bool,
              allow_env_mismatch: bool = False) -> Program:
-    """The cached evaluation program (`_evaluator`) for `policy`'s network on this env, after checking
-    the env config, that the env fits the policy and that a stochastic evaluation has a distribution to sample."""
+    """The cached evaluation program (`_evaluator`) for `policy` on this env, after checking the env config, that the
+    env fits the policy and that a stochastic evaluation has a distribution to sample."""
     envs.registry.check_config(env_name, env_config)
-    check_request(policy, 1, [DEFAULT_EVAL_SEED], stochastic)
+    check_stochastic(policy, stochastic)
     e = policy.export
     program = _evaluator(env_name, env_config, policy.algo_config, e.observation_size if e else 0,
                          e.action_size if e else 0, int(num_envs), int(last_steps), bool(stochastic), policy.planner)
@@ -370,26 +290,31 @@ def _metric_names(per_step: dict, last_steps: int) -> dict:
 
 
 def check_request(policy: Policy, num_envs: int, eval_seeds, stochastic: bool) -> None:
-    """ValueError for an impossible evaluation request; ImportError without the packages its intervals need."""
+    """ValueError for an impossible evaluation request, ImportError where its intervals cannot be computed (the env
+    config is checked where its program is made)."""
     if int(num_envs) < 1:
         raise ValueError(f"num_envs={num_envs!r} is invalid: allowed is an integer >= 1.")
     if not eval_seeds:
         raise ValueError("eval_seeds=[] is invalid: allowed is at least one seed.")
+    check_stochastic(policy, stochastic)
+    if len(policy.units) * len(eval_seeds) > 1:
+        intervals.check_installed()  # the summary's intervals come after the evaluation
+
+
+def check_stochastic(policy: Policy, stochastic: bool) -> None:
+    """ValueError for sampled actions of a policy without an action distribution."""
     if stochastic and policy.export is None:
         raise ValueError(f"stochastic=True is invalid for the {policy.kind} {policy.name!r}: allowed only for checkpoints "
                          f"(the {policy.kind} has no action distribution).")
-    if len(policy.units) * len(eval_seeds) > 1:
-        intervals.check_installed()  # the summary's intervals come after the evaluation
 
 
 def run(policy: Policy, env_name: str, env_config, num_envs: int = 4096, eval_seeds=(DEFAULT_EVAL_SEED,),
         last_steps: int = 10, stochastic: bool = False, progress: Callable[[str], None] | None = None,
         allow_env_mismatch: bool = False) -> Result:
-    """Evaluates `policy` on `num_envs` episodes per unit and evaluation seed (see module doc);
-    `stochastic=True` samples a checkpoint's actions instead of taking its deterministic mode;
-    `allow_env_mismatch` evaluates a checkpoint on another observation layout or action mode
-    (`check_compatible`) with a warning instead of an error.
-    `progress(line)` is told when the program compiles and what each evaluation seed gave."""
+    """Evaluates `policy` on `num_envs` episodes per unit and evaluation seed (see module doc); `stochastic=True`
+    samples a checkpoint's actions instead of taking its mode; `allow_env_mismatch` evaluates a checkpoint on another
+    observation layout or action mode (`check_compatible`) with a warning instead of an error. `progress(line)` is
+    told when the program compiles and what each evaluation seed gave."""
     check_request(policy, num_envs, eval_seeds, stochastic)
     program = _program(policy, env_name, env_config, num_envs, last_steps, stochastic, allow_env_mismatch)
     return run_program(policy, program, env_name, env_config, num_envs, eval_seeds, last_steps, stochastic, progress)
@@ -397,8 +322,7 @@ def run(policy: Policy, env_name: str, env_config, num_envs: int = 4096, eval_se
 
 def run_program(policy: Policy, program: Program, env_name: str, env_config, num_envs: int, eval_seeds, last_steps: int,
                 stochastic: bool, progress: Callable[[str], None] | None) -> Result:
-    """`run` with its checked program (`_program`, or `agents.sweep`'s for one setting of many): every evaluation seed
-    through `program.evaluate(params, key)`, gathered per unit."""
+    """`run` with its checked program (`_program`'s, or `agents.sweep`'s): each evaluation seed through `program`."""
     params = act_params(policy)
     batch = len(policy.units) if policy.export else 0
     t0 = time.perf_counter()

@@ -13,6 +13,7 @@ collision anywhere inside the step ends the episode.
 from __future__ import annotations
 
 import copy
+import dataclasses
 import functools
 import operator
 
@@ -66,14 +67,24 @@ class ArmEnv(Env):
         self._init_low, self._init_high = robot.joint_range(config.init_range)
         self._backend = physics.resolve(config.backend)
         self.physics = physics.PHYSICS[self._backend](robot, config.substeps)
+        # Array shapes decided from the config once, here: `with_config` keeps them (`program_key`).
         self.candidate_counts = {q: self.count_candidates(q) for q in ("pose", "target", "obstacle")}
-        """Rejection-sampling candidates per quantity, decided here from the config (`count_candidates`): array
-        shapes, so `with_config` keeps them."""
+
+    def program_key(self) -> tuple:
+        """What this env decided at construction that a field of `TRACED_FIELDS` may change: envs alike in it trace
+        into one program for every value of such a field (`with_config`)."""
+        return tuple(sorted(self.candidate_counts.items()))
 
     def with_config(self, config: ReachConfig) -> ArmEnv:
-        """This env reading `config` in its traced functions, with the decisions made at construction kept (candidate
-        counts, physics backend, joint ranges): for a config differing only in its class's `TRACED_FIELDS`, whose
-        values may be traced arrays (one evaluation program for many settings, `agents.sweep`)."""
+        """This env reading `config` in its traced functions, with what it decided at construction kept (candidate
+        counts, physics backend, joint ranges): `config` may differ from the env's own only in its class's
+        `TRACED_FIELDS`, whose values may be traced arrays (one evaluation program for many settings, `agents.sweep`)."""
+        traced = type(config).TRACED_FIELDS
+        other = [f.name for f in dataclasses.fields(config) if f.name not in traced
+                 and getattr(config, f.name) != getattr(self.config, f.name)]
+        if type(config) is not type(self.config) or other:
+            raise ValueError(f"with_config: the config differs in {other or type(config).__name__} besides "
+                             f"TRACED_FIELDS={traced!r}; allowed are configs differing only in those.")
         env = copy.copy(self)
         env.config = config
         return env

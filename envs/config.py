@@ -127,7 +127,7 @@ class ReachConfig:
     and task logic; results agree to float tolerance."""
     sampling_candidates: int = 8
     """Candidates drawn at once per rejection-sampled quantity; targets in the front/upper
-    workspaces and obstacles over 0.15 m use more (see `ArmEnv.candidates`, `ReachAvoid.candidates`).
+    workspaces and obstacles over 0.15 m use more (see `ArmEnv.count_candidates`, `ReachAvoid.count_candidates`).
     A reset that finds none valid is counted in the `reset_fallback` metric (expected rate about 1e-6)."""
     joint_noise_std: float = 0.0
     """Standard deviation (rad) of Gaussian noise on the observed joint angles (joint_pos and joint_sin_cos, and
@@ -227,9 +227,15 @@ class ReachAvoidConfig(ReachConfig):
     obstacle_noise_std go beyond it, towards the future work its Discussion names)."""
 
     TRACED_FIELDS: ClassVar[tuple[str, ...]] = ("obstacle_radius",)
-    """Fields the env reads only inside its traced functions (`ArmEnv.with_config`), so a sweep over them evaluates
-    with one compiled program whose argument they are (`agents.sweep`); tests/test_sweep.py holds each to the
-    program compiled per value."""
+    """Float fields the env reads only inside its traced functions or in `count_candidates` (`ArmEnv.with_config`), so
+    a sweep over one evaluates with one compiled program whose argument it is (`agents.sweep`); tests/test_sweep.py
+    holds each to the program compiled per value."""
+
+    def inert_fields(self) -> dict[str, str]:
+        """Fields without effect under this config, and why (a sweep over one is refused)."""
+        if self.obstacle_radius_range is not None:
+            return {"obstacle_radius": f"obstacle_radius_range={self.obstacle_radius_range!r} draws the radii"}
+        return {}
 
     observation: tuple[str, ...] = ("joint_pos", "ee_pos", "target_pos", "ee_to_target", "obstacle_pos",
                                     "link_obstacle_dist")

@@ -4,7 +4,7 @@ import dataclasses
 
 import pytest
 
-from agents import evaluation
+from agents import evaluation, sweep
 from benchmarks import eval_settings
 from tools import literal_or_text
 
@@ -38,18 +38,16 @@ def test_a_name_stays_text():
 @pytest.fixture(scope="module")
 def rows():
     """Episodes of 1 step (no arm gets to its target) and of the trained 125, 8 episodes each, on the CPU."""
-    rows, traced = eval_settings.evaluate(SHIPPED, "episode_length", ["1", "125"], num_envs=8, seeds=1,
-                                          log=lambda line: None)
+    rows, _ = eval_settings.evaluate(SHIPPED, "episode_length", ["1", "125"], num_envs=8, seeds=1, log=lambda line: None)
     return rows
 
 
-def test_a_traced_field_is_said_to_be_one():
-    _, traced = eval_settings.evaluate(SHIPPED, "obstacle_radius", ["0.1"], num_envs=1, seeds=1, log=lambda line: None)
-    assert traced is True
+def test_the_obstacle_radius_is_a_program_argument():
+    assert sweep.traced(_base()[1], "obstacle_radius") is True
 
 
-def test_a_field_that_shapes_the_program_is_not_traced():
-    assert eval_settings.sweep.traced(_base()[1], "episode_length") is False
+def test_the_episode_length_is_not_a_program_argument():
+    assert sweep.traced(_base()[1], "episode_length") is False
 
 
 def test_a_one_step_episode_reaches_nothing(rows):
