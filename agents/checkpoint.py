@@ -15,7 +15,14 @@ import re
 
 import jax
 import jax.numpy as jnp
-import orbax.checkpoint as ocp
+
+
+def _ocp():
+    """Orbax's checkpoint API, imported when a checkpoint is first written or read: evaluating a policy export never
+    needs it."""
+    import orbax.checkpoint as ocp
+
+    return ocp
 
 
 def _leaf_name(index: int, path) -> str:
@@ -58,16 +65,19 @@ class Checkpointer:
 
     def __init__(self, directory: str, keep: int = 3):
         self.directory = os.path.abspath(directory)
+        ocp = _ocp()
         options = ocp.CheckpointManagerOptions(max_to_keep=keep, create=True, enable_async_checkpointing=False)
         self.manager = ocp.CheckpointManager(self.directory, options=options, item_names=("state", "config"))
+        self.args = ocp.args
+        """Orbax's save and restore arguments."""
 
     def latest_step(self) -> int | None:
         return self.manager.latest_step()
 
     def save(self, step: int, state, config_dict: dict) -> None:
         self.manager.save(
-            step, args=ocp.args.Composite(state=ocp.args.StandardSave(_nonempty_leaves(state)),
-                                          config=ocp.args.JsonSave(config_dict)),
+            step, args=self.args.Composite(state=self.args.StandardSave(_nonempty_leaves(state)),
+                                           config=self.args.JsonSave(config_dict)),
             force=True,
         )
         self.manager.wait_until_finished()
@@ -75,8 +85,8 @@ class Checkpointer:
     def restore(self, step: int, abstract_state):
         """The state saved at `step`, placed with the shardings of `abstract_state`."""
         restored = self.manager.restore(
-            step, args=ocp.args.Composite(state=ocp.args.StandardRestore(_nonempty_leaves(abstract_state)),
-                                          config=ocp.args.JsonRestore())
+            step, args=self.args.Composite(state=self.args.StandardRestore(_nonempty_leaves(abstract_state)),
+                                           config=self.args.JsonRestore())
         )
         return _rebuild(abstract_state, lambda name, _: restored.state[name]), restored.config
 
@@ -84,7 +94,7 @@ class Checkpointer:
         """The leaves of `abstract_state` read from the state saved at `step` by their tree path, whatever else it
         holds and in whichever order: a learner out of a checkpoint whose env state another env version wrote.
         ValueError naming a leaf the checkpoint lacks or holds with another shape or dtype."""
-        saved = self.manager.restore(step, args=ocp.args.Composite(state=ocp.args.StandardRestore())).state
+        saved = self.manager.restore(step, args=self.args.Composite(state=self.args.StandardRestore())).state
         by_path = {name[5:]: value for name, value in saved.items()}  # the position prefix dropped
         if len(by_path) != len(saved):
             raise ValueError(f"checkpoint {self.step_dir(step)} names two leaves alike: allowed is unique tree paths.")
@@ -101,7 +111,7 @@ class Checkpointer:
         return _rebuild(abstract_state, value_of)
 
     def restore_config(self, step: int) -> dict:
-        return self.manager.restore(step, args=ocp.args.Composite(config=ocp.args.JsonRestore())).config
+        return self.manager.restore(step, args=self.args.Composite(config=self.args.JsonRestore())).config
 
     def step_dir(self, step: int) -> str:
         return os.path.join(self.directory, str(step))

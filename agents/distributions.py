@@ -18,9 +18,9 @@ bounds. `tests/test_agents_units.py` checks both against each other in the inter
 
 from __future__ import annotations
 
+import functools
 import math
 
-import distrax
 import jax
 import jax.numpy as jnp
 
@@ -36,8 +36,14 @@ class TanhNormal:
     def __init__(self, mean: jax.Array, std: jax.Array):
         self.mean = mean
         self.std = std
-        self.base = distrax.MultivariateNormalDiag(mean, std)
-        """The pre-squash Gaussian."""
+
+    @functools.cached_property
+    def base(self):
+        """The pre-squash Gaussian; distrax (with TensorFlow Probability's JAX substrate, about a second to import) is
+        imported on first use, which an evaluation acting by the mode never makes."""
+        import distrax
+
+        return distrax.MultivariateNormalDiag(self.mean, self.std)
 
     @classmethod
     def from_network_output(cls, output: jax.Array, min_std: float = 1e-3) -> "TanhNormal":
