@@ -56,7 +56,8 @@ with MuJoCo's offscreen renderer (`envs.render`; headless: EGL or OSMesa, chosen
 automatically, or set MUJOCO_GL). Needs the `viz` extra (imageio, imageio-ffmpeg).
 
 Compiled programs go to JAX's persistent compilation cache (`.jax_cache/` in the checkout, or
-$JAX_COMPILATION_CACHE_DIR; set it empty for none): a second evaluation of a setting skips compiling.
+$JAX_COMPILATION_CACHE_DIR; set it empty for none): a second evaluation of a setting skips compiling, and, from
+its traced programs kept in the cache's `programs/` folder (`agents.program_store`), tracing.
 The JSON's `wall_seconds` says where the time went: before the evaluations (imports, devices, loading), in them
 (compiling and running), and in all.
 
@@ -82,7 +83,7 @@ IMPORTED = time.perf_counter()
 import tyro  # noqa: E402
 
 import envs  # noqa: E402
-from agents import baselines, evaluation, intervals, planner as planners, provenance, xla_flags  # noqa: E402
+from agents import baselines, evaluation, intervals, planner as planners, program_store, provenance, xla_flags  # noqa: E402
 from agents import logdir as logdirs  # noqa: E402
 from tools import run_cli  # noqa: E402
 
@@ -362,5 +363,6 @@ def write_video(path: str, policy, env_name: str, env_config, num_envs: int, see
 
 
 if __name__ == "__main__":
-    xla_flags.compilation_cache()  # a second evaluation of the same setting loads its program instead of compiling
+    cache = xla_flags.compilation_cache()  # a second evaluation of the same setting loads its program instead of compiling
+    program_store.use(os.path.join(cache, "programs") if cache else None)  # ... and skips tracing it
     run_cli(main)

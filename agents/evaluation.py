@@ -29,7 +29,7 @@ import jax
 import numpy as np
 
 import envs
-from agents import baselines, driver, export, intervals, planner as planners, registry
+from agents import baselines, driver, export, intervals, planner as planners, program_store, registry
 from agents.compatibility import LAYOUT_FIELDS, check, check_compatible, unseen_constants  # noqa: F401 (evaluation.check, ...)
 from envs import physics
 from agents.loop import make_evaluate, make_evaluate_stacked
@@ -203,8 +203,11 @@ def _evaluator(env_name: str, env_config, algo_config, obs_size: int, act_size: 
     first episode counts, and its poses are recorded for rendering. `stochastic`: actions drawn from the policy's
     distribution (a fresh key per step) instead of its mode; `planner`: the MPPI planner with these options acts."""
     env = envs.wrap(envs.registry.build(env_name, env_config), autoreset=False)  # checked by `_program`
-    return Program(env, jax.jit(evaluate_fn(env, algo_config, obs_size, act_size, num_envs, env_config.episode_length,
-                                             last_steps, stochastic, planner)))
+    fn = jax.jit(evaluate_fn(env, algo_config, obs_size, act_size, num_envs, env_config.episode_length, last_steps,
+                             stochastic, planner))
+    described = ("evaluation", env_name, env_config, algo_config, obs_size, act_size, num_envs, last_steps, stochastic,
+                 planner)
+    return Program(env, program_store.Stored(fn, described))
 
 
 def _program(policy: Policy, env_name: str, env_config, num_envs: int, last_steps: int, stochastic: bool,
