@@ -238,6 +238,17 @@ def test_time_to_result_cell_shows_one_number_where_the_bounds_round_alike():
         "101 s with the compilation cache (2 seeds);")
 
 
+def test_eval_wall_cell_spans_the_cached_processes():
+    report = {"wall_seconds": {"cold": 40.62, "cache": 15.64, "cache2": 15.71}}
+    assert rc.eval_wall_cell(report) == "15.6-15.7 s with the compilation cache, 40.6 s into an empty one"
+
+
+def test_eval_settings_cell_lists_the_further_settings_in_order():
+    report = {"field": "obstacle_radius", "settings": [{"wall_seconds": 10.6}, {"wall_seconds": 0.81},
+                                                       {"wall_seconds": 4.72}]}
+    assert rc.eval_settings_cell(report) == "0.8, 4.7 s per further obstacle_radius (10.6 s the first, loading the checkpoint)"
+
+
 def test_time_to_result_cell_refuses_reports_of_two_presets():
     with pytest.raises(ValueError, match="differ in preset"):
         rc.time_to_result_cell([_ttr_report(100.0), _ttr_report(100.0, preset="ur5e-reach-ppo")], [])

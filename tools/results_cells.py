@@ -136,6 +136,27 @@ def time_to_result_cell(reports: list[dict], cold_seeds: list[int]) -> str:
     return ", ".join(cells) + f"; {sum(s['reached_target'] for s in seeds)} of {len(seeds)} evaluations at the target"
 
 
+def per_gpu_count(rows: list[dict]) -> str:
+    """"893,471 on 1 GPU, 1,627,793 on 2": a train_throughput report's training rate per device count (no variants)."""
+    rates = [(r["devices"], thousands(r["train_steps_per_s"])) for r in rows if r.get("variant") is None]
+    return ", ".join(f"{rate} on {n}" + (" GPU" if i == 0 else "") for i, (n, rate) in enumerate(rates))
+
+
+def eval_wall_cell(report: dict) -> str:
+    """eval.py's wall clock per process from a wall-clock report (`wall_seconds`: cold, cache[, cache2, ...])."""
+    wall = report["wall_seconds"]
+    cached = [v for k, v in wall.items() if k.startswith("cache")]
+    low, high = min(cached), max(cached)
+    return f"{low:.1f}{'' if low == high else f'-{high:.1f}'} s with the compilation cache, {wall['cold']:.1f} s into an empty one"
+
+
+def eval_settings_cell(report: dict) -> str:
+    """benchmarks/eval_settings.py's seconds per further setting in one process, in the order evaluated."""
+    rows = report["settings"]
+    further = ", ".join(f"{row['wall_seconds']:.1f}" for row in rows[1:])
+    return f"{further} s per further {report['field']} ({rows[0]['wall_seconds']:.1f} s the first, loading the checkpoint)"
+
+
 def paper_pct(value: float | None) -> str:
     """'96.1 %' from the paper's rate 0.961."""
     return "" if value is None else f"{100 * value:.1f} %"

@@ -35,7 +35,8 @@ from tools.paper_tables import WORKSPACE_NAMES
 from tools.results_cells import (PAPER_BASELINES, PAPER_OBSTACLE, PAPER_ROWS, PAPER_THROUGHPUT,
                                  PAPER_WORKSPACE, ROOT, Context, seed_stats, train_config, collisions,
                                  listed_table, markdown, millions, paper_action_space, paper_collisions, paper_pct,
-                                 pct, rate, runs, thousands, time_to_result_cell)
+                                 pct, rate, runs, thousands, time_to_result_cell, eval_settings_cell,
+                                 eval_wall_cell, per_gpu_count)
 
 # ------------------------------------------------------------------------------------------------
 # The studies: the rows of the tables below are listed in results/index.json.
@@ -143,19 +144,18 @@ def readme_table(ctx: Context) -> list[list[str]]:
                  "", f"{thousands(env['ur5e-reach']['steps_per_s'])} / {thousands(env['ur5e-reach-avoid']['steps_per_s'])}"])
     train = ctx.json("throughput/train_throughput.json")
     rows.append([f"UR5e reach PPO training env steps/s, 1 seed, 8,192 envs per GPU ({train['meta']['date']})", "", "",
-                 _per_gpu_count(train["rows"])])
+                 per_gpu_count(train["rows"])])
     sac = ctx.json(readme["sac_fast_throughput_file"])  # benchmarks/train_throughput.py on the fast SAC preset
     row = next(r for r in sac["rows"] if r["setting"] == "1dev")
     rows.append([f"UR5e reach fast SAC training env steps/s, 1 seed, {row['num_envs']:,} envs per GPU ({sac['meta']['date']})",
-                 "", "", _per_gpu_count(sac["rows"])])
+                 "", "", per_gpu_count(sac["rows"])])
     rows.append(_time_to_result_row(ctx, readme))
+    wall, sweep = ctx.json(readme["eval_wall_clock_file"]), ctx.json(readme["eval_settings_file"])
+    rows.append([f"eval.py on a shipped checkpoint (`ur5e-reach-ppo`, 5 seeds x 4,096 episodes), wall clock of the process ({wall['date']})",
+                 "", "", eval_wall_cell(wall)])
+    rows.append([f"A further env setting in one process (`benchmarks/eval_settings`, Panda reach-avoid policy, "
+                 f"{sweep['num_envs']:,} episodes; {sweep['date']})", "", "", eval_settings_cell(sweep)])
     return rows
-
-
-def _per_gpu_count(rows: list[dict]) -> str:
-    """"893,471 on 1 GPU, 1,627,793 on 2": a train_throughput report's training rate per device count (no variants)."""
-    rates = [(r["devices"], thousands(r["train_steps_per_s"])) for r in rows if r.get("variant") is None]
-    return ", ".join(f"{rate} on {n}" + (" GPU" if i == 0 else "") for i, (n, rate) in enumerate(rates))
 
 
 def _time_to_result_row(ctx: Context, readme: dict) -> list[str]:
