@@ -51,13 +51,18 @@ def _nonempty_leaves(tree) -> dict:
     return out
 
 
-def write_atomic(path: str, text: str) -> None:
-    """Writes `text` to `path` through a temporary file and a rename: a reader (another worker of
-    `tools.experiments run --parallel` reading the run's parts) sees the old file or the whole new one."""
+def write_atomic(path: str, text: str | bytes) -> None:
+    """Writes `text` (or bytes) to `path` through a temporary file and a rename: a reader (another worker of
+    `tools.experiments run --parallel` reading the run's parts) sees the old file or the whole new one; a failed
+    write leaves no temporary file."""
     tmp = f"{path}.tmp-{os.getpid()}"
-    with open(tmp, "w") as f:
-        f.write(text)
-    os.replace(tmp, path)
+    try:
+        with open(tmp, "wb" if isinstance(text, bytes) else "w") as f:
+            f.write(text)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
 
 
 class Checkpointer:

@@ -24,7 +24,6 @@ import importlib.util
 import os
 import pathlib
 import shutil
-import tempfile
 import threading
 import warnings
 from typing import Callable
@@ -32,6 +31,7 @@ from typing import Callable
 import jax
 
 import envs
+from agents.checkpoint import write_atomic
 from envs.robots.base import ASSETS
 
 SOURCES = (pathlib.Path(envs.__file__).parent, pathlib.Path(__file__).resolve().parent, ASSETS)
@@ -113,7 +113,7 @@ class Stored:
         self.calls: dict = {}
         """Argument signature -> the callable of flat arguments that runs it."""
         self.loaded = 0
-        """Programs read from the store rather than traced (tests and benchmarks count them)."""
+        """Programs read from the store rather than traced (what tests/test_program_store.py counts)."""
 
     def __call__(self, *args):
         if _folder is None:
@@ -163,18 +163,10 @@ def _read(path: str) -> bytes | None:
 
 
 def _write(path: str, blob: bytes) -> None:
-    """`blob` to `path` through a temporary file and a rename (processes may share the store); a folder that cannot
-    be written is warned about, and the evaluation goes on."""
-    tmp = None
+    """`blob` to `path` atomically (processes may share the store); a folder that cannot be written is warned
+    about, and the evaluation goes on."""
     try:
         os.makedirs(os.path.dirname(path), exist_ok=True)
-        handle, tmp = tempfile.mkstemp(dir=os.path.dirname(path), suffix=".tmp")
-        with os.fdopen(handle, "wb") as f:
-            f.write(blob)
-        os.replace(tmp, path)
-        tmp = None
+        write_atomic(path, blob)
     except OSError as error:
         warnings.warn(f"the evaluation program could not be kept in {path}: {error}")
-    finally:
-        if tmp is not None and os.path.exists(tmp):
-            os.unlink(tmp)

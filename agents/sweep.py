@@ -19,7 +19,7 @@ from __future__ import annotations
 import collections
 import dataclasses
 import functools
-from typing import Any, Callable
+from typing import Callable
 
 import jax
 import numpy as np
@@ -34,13 +34,10 @@ def traced(config, field: str) -> bool:
 
 
 @dataclasses.dataclass
-class _Entry:
-    """A cached program: the batched env it was built on, its jitted `evaluate(params, key, value)`, the trained-seed
-    counts it ran with (`evaluation.Program.compiled`) and how often it was traced."""
+class _Entry(evaluation.Program):
+    """A cached program: `evaluation.Program` whose `evaluate(params, key, value)` takes the field's value, and how
+    often it was traced (what tests/test_sweep.py counts)."""
 
-    env: Any
-    evaluate: Callable
-    compiled: set = dataclasses.field(default_factory=set)
     traces: int = 0
 
 
@@ -110,7 +107,7 @@ def run(policy: evaluation.Policy, env_name: str, field: str, configs: list, num
     evaluation.check_request(policy, num_envs, eval_seeds, stochastic)
     built = []
     for config in configs:
-        env = envs.from_config(env_name, config)
+        env = envs.registry.build(env_name, config)  # checked by `check`
         evaluation.check_compatible(policy, env_name, env, allow_env_mismatch)
         built.append(env)
     kw = dict(num_envs=num_envs, eval_seeds=eval_seeds, last_steps=last_steps, stochastic=stochastic,

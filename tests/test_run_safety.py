@@ -398,3 +398,12 @@ def test_run_files_are_replaced_whole(tmp_path):
         assert reader.read() == "old " * 1000  # written in place, this handle would see the truncated new text
     assert path.read_text() == "new"
     assert os.listdir(tmp_path) == ["eval.json"]
+
+
+def test_a_failed_replace_leaves_no_temporary_file(tmp_path):
+    from agents.checkpoint import write_atomic
+
+    (tmp_path / "taken").mkdir()  # a folder where the file should go: the rename fails after the write
+    with pytest.raises(OSError):
+        write_atomic(str(tmp_path / "taken"), b"program")
+    assert os.listdir(tmp_path) == ["taken"]
