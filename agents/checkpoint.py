@@ -10,6 +10,8 @@ chunk donates its input state, so the arrays must be written before the next chu
 
 from __future__ import annotations
 
+import asyncio
+import gc
 import os
 import re
 
@@ -65,6 +67,28 @@ def write_atomic(path: str, text: str | bytes) -> None:
             os.unlink(tmp)
 
 
+def _close_abandoned_reads() -> int:
+    """Closes, quietly, the reads a failed orbax restore left pending; returns how many. When one array fails to read
+    (a damaged file), orbax closes its event loop with the other reads' tasks pending and the gather's error
+    unretrieved; each would print at some later garbage collection ("Exception ignored in <coroutine ...>", "Task
+    was destroyed but it is pending", "exception was never retrieved"), after the restore has reported the error.
+    The errors of finished futures of closed loops are marked retrieved: no loop is left to report them."""
+    closed = 0
+    for future in [obj for obj in gc.get_objects() if isinstance(obj, asyncio.Future) and obj.get_loop().is_closed()]:
+        if not future.done():
+            code = getattr(future.get_coro(), "cr_code", None) if isinstance(future, asyncio.Task) else None
+            if code is not None and "orbax" in code.co_filename:
+                future._log_destroy_pending = False  # asyncio's switch for that line (it has no public one)
+                try:
+                    future.get_coro().close()
+                except Exception:  # orbax's read turns the close into its read error, already reported
+                    pass
+                closed += 1
+        elif not future.cancelled():
+            future.exception()  # marks it retrieved
+    return closed
+
+
 class Checkpointer:
     """Saves and restores `TrainState`s under `<directory>`, keeping the newest `keep`."""
 
@@ -87,19 +111,25 @@ class Checkpointer:
         )
         self.manager.wait_until_finished()
 
+    def _read(self, step: int, **items):
+        """Orbax's restore of `items` at `step`; a failure propagates after `_close_abandoned_reads`."""
+        try:
+            return self.manager.restore(step, args=self.args.Composite(**items))
+        except Exception:
+            _close_abandoned_reads()
+            raise
+
     def restore(self, step: int, abstract_state):
         """The state saved at `step`, placed with the shardings of `abstract_state`."""
-        restored = self.manager.restore(
-            step, args=self.args.Composite(state=self.args.StandardRestore(_nonempty_leaves(abstract_state)),
-                                           config=self.args.JsonRestore())
-        )
+        restored = self._read(step, state=self.args.StandardRestore(_nonempty_leaves(abstract_state)),
+                              config=self.args.JsonRestore())
         return _rebuild(abstract_state, lambda name, _: restored.state[name]), restored.config
 
     def restore_matching(self, step: int, abstract_state):
         """The leaves of `abstract_state` read from the state saved at `step` by their tree path, whatever else it
         holds and in whichever order: a learner out of a checkpoint whose env state another env version wrote.
         ValueError naming a leaf the checkpoint lacks or holds with another shape or dtype."""
-        saved = self.manager.restore(step, args=self.args.Composite(state=self.args.StandardRestore())).state
+        saved = self._read(step, state=self.args.StandardRestore()).state
         by_path = {name[5:]: value for name, value in saved.items()}  # the position prefix dropped
         if len(by_path) != len(saved):
             raise ValueError(f"checkpoint {self.step_dir(step)} names two leaves alike: allowed is unique tree paths.")
@@ -116,7 +146,7 @@ class Checkpointer:
         return _rebuild(abstract_state, value_of)
 
     def restore_config(self, step: int) -> dict:
-        return self.manager.restore(step, args=self.args.Composite(config=self.args.JsonRestore())).config
+        return self._read(step, config=self.args.JsonRestore()).config
 
     def step_dir(self, step: int) -> str:
         return os.path.join(self.directory, str(step))
