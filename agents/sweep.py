@@ -16,7 +16,6 @@ traced once per group of values that shape the program alike (`ArmEnv.program_ke
 
 from __future__ import annotations
 
-import collections
 import dataclasses
 import functools
 from typing import Callable
@@ -26,6 +25,7 @@ import numpy as np
 
 import envs
 from agents import evaluation
+from envs.cache import LRU
 
 
 def traced(config, field: str) -> bool:
@@ -41,10 +41,9 @@ class _Entry(evaluation.Program):
     traces: int = 0
 
 
-_PROGRAMS: collections.OrderedDict = collections.OrderedDict()
-"""(env name, config without the field, field, program key, network and evaluation options) -> `_Entry`; the most
-recently used last."""
 PROGRAM_CACHE_SIZE = 16
+_PROGRAMS = LRU(PROGRAM_CACHE_SIZE)
+"""(env name, config without the field, field, program key, network and evaluation options) -> `_Entry`."""
 
 
 def _traced_evaluator(env_name: str, env_config, field: str, env, policy: evaluation.Policy, num_envs: int,
@@ -57,7 +56,8 @@ def _traced_evaluator(env_name: str, env_config, field: str, env, policy: evalua
     base = env.unwrapped
     key = (env_name, dataclasses.replace(env_config, **{field: None}), field, base.program_key(), algo_config, sizes,
            num_envs, last_steps, stochastic, planner)
-    if key not in _PROGRAMS:
+
+    def make() -> _Entry:
         entry = _Entry(envs.wrap(base, autoreset=False), None)
 
         def evaluate(params, rng, value):
@@ -67,11 +67,9 @@ def _traced_evaluator(env_name: str, env_config, field: str, env, policy: evalua
                                           last_steps, stochastic, planner)(params, rng)
 
         entry.evaluate = jax.jit(evaluate)
-        _PROGRAMS[key] = entry
-        while len(_PROGRAMS) > PROGRAM_CACHE_SIZE:
-            _PROGRAMS.popitem(last=False)
-    _PROGRAMS.move_to_end(key)
-    return _PROGRAMS[key]
+        return entry
+
+    return _PROGRAMS.get(key, make)
 
 
 def check(env_name: str, field: str, configs: list) -> None:

@@ -10,24 +10,22 @@ Both step the same MJCF model with the same options; the task logic around them 
 
 from __future__ import annotations
 
-import collections
 import contextlib
 import functools
-import threading
 
 import jax
 import jax.numpy as jnp
 from mujoco import mjx
 
 from envs import fast_mjx
+from envs.cache import LRU
 from envs.config import BACKENDS  # noqa: F401  (the allowed values of ReachConfig.backend)
 from envs.native import NativePhysics
 
-_STEPS: collections.OrderedDict = collections.OrderedDict()
-"""(id of an MJX model, fast_mjx active) -> (the model, its jitted `mjx.step`); the most recently used last."""
 STEP_CACHE_SIZE = 16
 """MJX models whose jitted step `mjx_step` keeps (robots built alike share one model: envs/robots/base.py)."""
-_STEPS_LOCK = threading.Lock()  # the driver compiles its evaluation in a thread while training traces
+_STEPS = LRU(STEP_CACHE_SIZE)
+"""(id of an MJX model, fast_mjx active) -> (the model, its jitted `mjx.step`)."""
 
 
 def mjx_step(model):
@@ -35,15 +33,10 @@ def mjx_step(model):
     step traced again, for another task setting of the same robot (a sweep over obstacle sizes, a new training
     program), reuses MuJoCo's traced step instead of tracing it anew, which is most of an arm step's tracing.
     Called inside a trace, it is inlined by XLA like any nested jit."""
-    key = (id(model), fast_mjx.active())
-    with _STEPS_LOCK:
-        entry = _STEPS.get(key)
-        if entry is None or entry[0] is not model:  # the model is kept, so its id is not reused while cached
-            entry = _STEPS[key] = (model, jax.jit(functools.partial(_step, model, key[1])))
-            while len(_STEPS) > STEP_CACHE_SIZE:
-                _STEPS.popitem(last=False)
-        _STEPS.move_to_end(key)
-        return entry[1]
+    fast = fast_mjx.active()
+    entry = _STEPS.get((id(model), fast), lambda: (model, jax.jit(functools.partial(_step, model, fast))),
+                       valid=lambda entry: entry[0] is model)  # the model is kept, so its id is not reused while cached
+    return entry[1]
 
 
 def _step(model, fast: bool, data):

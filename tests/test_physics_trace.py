@@ -1,13 +1,12 @@
 """envs.physics.mjx_step: MuJoCo's step traced once per MJX model, reused by every env step traced after."""
 
-import collections
-
 import jax
 import pytest
 from mujoco import mjx
 
 import envs
 from envs import fast_mjx, physics
+from envs.cache import LRU
 
 
 def test_a_second_setting_of_the_same_robot_reuses_mujocos_traced_step(monkeypatch):
@@ -19,7 +18,7 @@ def test_a_second_setting_of_the_same_robot_reuses_mujocos_traced_step(monkeypat
         traced.append(1)
         return step(model, data)
 
-    monkeypatch.setattr(physics, "_STEPS", collections.OrderedDict())
+    monkeypatch.setattr(physics, "_STEPS", LRU(physics.STEP_CACHE_SIZE))
     monkeypatch.setattr(physics.mjx, "step", counting_step)
     for radius in (0.05, 0.1):
         env = envs.make("ur5e-reach-avoid", backend="mjx", obstacle_radius=radius, substeps=1)

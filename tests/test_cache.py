@@ -1,0 +1,32 @@
+"""envs.cache.LRU: the bounded cache of traced functions."""
+
+import pytest
+
+from envs.cache import LRU
+
+
+def test_the_least_recently_used_entry_goes_first():
+    cache = LRU(2)
+    cache.get("a", lambda: 1)
+    cache.get("b", lambda: 2)
+    cache.get("a", lambda: 10)  # a used again: b is now the oldest
+    cache.get("c", lambda: 3)
+    assert cache.values() == [1, 3]
+
+
+def test_an_entry_is_made_once_while_cached():
+    cache, made = LRU(4), []
+    for _ in range(3):
+        cache.get("a", lambda: made.append(1) or len(made))
+    assert made == [1]
+
+
+def test_an_invalid_entry_is_made_again():
+    cache = LRU(4)
+    cache.get("a", lambda: "old")
+    assert cache.get("a", lambda: "new", valid=lambda entry: entry == "current") == "new"
+
+
+def test_a_size_below_one_is_refused():
+    with pytest.raises(ValueError, match="size=0"):
+        LRU(0)
