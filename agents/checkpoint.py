@@ -11,6 +11,7 @@ chunk donates its input state, so the arrays must be written before the next chu
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import gc
 import os
 import re
@@ -67,24 +68,31 @@ def write_atomic(path: str, text: str | bytes) -> None:
             os.unlink(tmp)
 
 
+def _orbax_dir() -> str:
+    """The folder of the orbax package, with a trailing separator."""
+    return os.path.dirname(os.path.dirname(_ocp().__file__)) + os.sep
+
+
+def _orbax_task(future: asyncio.Future) -> bool:
+    """Whether `future` is a task running one of orbax's coroutines."""
+    code = getattr(future.get_coro(), "cr_code", None) if isinstance(future, asyncio.Task) else None
+    return code is not None and code.co_filename.startswith(_orbax_dir())
+
+
 def _close_abandoned_reads() -> int:
     """Closes, quietly, the reads a failed orbax restore left pending; returns how many. When one array fails to read
     (a damaged file), orbax closes its event loop with the other reads' tasks pending and the gather's error
     unretrieved; each would print at some later garbage collection ("Exception ignored in <coroutine ...>", "Task
-    was destroyed but it is pending", "exception was never retrieved"), after the restore has reported the error.
-    The errors of finished futures of closed loops are marked retrieved: no loop is left to report them."""
+    was destroyed but it is pending", "exception was never retrieved"), after the restore has reported the error."""
     closed = 0
     for future in [obj for obj in gc.get_objects() if isinstance(obj, asyncio.Future) and obj.get_loop().is_closed()]:
-        if not future.done():
-            code = getattr(future.get_coro(), "cr_code", None) if isinstance(future, asyncio.Task) else None
-            if code is not None and "orbax" in code.co_filename:
-                future._log_destroy_pending = False  # asyncio's switch for that line (it has no public one)
-                try:
-                    future.get_coro().close()
-                except Exception:  # orbax's read turns the close into its read error, already reported
-                    pass
-                closed += 1
-        elif not future.cancelled():
+        if not future.done() and _orbax_task(future) and future.get_coro().cr_frame is not None:
+            future._log_destroy_pending = False  # asyncio's switch for that line (it has no public one)
+            with contextlib.suppress(Exception):  # orbax's read turns the close into its read error, already reported
+                future.get_coro().close()
+            closed += 1
+        elif future.done() and not future.cancelled() and (
+                _orbax_task(future) or any(_orbax_task(c) for c in getattr(future, "_children", ()))):  # a gather's
             future.exception()  # marks it retrieved
     return closed
 
@@ -116,7 +124,8 @@ class Checkpointer:
         try:
             return self.manager.restore(step, args=self.args.Composite(**items))
         except Exception:
-            _close_abandoned_reads()
+            with contextlib.suppress(Exception):  # the cleanup must not replace the restore's error
+                _close_abandoned_reads()
             raise
 
     def restore(self, step: int, abstract_state):
