@@ -7,10 +7,13 @@ import collections
 import threading
 from typing import Callable, Hashable
 
+_ABSENT = object()
+
 
 class LRU:
-    """At most `size` entries; `get(key, make)` returns the entry of `key`, made by `make()` when absent or when
-    `valid(entry)` is false (an entry made for another object that happened to get the same key)."""
+    """At most `size` entries; `get(key, make)` returns the entry of `key`, made by `make()` when absent. `make` runs
+    under the cache's lock: it should be cheap (wrapping a function in `jax.jit` is; tracing it is not) and must not
+    use the same cache."""
 
     def __init__(self, size: int):
         if size < 1:
@@ -19,10 +22,10 @@ class LRU:
         self._entries: collections.OrderedDict = collections.OrderedDict()
         self._lock = threading.Lock()  # the driver compiles its evaluation in a thread while training traces
 
-    def get(self, key: Hashable, make: Callable, valid: Callable = lambda entry: True):
+    def get(self, key: Hashable, make: Callable):
         with self._lock:
-            entry = self._entries.get(key)
-            if entry is None or not valid(entry):
+            entry = self._entries.get(key, _ABSENT)
+            if entry is _ABSENT:
                 entry = self._entries[key] = make()
                 while len(self._entries) > self.size:
                     self._entries.popitem(last=False)
@@ -35,7 +38,8 @@ class LRU:
             return list(self._entries.values())
 
     def __len__(self) -> int:
-        return len(self._entries)
+        with self._lock:
+            return len(self._entries)
 
     def clear(self) -> None:
         with self._lock:

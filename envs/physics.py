@@ -25,7 +25,8 @@ from envs.native import NativePhysics
 STEP_CACHE_SIZE = 16
 """MJX models whose jitted step `mjx_step` keeps (robots built alike share one model: envs/robots/base.py)."""
 _STEPS = LRU(STEP_CACHE_SIZE)
-"""(id of an MJX model, fast_mjx active) -> (the model, its jitted `mjx.step`)."""
+"""(id of an MJX model, fast_mjx active) -> its jitted `mjx.step`, which holds the model: a cached model stays alive,
+so its id names no other model while the entry exists."""
 
 
 def mjx_step(model):
@@ -34,9 +35,7 @@ def mjx_step(model):
     program), reuses MuJoCo's traced step instead of tracing it anew, which is most of an arm step's tracing.
     Called inside a trace, it is inlined by XLA like any nested jit."""
     fast = fast_mjx.active()
-    entry = _STEPS.get((id(model), fast), lambda: (model, jax.jit(functools.partial(_step, model, fast))),
-                       valid=lambda entry: entry[0] is model)  # the model is kept, so its id is not reused while cached
-    return entry[1]
+    return _STEPS.get((id(model), fast), lambda: jax.jit(functools.partial(_step, model, fast)))
 
 
 def _step(model, fast: bool, data):

@@ -21,10 +21,11 @@ def test_an_entry_is_made_once_while_cached():
     assert made == [1]
 
 
-def test_an_invalid_entry_is_made_again():
-    cache = LRU(4)
-    cache.get("a", lambda: "old")
-    assert cache.get("a", lambda: "new", valid=lambda entry: entry == "current") == "new"
+def test_a_cached_none_is_not_made_again():
+    cache, made = LRU(4), []
+    for _ in range(2):
+        cache.get("a", lambda: made.append(1))  # append returns None, the entry
+    assert made == [1]
 
 
 def test_a_size_below_one_is_refused():
