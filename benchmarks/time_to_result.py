@@ -86,12 +86,15 @@ def summary(rows: list[dict]) -> dict:
             "wall_max": float(wall.max()), "reached": int(sum(r["reached_target"] for r in rows))}
 
 
-def markdown(preset: str, target: float, rows: list[dict], stamp: dict, stop_at: float | None = None) -> str:
-    """The table of `rows` under a line naming the command, code version, device and date of `stamp`."""
+def markdown(preset: str, target: float, rows: list[dict], stamp: dict, stop_at: float | None = None,
+             xla_flags: str = "") -> str:
+    """The table of `rows` under a line naming the command, code version, device and date of `stamp` (and the
+    XLA_FLAGS the seeds ran with, when set)."""
     s = summary(rows)
     stop = "" if stop_at in (None, target) else f" (training stopped at {100 * stop_at:.1f} % success)"
+    flags = f" XLA_FLAGS: `{xla_flags}`." if xla_flags else ""
     lines = [f"`{preset}` to {100 * target:.1f} % reached{stop}", "",
-             f"Command: `{stamp['command']}`; code {stamp['code']}; {stamp['device']}; {stamp['date']}.", "",
+             f"Command: `{stamp['command']}`; code {stamp['code']}; {stamp['device']}; {stamp['date']}.{flags}", "",
              "| seed | wall clock (s) | training chunks (s) | first chunk (s, compiling included) | env steps | training success at the stop "
              "| evaluation reached | target met |",
              "|---:|---:|---:|---:|---:|---:|---:|---|"]
@@ -131,6 +134,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.stop_at is not None and not 0.0 < args.stop_at <= 1.0:
         raise ValueError(f"--stop-at={args.stop_at} is invalid: allowed is a success rate in (0, 1].")
     stop_at = args.target if args.stop_at is None else args.stop_at
+    xla_flags = os.environ.get("XLA_FLAGS", "")  # as the seeds' processes inherit them (agents/xla_flags.py adds its own)
     os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
@@ -142,13 +146,13 @@ def main(argv: list[str] | None = None) -> int:
                   f"evaluation {100 * rows[-1]['eval_success']:.1f} %", flush=True)
             stamp = provenance.stamp()
             report = {**stamp, "preset": args.preset, "target": args.target,
-                      "stop_at": stop_at, "train_options": extra,
-                      "cache_dir": args.cache_dir, "seeds": rows, "summary": summary(rows)}
+                      "stop_at": stop_at, "train_options": extra, "cache_dir": args.cache_dir,
+                      "xla_flags": xla_flags, "seeds": rows, "summary": summary(rows)}
             with open(args.out + ".json", "w") as f:  # after every seed: a run cut short keeps what it finished
                 json.dump(jsonable(report), f, indent=2)
             with open(args.out + ".md", "w") as f:
-                f.write(markdown(args.preset, args.target, rows, stamp, stop_at))
-    print(markdown(args.preset, args.target, rows, stamp, stop_at))
+                f.write(markdown(args.preset, args.target, rows, stamp, stop_at, xla_flags))
+    print(markdown(args.preset, args.target, rows, stamp, stop_at, xla_flags))
     return 0
 
 

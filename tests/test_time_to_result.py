@@ -113,3 +113,16 @@ def test_the_summary_uses_the_sample_std():
 def test_bad_options_are_refused_naming_them(args, field, tmp_path):
     with pytest.raises(ValueError, match=field):
         time_to_result.main(args + ["--out", str(tmp_path / "x")])
+
+
+def test_the_report_keeps_the_xla_flags_the_seeds_ran_with(one_seed):
+    _, report = one_seed
+    assert report["xla_flags"] == os.environ.get("XLA_FLAGS", "")
+
+
+def test_the_table_names_xla_flags_when_set():
+    row = {"seed": 1, "wall_seconds": 10.0, "training_seconds": 8.0, "first_log_seconds": 3.0, "first_log_env_steps": 5,
+           "env_steps": 50, "training_success": 0.9, "eval_success": 0.9, "reached_target": True}
+    stamp = {"command": "c", "code": "abc", "device": "CPU", "date": "2026-11-30"}
+    table = time_to_result.markdown("point-mass-ppo", 0.8, [row], stamp, xla_flags="--xla_gpu_autotune_level=0")
+    assert "XLA_FLAGS: `--xla_gpu_autotune_level=0`." in table
