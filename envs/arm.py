@@ -25,6 +25,11 @@ from envs.base import Env, State, check_action, check_state
 from envs.config import ReachConfig
 from envs.robots import Robot, first_valid
 
+_PART_SIZES: dict = {}
+"""`ArmEnv.observation_part_sizes`' key (what decides the sizes) -> the sizes."""
+PART_SIZES_KEPT = 256
+"""Configs whose part sizes are kept (a sweep builds one env per setting); past it the memo starts afresh."""
+
 LAST_DISTANCES = 10
 """Steps over which the final distance to the target is averaged (paper: last 10 steps)."""
 
@@ -95,7 +100,23 @@ class ArmEnv(Env):
     @functools.cached_property
     def observation_part_sizes(self) -> dict[str, int]:
         """Length of each configured observation part, in order: the size of its value in `observation_parts`
-        on a reset state, traced abstractly (nothing runs), so a part's name, value and size are one entry."""
+        on a reset state, traced abstractly (nothing runs), so a part's name, value and size are one entry. Envs
+        built alike (env class and its `observation_parts` and `_reset` as defined now, robot class and options,
+        config) share one tracing per process."""
+        cls = type(self)
+        key = (cls, cls.observation_parts, cls._reset, type(self.robot), self.robot.gravity_compensation,
+               self.robot.integrator, self.config)
+        try:
+            sizes = _PART_SIZES.get(key)
+        except TypeError:  # a config holding a traced value (`with_config`) is not hashable: traced each time
+            return self._traced_part_sizes()
+        if sizes is None:
+            if len(_PART_SIZES) >= PART_SIZES_KEPT:
+                _PART_SIZES.clear()
+            sizes = _PART_SIZES[key] = self._traced_part_sizes()
+        return dict(sizes)
+
+    def _traced_part_sizes(self) -> dict[str, int]:
         def parts(rng):
             state = self._reset(rng)
             data = state.pipeline_state
