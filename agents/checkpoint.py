@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
 import gc
 import os
 import re
@@ -68,6 +69,7 @@ def write_atomic(path: str, text: str | bytes) -> None:
             os.unlink(tmp)
 
 
+@functools.cache
 def _orbax_dir() -> str:
     """The folder of the orbax package, with a trailing separator."""
     return os.path.dirname(os.path.dirname(_ocp().__file__)) + os.sep
@@ -79,22 +81,19 @@ def _orbax_task(future: asyncio.Future) -> bool:
     return code is not None and code.co_filename.startswith(_orbax_dir())
 
 
-def _close_abandoned_reads() -> int:
-    """Closes, quietly, the reads a failed orbax restore left pending; returns how many. When one array fails to read
-    (a damaged file), orbax closes its event loop with the other reads' tasks pending and the gather's error
-    unretrieved; each would print at some later garbage collection ("Exception ignored in <coroutine ...>", "Task
-    was destroyed but it is pending", "exception was never retrieved"), after the restore has reported the error."""
-    closed = 0
+def _close_abandoned_reads() -> None:
+    """Closes, quietly, the reads a failed orbax restore left pending. When one array fails to read (a damaged file),
+    orbax closes its event loop with the other reads' tasks pending and the gather's error unretrieved; each would
+    print at some later garbage collection ("Exception ignored in <coroutine ...>", "Task was destroyed but it is
+    pending", "exception was never retrieved"), after the restore has reported the error."""
     for future in [obj for obj in gc.get_objects() if isinstance(obj, asyncio.Future) and obj.get_loop().is_closed()]:
         if not future.done() and _orbax_task(future) and future.get_coro().cr_frame is not None:
             future._log_destroy_pending = False  # asyncio's switch for that line (it has no public one)
             with contextlib.suppress(Exception):  # orbax's read turns the close into its read error, already reported
                 future.get_coro().close()
-            closed += 1
         elif future.done() and not future.cancelled() and (
                 _orbax_task(future) or any(_orbax_task(c) for c in getattr(future, "_children", ()))):  # a gather's
             future.exception()  # marks it retrieved
-    return closed
 
 
 class Checkpointer:
