@@ -22,13 +22,12 @@ import jax.numpy as jnp
 
 from envs import fast_mjx, physics, rewards, workspaces
 from envs.base import Env, State, check_action, check_state
+from envs.cache import LRU
 from envs.config import ReachConfig
 from envs.robots import Robot, first_valid
 
-_PART_SIZES: dict = {}
-"""`ArmEnv.observation_part_sizes`' key (what decides the sizes) -> the sizes."""
-PART_SIZES_KEPT = 256
-"""Configs whose part sizes are kept (a sweep builds one env per setting); past it the memo starts afresh."""
+_PART_SIZES = LRU(256)
+"""`ArmEnv.observation_part_sizes`' key (what decides the sizes) -> the sizes (a sweep builds an env per setting)."""
 
 LAST_DISTANCES = 10
 """Steps over which the final distance to the target is averaged (paper: last 10 steps)."""
@@ -107,14 +106,10 @@ class ArmEnv(Env):
         key = (cls, cls.observation_parts, cls._reset, type(self.robot), self.robot.gravity_compensation,
                self.robot.integrator, self.config)
         try:
-            sizes = _PART_SIZES.get(key)
+            hash(key)
         except TypeError:  # a config holding a traced value (`with_config`) is not hashable: traced each time
             return self._traced_part_sizes()
-        if sizes is None:
-            if len(_PART_SIZES) >= PART_SIZES_KEPT:
-                _PART_SIZES.clear()
-            sizes = _PART_SIZES[key] = self._traced_part_sizes()
-        return dict(sizes)
+        return dict(_PART_SIZES.get(key, self._traced_part_sizes))
 
     def _traced_part_sizes(self) -> dict[str, int]:
         def parts(rng):

@@ -1,5 +1,6 @@
-"""A bounded, thread-safe cache of traced functions, the least recently used dropped first: MuJoCo's jitted step
-per MJX model (envs/physics.py) and the evaluation program per env shape (agents/sweep.py)."""
+"""A bounded, thread-safe cache of what tracing makes, the least recently used dropped first: MuJoCo's jitted step
+per MJX model (envs/physics.py), the evaluation program per env shape (agents/sweep.py), the observation sizes per
+env config (envs/arm.py)."""
 
 from __future__ import annotations
 
@@ -12,8 +13,8 @@ _ABSENT = object()
 
 class LRU:
     """At most `size` entries; `get(key, make)` returns the entry of `key`, made by `make()` when absent. `make` runs
-    under the cache's lock: it should be cheap (wrapping a function in `jax.jit` is; tracing it is not) and must not
-    use the same cache."""
+    outside the cache's lock (it may trace, or use the cache): two threads asking for one key at once may both make
+    it, and the entry stored first is the one both get."""
 
     def __init__(self, size: int):
         if size < 1:
@@ -25,11 +26,15 @@ class LRU:
     def get(self, key: Hashable, make: Callable):
         with self._lock:
             entry = self._entries.get(key, _ABSENT)
-            if entry is _ABSENT:
-                entry = self._entries[key] = make()
-                while len(self._entries) > self.size:
-                    self._entries.popitem(last=False)
+            if entry is not _ABSENT:
+                self._entries.move_to_end(key)
+                return entry
+        made = make()
+        with self._lock:
+            entry = self._entries.setdefault(key, made)
             self._entries.move_to_end(key)
+            while len(self._entries) > self.size:
+                self._entries.popitem(last=False)
             return entry
 
     def values(self) -> list:

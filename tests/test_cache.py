@@ -1,5 +1,7 @@
 """envs.cache.LRU: the bounded cache of traced functions."""
 
+import threading
+
 import pytest
 
 from envs.cache import LRU
@@ -31,3 +33,17 @@ def test_a_cached_none_is_not_made_again():
 def test_a_size_below_one_is_refused():
     with pytest.raises(ValueError, match="size=0"):
         LRU(0)
+
+
+def test_make_may_use_the_cache():
+    cache, results = LRU(4), []
+    worker = threading.Thread(target=lambda: results.append(cache.get("a", lambda: cache.get("b", lambda: 2) + 1)))
+    worker.start()
+    worker.join(timeout=10)  # a make run under the lock would wait on it forever
+    assert results == [3]
+
+
+def test_the_entry_stored_first_is_kept():
+    cache = LRU(4)
+    first = cache.get("a", lambda: cache.get("a", lambda: "inner") and "outer")  # the inner make stores first
+    assert first == "inner"

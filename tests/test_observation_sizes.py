@@ -9,6 +9,7 @@ import pytest
 
 import envs
 from envs import arm
+from envs.cache import LRU
 from envs.tasks.reach import Reach
 
 OBS = ("joint_pos", "ee_pos")
@@ -17,7 +18,7 @@ OBS = ("joint_pos", "ee_pos")
 @pytest.fixture
 def resets(monkeypatch):
     """Counts traced resets, starting from an empty memo."""
-    monkeypatch.setattr(arm, "_PART_SIZES", {})
+    monkeypatch.setattr(arm, "_PART_SIZES", LRU(8))
     count, reset = [], arm.ArmEnv._reset
 
     def counting_reset(self, rng):
