@@ -209,6 +209,8 @@ register(Experiment(
     (_fast("ur5e-reach", "ur5e-reach", ""),
      _fast("ur5e-reach-8192", "ur5e-reach", "8,192 envs (half the gradient steps per env step)",
            {"algo.num_envs": 8192}),
+     _fast("ur5e-reach-8192-170m", "ur5e-reach", "8,192 envs, 170M steps (about the preset's wall clock)",
+           {"algo.num_envs": 8192}, num_timesteps=170_000_000, seeds=2),
      _fast("panda-reach", "panda-reach", "paper's observation", _PAPER_OBS, num_timesteps=60_000_000),
      _fast("ur5e-reach-avoid", "ur5e-reach-avoid", "paper's observation", _PAPER_AVOID_OBS),
      _fast("panda-reach-avoid", "panda-reach-avoid", "paper's observation", _PAPER_AVOID_OBS, num_timesteps=_100M),
@@ -235,7 +237,7 @@ register(Experiment(
            num_timesteps=200_000_000, seeds=5))
     + tuple(Run(f"{env}-ppo", f"{env}-ppo", label=f"{env}, PPO", paper=paper) for env, paper in _PPO_ROWS.items()),
     metrics=_AVOID_METRICS + ("wall_clock", "steps_per_second"), curves=("episode/target_reached",),
-    curve_groups=(("UR5e reach", ("ur5e-reach", "ur5e-reach-8192", "ur5e-reach-ppo")),
+    curve_groups=(("UR5e reach", ("ur5e-reach", "ur5e-reach-8192", "ur5e-reach-8192-170m", "ur5e-reach-ppo")),
                   ("Panda reach", ("panda-reach", "panda-reach-100m", "panda-reach-f32-100m", "panda-reach-plus",
                                    "panda-reach-plus-jl", "panda-reach-plus-ent14", "panda-reach-plus-200m",
                                    "panda-reach-ppo")),
