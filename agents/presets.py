@@ -50,6 +50,9 @@ SAC_FAST = SACConfig(num_envs=4096, batch_size=16_384, learning_rate=3e-4, disco
                      min_replay_size=4096 * 8, max_replay_size=4096 * 512, grad_updates_per_step=4, init_alpha=0.01,
                      layer_norm=True, n_step=3, distributional=True, num_atoms=101, v_min=-10.0, v_max=40.0,
                      max_grad_norm=0.0, q_hidden_sizes=(512, 512, 256), compute_dtype="bfloat16")
+# UR5e reach: 8,192 envs (one gradient step per 8,192 env steps, half the preset's) train at 1.7x the env steps per
+# second; given 170M steps they end above 4,096 envs at 100M in less wall clock (results/sac/fast).
+SAC_FAST_UR5E_REACH = dataclasses.replace(SAC_FAST, num_envs=8192)
 # Reach-avoid's semi-sparse reward is larger per step: a wider support.
 SAC_FAST_REACH_AVOID = dataclasses.replace(SAC_FAST, v_min=-20.0, v_max=120.0)
 # The buffer is left out of checkpoints (checkpoint_envs=False): saving and resuming take seconds and a resume
@@ -114,10 +117,10 @@ PRESETS: dict[str, Preset] = {
     "ur5e-reach-sac-limited": Preset("UR5e reach with SAC from the limited initial joint range (paper)", "ur5e-reach",
                                      SAC_PAPER, env=dict(init_range="limited"), run=dict(num_timesteps=40_000_000)),
     # Fast SAC (not in the paper): the same tasks and env options as the PPO presets.
-    "ur5e-reach-sac-fast": Preset("UR5e reach with fast SAC (4,096 envs, n-step, categorical critic), ur5e-reach-ppo's "
+    "ur5e-reach-sac-fast": Preset("UR5e reach with fast SAC (8,192 envs, n-step, categorical critic), ur5e-reach-ppo's "
                                   "env options + joint sin/cos and self-collision distances observed", "ur5e-reach",
-                                  SAC_FAST, env=dict(_UR5E_REACH, observation=_PLUS_REACH),
-                                  run=dict(num_timesteps=100_000_000, **_FAST_RUN)),
+                                  SAC_FAST_UR5E_REACH, env=dict(_UR5E_REACH, observation=_PLUS_REACH),
+                                  run=dict(num_timesteps=170_000_000, **_FAST_RUN)),
     "panda-reach-sac-fast": Preset("Panda reach with fast SAC (4,096 envs, n-step, categorical critic) + joint sin/cos and "
                                    "self-collision distances observed", "panda-reach", SAC_FAST,
                                    env=dict(observation=_PLUS_REACH), run=dict(num_timesteps=200_000_000, **_FAST_RUN)),
