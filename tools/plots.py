@@ -22,6 +22,7 @@ import argparse
 import csv
 import os
 import sys
+import textwrap
 
 import numpy as np
 
@@ -106,6 +107,10 @@ def curve(logdirs, metric: str, x: str = "env_steps",
     return xs, np.nanmean(values, 0), np.nanstd(values, 0), len(series)
 
 
+LEGEND_INCHES = 4.0
+"""Width of the column right of the panels that holds each row's legend."""
+
+
 def training_curves(runs: dict, metrics=None, out: str | None = None, title: str | None = None, band: float = 1.0,
                     x: str = "env_steps"):
     """One panel per metric, one line per run (label -> logdir or list of logdirs): the mean over
@@ -129,7 +134,8 @@ def curve_grid(groups: dict, metrics, axes=("env_steps",), out: str | None = Non
         if x not in X_AXES:
             raise ValueError(f"axes={tuple(axes)!r} holds {x!r}: allowed are {', '.join(X_AXES)}.")
     columns = [(metric, x) for metric in metrics for x in axes]
-    fig, grid = plt.subplots(len(groups), len(columns), figsize=(4.2 * len(columns), 3.4 * len(groups)), squeeze=False)
+    width = 4.2 * len(columns) + LEGEND_INCHES
+    fig, grid = plt.subplots(len(groups), len(columns), figsize=(width, 3.4 * len(groups)), squeeze=False)
     for row, (group, runs) in zip(grid, groups.items()):
         for ax, (metric, x) in zip(row, columns):
             for name, logdirs in runs.items():
@@ -144,10 +150,14 @@ def curve_grid(groups: dict, metrics, axes=("env_steps",), out: str | None = Non
             ax.grid(alpha=0.3)
             if metric in ("episode/target_reached", "episode/self_collision", "episode/obstacle_collision"):
                 ax.set_ylim(-0.02, 1.02)
-        row[0].legend(fontsize=8)
     if title:
         fig.suptitle(title)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0, 1 - LEGEND_INCHES / width, 1))
+    for row in grid:  # each row's legend right of its panels, where it hides no curve and squeezes no panel
+        handles, labels = row[0].get_legend_handles_labels()
+        box = row[-1].get_position()
+        fig.legend(handles, [textwrap.fill(label, 50) for label in labels], loc="center left", fontsize=8,
+                   bbox_to_anchor=(box.x1 + 0.1 / width, (box.y0 + box.y1) / 2), frameon=False)
     return save(fig, out)
 
 
