@@ -431,6 +431,14 @@ def test_the_figure_draws_each_group_of_runs_on_its_own_row_against_both_axes(tm
     assert list(line_c.get_ydata()) == pytest.approx([0.55, 0.6])
     assert line_c.get_label() == "c (2 seeds)"
     assert list(fig.axes[1].get_lines()[0].get_xdata()) == pytest.approx([51.2, 102.4])
+    # One legend per row, right of the row's panels and level with them: it covers no curve and squeezes no panel.
+    assert [[t.get_text() for t in legend.get_texts()] for legend in fig.legends] == [["a (2 seeds)", "c (2 seeds)"],
+                                                                                      ["b (2 seeds)"]]
+    renderer = fig.canvas.get_renderer()
+    for legend, last_panel in zip(fig.legends, (fig.axes[1], fig.axes[3])):
+        box, panel = legend.get_window_extent(renderer), last_panel.get_window_extent(renderer)
+        assert box.x0 > panel.x1
+        assert panel.y0 < (box.y0 + box.y1) / 2 < panel.y1
     with pytest.raises(ValueError, match=r"holds 'minutes': allowed are env_steps, wall_clock"):
         plots.curve_grid(groups, ["episode/target_reached"], ("minutes",))
     from tools.experiment_spec import CURVE_AXES
