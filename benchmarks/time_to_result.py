@@ -48,9 +48,8 @@ def run_seed(preset: str, seed: int, target: float, logdir: str, extra: list[str
     """One seed's process, stopped at the training success `stop_at` (default `target`): its wall clock and what its
     eval.json and metrics.csv say; its evaluation is held against `target`."""
     env = dict(os.environ)
-    env.pop("JAX_COMPILATION_CACHE_DIR", None)
-    if cache_dir:
-        env["JAX_COMPILATION_CACHE_DIR"] = cache_dir
+    # An empty value turns the cache off: left unset, train.py would use the repository's .jax_cache/.
+    env["JAX_COMPILATION_CACHE_DIR"] = cache_dir or ""
     command = train_command(preset, seed, target if stop_at is None else stop_at, logdir, extra)
     start = time.perf_counter()
     done = subprocess.run(command, env=env, capture_output=True, text=True)

@@ -731,6 +731,11 @@ def test_training_curves_from_train_logs(point_run, tmp_path):
     fig = plots.training_curves({"ppo": str(point_run)}, out=str(out))
     assert out.stat().st_size > 10_000
     assert len(fig.axes) == 2  # target reached and return (point mass has no collisions)
+    assert [t.get_text() for t in fig.legends[0].get_texts()] == ["ppo (2 seeds)"]
+    renderer = fig.canvas.get_renderer()
+    legend_box = fig.legends[0].get_window_extent(renderer)
+    assert legend_box.x0 > fig.axes[-1].get_window_extent(renderer).x1  # beside the panels, over no curve
+    assert legend_box.x1 < fig.bbox.x1  # the figure widened to hold it
     with pytest.raises(ValueError, match="metrics.csv"):
         plots.read_metrics(str(tmp_path))
 

@@ -60,6 +60,19 @@ def test_the_evaluation_is_held_against_the_target_not_the_stop(target, met, tmp
     assert row["reached_target"] is met
 
 
+@pytest.mark.parametrize("cache_dir, seen", [(None, ""), ("/tmp/jc", "/tmp/jc")])
+def test_a_seed_without_a_cache_dir_compiles_with_the_cache_off(cache_dir, seen, tmp_path, monkeypatch):
+    """No --cache-dir is a cold start: the seed's train.py gets an empty JAX_COMPILATION_CACHE_DIR (the cache off),
+    not an unset one (train.py's default folder, which earlier runs may have filled)."""
+    envs = []
+    fake = fake_train(0.77)
+    monkeypatch.setattr(time_to_result.subprocess, "run", lambda command, env, **kw: envs.append(env) or fake(
+        command, env, **kw))
+    monkeypatch.setenv("JAX_COMPILATION_CACHE_DIR", "/somewhere/filled")
+    time_to_result.run_seed("point-mass-ppo", 7, 0.75, str(tmp_path / "run"), [], cache_dir)
+    assert envs[0]["JAX_COMPILATION_CACHE_DIR"] == seen
+
+
 def test_without_a_stop_the_run_stops_at_the_target(tmp_path, monkeypatch):
     monkeypatch.setattr(time_to_result.subprocess, "run", fake_train(0.77))
     row = time_to_result.run_seed("point-mass-ppo", 7, 0.75, str(tmp_path / "run"), [], None)

@@ -107,8 +107,10 @@ def curve(logdirs, metric: str, x: str = "env_steps",
     return xs, np.nanmean(values, 0), np.nanstd(values, 0), len(series)
 
 
-LEGEND_INCHES = 4.0
-"""Width of the column right of the panels that holds each row's legend."""
+LEGEND_CHARS = 50
+"""A legend label's longest line (characters) in the training-curve figures; longer labels wrap."""
+LEGEND_CHAR_INCHES, LEGEND_MARGIN_INCHES = 0.062, 0.8
+"""The legend column's width: per character of the longest label line at font size 8, and for the line marker."""
 
 
 def training_curves(runs: dict, metrics=None, out: str | None = None, title: str | None = None, band: float = 1.0,
@@ -134,8 +136,8 @@ def curve_grid(groups: dict, metrics, axes=("env_steps",), out: str | None = Non
         if x not in X_AXES:
             raise ValueError(f"axes={tuple(axes)!r} holds {x!r}: allowed are {', '.join(X_AXES)}.")
     columns = [(metric, x) for metric in metrics for x in axes]
-    width = 4.2 * len(columns) + LEGEND_INCHES
-    fig, grid = plt.subplots(len(groups), len(columns), figsize=(width, 3.4 * len(groups)), squeeze=False)
+    panels, height = 4.2 * len(columns), 3.4 * len(groups)
+    fig, grid = plt.subplots(len(groups), len(columns), figsize=(panels, height), squeeze=False)
     for row, (group, runs) in zip(grid, groups.items()):
         for ax, (metric, x) in zip(row, columns):
             for name, logdirs in runs.items():
@@ -152,12 +154,18 @@ def curve_grid(groups: dict, metrics, axes=("env_steps",), out: str | None = Non
                 ax.set_ylim(-0.02, 1.02)
     if title:
         fig.suptitle(title)
-    fig.tight_layout(rect=(0, 0, 1 - LEGEND_INCHES / width, 1))
-    for row in grid:  # each row's legend right of its panels, where it hides no curve and squeezes no panel
-        handles, labels = row[0].get_legend_handles_labels()
-        box = row[-1].get_position()
-        fig.legend(handles, [textwrap.fill(label, 50) for label in labels], loc="center left", fontsize=8,
-                   bbox_to_anchor=(box.x1 + 0.1 / width, (box.y0 + box.y1) / 2), frameon=False)
+    # Each row's legend goes right of its panels, where it hides no curve and squeezes no panel; the figure widens
+    # by the longest label line.
+    legends = [(row[0].get_legend_handles_labels(), row) for row in grid]
+    lines = [line for (_, labels), _ in legends for label in labels for line in textwrap.wrap(label, LEGEND_CHARS)]
+    width = panels + (LEGEND_MARGIN_INCHES + LEGEND_CHAR_INCHES * max(map(len, lines)) if lines else 0.0)
+    fig.set_size_inches(width, height)
+    fig.tight_layout(rect=(0, 0, panels / width, 1))
+    for (handles, labels), row in legends:
+        if labels:
+            box = row[-1].get_position()
+            fig.legend(handles, [textwrap.fill(label, LEGEND_CHARS) for label in labels], loc="center left",
+                       fontsize=8, bbox_to_anchor=(box.x1 + 0.1 / width, (box.y0 + box.y1) / 2), frameon=False)
     return save(fig, out)
 
 

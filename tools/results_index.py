@@ -162,9 +162,11 @@ def _time_to_result_row(ctx: Context, readme: dict) -> list[str]:
     """Seconds from `python train.py` to a final evaluation at the target, per fresh seed (`time_to_result_cell`)."""
     reports = [ctx.json(f) for f in readme["time_to_result_files"]]
     first = reports[0]
+    dates = sorted({r["date"] for r in reports})
     return [f"UR5e reach, seconds to a policy at >= {100 * first['target']:.0f} % reached, fresh seeds, compiling and the "
             f"final evaluation included (`{first['preset']}`, training stopped at {100 * first['stop_at']:.1f} %; "
-            f"{first['date']})", "", "", time_to_result_cell(reports, readme["cache_cold_seeds"])]
+            f"{' to '.join(dates[::len(dates) - 1] if len(dates) > 1 else dates)})", "", "",
+            time_to_result_cell(reports, readme["cache_cold_seeds"])]
 
 
 def _baseline_rows(ctx: Context) -> dict:
