@@ -2,38 +2,66 @@
 # Trains registered runs on a GPU host that takes one command of limited length (see README.md):
 #
 #   REACH_AVOID_CODE_VERSION=<commit> bash dev/train_within.sh SECONDS EXPERIMENT/RUN [EXPERIMENT/RUN ...]
+#   bash dev/train_within.sh --pack     # a later command on the same warm host: pack what finished since
 #
 # Installs the wheels of .whl/, copies the tree to /tmp/x/repo and runs `tools.experiments launch ... --executor
-# local --max-seeds 1` there (one seed per GPU). It shows the launch's first output after 30 s (a refused launch ends
+# local --max-seeds 1` there (one seed per GPU), recording into the copy's results/experiments: the parts the tree
+# already holds are not trained again. It shows the launch's first output after at most 30 s (a refused launch ends
 # the command then, with its exit status), waits until the launch ends or SECONDS have passed since the script
-# started, and packs the finished parts, job logs and launch log into $OUT/experiments.tgz. Give SECONDS about 30
-# less than the command's limit; the script exits 3 when the deadline came first. Parts still training at the
-# deadline keep running on a host that stays warm: a later command can pack them with `tar czf $OUT/experiments.tgz
-# -C /tmp/x out jobs launch.log`.
+# started, and packs the parts finished since it started (their runs/ files under results/experiments/), the job logs
+# and the launch log into $OUT/experiments.tgz: `tar xzf experiments.tgz` in the tree puts the parts in place. Give
+# SECONDS about 30 less than the command's limit; the script exits 3 when the deadline came first. Parts still
+# training then go on while the host stays warm; the script refuses to start another launch until they end.
 set -u
-if [ $# -lt 2 ]; then
+work=/tmp/x
+
+pack() {  # the parts recorded since the launch started, with the job and launch logs
+  (cd "$work/repo" && find results/experiments -path '*/runs/*' -type f -newer "$work/started" -print0) \
+    > "$work/parts.list"
+  tar czf "$OUT/experiments.tgz" -C "$work/repo" --null -T "$work/parts.list" -C "$work" jobs launch.log
+  echo "packed $(tr -cd '\0' < "$work/parts.list" | wc -c) files of finished parts"
+}
+
+running() { [ -f "$work/launch.pid" ] && kill -0 "$(cat "$work/launch.pid")" 2>/dev/null; }
+
+: "${OUT:?the folder that comes back}"
+if [ "${1:-}" = "--pack" ]; then
+  running && echo "the launch is still running; packing what finished so far"
+  tail -n 20 "$work/launch.log"
+  pack
+  exit 0
+fi
+if [ $# -lt 2 ] || ! [[ $1 =~ ^[0-9]+$ ]]; then
   echo "usage: REACH_AVOID_CODE_VERSION=<commit> bash dev/train_within.sh SECONDS EXPERIMENT/RUN [...]" >&2
   exit 2
 fi
 deadline=$(( $(date +%s) + $1 ))
 shift
 : "${REACH_AVOID_CODE_VERSION:?set it to the commit the tree holds (the copy has no .git)}"
-: "${OUT:?the folder that comes back}"
-work=/tmp/x
-pack() { tar czf "$OUT/experiments.tgz" -C "$work" out jobs launch.log 2>/dev/null; ls -l "$OUT"; }
+if running; then
+  echo "a launch from an earlier command is still running (pid $(cat "$work/launch.pid")): --pack, or wait" >&2
+  exit 2
+fi
 
 python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site .whl/*.whl \
   || exit 1
-mkdir -p "$work/out" "$work/jobs"
-rm -rf "$work/repo"
+# A fresh copy of the tree and job logs; the runs' folders ($work/runs: a part stopped early resumes from its
+# checkpoint) and the compilation cache ($work/jc) are kept.
+rm -rf "$work/repo" "$work/jobs"
+mkdir -p "$work/jobs"
 cp -r . "$work/repo"
 cd "$work/repo" || exit 1
+touch "$work/started"
 export PYTHONPATH="/tmp/site:$PWD" PYTHONUNBUFFERED=1 REACH_AVOID_CODE_VERSION
 nvidia-smi -L
-python3 -m tools.experiments launch "$@" --executor local --max-seeds 1 --runs-dir "$work/runs" --out "$work/out" \
+python3 -m tools.experiments launch "$@" --executor local --max-seeds 1 --runs-dir "$work/runs" \
   --jobs-dir "$work/jobs" --compilation-cache "$work/jc" > "$work/launch.log" 2>&1 &
 launch=$!
-sleep 30
+echo "$launch" > "$work/launch.pid"
+for _ in $(seq 30); do
+  kill -0 "$launch" 2>/dev/null || break
+  sleep 1
+done
 cat "$work/launch.log"
 if ! kill -0 "$launch" 2>/dev/null; then
   wait "$launch"
@@ -45,7 +73,6 @@ fi
 while kill -0 "$launch" 2>/dev/null && [ "$(date +%s)" -lt "$deadline" ]; do
   sleep 5
 done
-status=0
 if kill -0 "$launch" 2>/dev/null; then
   echo "deadline reached with the launch still running; packing what finished"
   status=3
