@@ -31,6 +31,7 @@ import numpy as np
 import envs
 from agents import export, provenance, registry
 from envs import validation
+from agents.ahead import compile_ahead
 from agents.checkpoint import Checkpointer, write_atomic
 from agents.config import (TrainConfig, config_from_json, config_json, env_steps_per_update, merge_resume_config,
                            num_devices, total_updates, validate, validate_stored)
@@ -110,14 +111,6 @@ def out_of_time(config: TrainConfig, started: float, per_update: float | None, n
     return time.perf_counter() - started + n * per_update > config.stop_after_seconds
 
 
-def compile_ahead(programs: Programs, state) -> float:
-    """Compiles the chunk for `state` without running it (the jit call then reuses the executable); returns
-    the seconds it took (a persistent compilation cache makes them few)."""
-    t0 = time.perf_counter()
-    programs.chunk.lower(state, jnp.int32(1)).compile()
-    return time.perf_counter() - t0
-
-
 def evaluates_ahead(config: TrainConfig, stop_updates: int, updates_total: int) -> bool:
     """Whether the final evaluation compiles in a thread while the run trains (`compile_eval_ahead`): on an accelerator
     (on a CPU the thread would take the training's cores), when the run is to end with its evaluation."""
@@ -133,7 +126,7 @@ def _train(config: TrainConfig, learner_cls: type | None = None) -> TrainResult:
     prepared = logdirs.prepare(logdir, config.resume, config.overwrite)  # refusals before anything is written
     created = prepared.created
     ckpt = Checkpointer(os.path.join(logdir, "checkpoints"), keep=config.keep_checkpoints)
-    start_step = None
+    start_step, chunk_ahead = None, None
     try:
         if config.resume:
             ckpt, start_step, config, programs, state = _resume(ckpt, config, learner_cls)
@@ -143,6 +136,7 @@ def _train(config: TrainConfig, learner_cls: type | None = None) -> TrainResult:
                       "the resumed run logs those steps again.", file=sys.stderr)
         else:
             programs = programs_for(config, learner_cls)
+            chunk_ahead = programs.chunk_ahead(seed_keys(config))
             state = programs.init(seed_keys(config))
             fallback = getattr(state.env_state, "metrics", {}).get("reset_fallback")
             if fallback is not None:  # options whose samplers cannot succeed: refused before any training
@@ -152,6 +146,8 @@ def _train(config: TrainConfig, learner_cls: type | None = None) -> TrainResult:
         sinks = [WandbLogger(config)] if config.logger == "wandb" else []
     except BaseException:
         ckpt.close()
+        if chunk_ahead is not None:  # no compiling thread outlives a run that failed before training
+            chunk_ahead.thread.join()
         _undo_start(logdir, prepared)
         raise
     spu = env_steps_per_update(config)
@@ -177,7 +173,10 @@ def _train(config: TrainConfig, learner_cls: type | None = None) -> TrainResult:
     status = "done"
     try:
         timed = config.stop_after_seconds and updates_done < stop_updates  # a resume to evaluate runs no chunk
-        compile_seconds = compile_ahead(programs, state) if timed else 0.0
+        t0 = time.perf_counter()  # the chunk's compiling left once init is done counts as the first chunk's
+        if chunk_ahead is not None:
+            chunk_ahead.join()
+        compile_seconds = time.perf_counter() - t0 + (compile_ahead(programs, state) if timed else 0.0)
         first_chunk = True
         while updates_done < stop_updates:
             targets = [stop_updates, (updates_done // every(log_every) + 1) * every(log_every)]

@@ -28,14 +28,14 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import threading
-import warnings
 from typing import Any, NamedTuple, Protocol
 
 import jax
 import jax.numpy as jnp
 from flax import struct
 from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
+
+from agents.ahead import Ahead
 
 AXIS = "dev"
 MULTI_DEVICE_MODES = ("shard_map", "gspmd")
@@ -404,30 +404,6 @@ def over_seeds(fn, num_seeds: int):
     return lambda state, x: expand(fn(squeeze(state), x))
 
 
-class Ahead:
-    """`fn()` run at once in a thread of its own, for compiling a program on the host while the device works (XLA's
-    compiler releases Python's GIL; tracing and lowering hold it). `join()` waits for it; an error it raised becomes a
-    warning, since the program is then compiled again where it is called, which reports the error if it persists."""
-
-    def __init__(self, fn, what: str):
-        self.error, self.what = None, what
-
-        def run():
-            try:
-                fn()
-            except Exception as error:  # compiled again on use
-                self.error = error
-
-        self.thread = threading.Thread(target=run, name=f"ahead: {what}")
-        self.thread.start()
-
-    def join(self) -> None:
-        self.thread.join()
-        if self.error is not None:
-            warnings.warn(f"compiling {self.what} ahead failed ({self.error!r}); it is compiled on use", stacklevel=2)
-            self.error = None
-
-
 class Programs:
     """The compiled pieces of one run: `init(keys)`, `chunk(state, n)`, `evaluate(state, keys)`.
 
@@ -471,6 +447,18 @@ class Programs:
             self.chunk = jax.jit(chunk, donate_argnums=0)
 
         self.evaluate = jax.jit(make_evaluate_stacked(eval_env, learner, eval_envs, episode_length, eval_last_steps))
+
+    def chunk_ahead(self, keys) -> Ahead:
+        """Compiles `chunk` in a thread for the state `init(keys)` will return: a fresh run's two compilations overlap
+        (the chunk's, the larger, while `init` compiles and runs)."""
+        like = self.init.eval_shape(keys)
+        precision = jax.config.jax_default_matmul_precision
+
+        def compile_it():
+            with jax.default_matmul_precision(precision):
+                self.chunk.lower(like, jnp.int32(1)).compile()
+
+        return Ahead(compile_it, "the training chunk")
 
     def evaluation_ahead(self, learner_states) -> Ahead:
         """Compiles `evaluate` in a thread for learner states shaped and placed like `learner_states` (read now: the

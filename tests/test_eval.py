@@ -829,7 +829,8 @@ def test_paper_tables_evaluate_each_pair_on_the_right_env_config(arm_export, tmp
            for name, env_name, cfg in calls]
     assert got[0] == ("avoid", "ur5e-reach-avoid", 0.1, 0.02, 6)
     # The reach agent on the reach-avoid env: its own 4-part observation, the reach-avoid runs' target.
-    assert got[1:] == [("arm0", "ur5e-reach-avoid", r, 0.02, 4) for r in (0.025, 0.05, 0.1, 0.2, 0.3)]
+    reach = arm_export.parent.name  # arm0, or arm1 where the worker made another "arm" folder first
+    assert got[1:] == [(reach, "ur5e-reach-avoid", r, 0.02, 4) for r in (0.025, 0.05, 0.1, 0.2, 0.3)]
     assert calls[1][2].substeps == 2  # the reach checkpoint's own settings otherwise
 
 

@@ -9,7 +9,7 @@ import jax
 import pytest
 
 from agents import driver, loop, presets
-from agents.loop import Ahead
+from agents.ahead import Ahead
 
 RUN = dict(num_timesteps=10_240, seeds=1, log_every=5_120, tensorboard=False, progress=False)
 """Two chunks of the point-mass PPO preset."""
@@ -100,7 +100,7 @@ def test_the_thread_has_ended_when_the_run_fails(tmp_path, monkeypatch):
     slow_compile(monkeypatch, 1.5)
     monkeypatch.setattr(driver, "evaluates_ahead", lambda *args: True)
     monkeypatch.setattr(driver, "evaluate", lambda *args: (_ for _ in ()).throw(RuntimeError("the evaluation failed")))
-    monkeypatch.setattr(loop.Ahead, "join", lambda self: None)  # the failure comes before the thread is waited for
+    monkeypatch.setattr(Ahead, "join", lambda self: None)  # the failure comes before the thread is waited for
     with pytest.raises(RuntimeError, match="the evaluation failed"):
         driver.train(presets.make_config("point-mass-ppo", logdir=str(tmp_path / "r"), eval_envs=29, **RUN))
     assert ahead_threads() == []

@@ -1,0 +1,42 @@
+"""Compiling a training run's programs before they are called: `Ahead` in a thread while the device (or the main
+thread) works on something else, `compile_ahead` at once."""
+
+from __future__ import annotations
+
+import threading
+import time
+import warnings
+
+import jax.numpy as jnp
+
+
+class Ahead:
+    """`fn()` run at once in a thread of its own, for compiling a program on the host while the device works (XLA's
+    compiler releases Python's GIL; tracing and lowering hold it). `join()` waits for it; an error it raised becomes a
+    warning, since the program is then compiled again where it is called, which reports the error if it persists."""
+
+    def __init__(self, fn, what: str):
+        self.error, self.what = None, what
+
+        def run():
+            try:
+                fn()
+            except Exception as error:  # compiled again on use
+                self.error = error
+
+        self.thread = threading.Thread(target=run, name=f"ahead: {what}")
+        self.thread.start()
+
+    def join(self) -> None:
+        self.thread.join()
+        if self.error is not None:
+            warnings.warn(f"compiling {self.what} ahead failed ({self.error!r}); it is compiled on use", stacklevel=2)
+            self.error = None
+
+
+def compile_ahead(programs, state) -> float:
+    """Compiles `programs.chunk` (`agents.loop.Programs`) for `state` without running it (the jit call then reuses the
+    executable); returns the seconds it took (a persistent compilation cache makes them few)."""
+    t0 = time.perf_counter()
+    programs.chunk.lower(state, jnp.int32(1)).compile()
+    return time.perf_counter() - t0
