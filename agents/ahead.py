@@ -3,6 +3,7 @@ thread) works on something else, `compile_ahead` at once."""
 
 from __future__ import annotations
 
+import sys
 import threading
 import time
 import warnings
@@ -34,9 +35,19 @@ class Ahead:
             self.error = None
 
 
+def finish(*aheads: Ahead | None) -> None:
+    """Waits, saying so, for each of `aheads` still compiling, when a run ends before it needed them: no compiling
+    thread outlives the run. Their errors do not matter then."""
+    for ahead in aheads:
+        if ahead is not None and ahead.thread.is_alive():
+            print(f"waiting for {ahead.what}'s compile to end ...", file=sys.stderr, flush=True)
+            ahead.thread.join()
+
+
 def compile_ahead(programs, state) -> float:
     """Compiles `programs.chunk` (`agents.loop.Programs`) for `state` without running it (the jit call then reuses the
-    executable); returns the seconds it took (a persistent compilation cache makes them few)."""
+    executable); returns the seconds it took (few after `Programs.chunk_ahead`, or with a persistent compilation
+    cache)."""
     t0 = time.perf_counter()
     programs.chunk.lower(state, jnp.int32(1)).compile()
     return time.perf_counter() - t0

@@ -4,8 +4,9 @@
 runs compiled chunks (`agents.loop`) and, between them, logs (`agents.logger`; with logger="wandb" also
 `agents.wandb_logger`), checkpoints (`agents.checkpoint`, plus the policy export of `agents.export`), honours Ctrl-C
 (checkpoint, then exit) and stops on a non-finite learner metric (keeping the last good checkpoint; a resume skips
-damaged checkpoints, moving them aside). At the end it evaluates the deterministic policy (compiled while it trained,
-on a GPU) and stores the metrics as JSON next to the final checkpoint. The config and its validation live in
+damaged checkpoints, moving them aside). A fresh run compiles its training chunk while `init` compiles and runs. At
+the end it evaluates the deterministic policy (compiled while it trained, on a GPU) and stores the metrics as JSON
+next to the final checkpoint. The config and its validation live in
 `agents.config`; the algorithm comes from `agents.registry`.
 """
 
@@ -31,7 +32,7 @@ import numpy as np
 import envs
 from agents import export, provenance, registry
 from envs import validation
-from agents.ahead import compile_ahead
+from agents.ahead import compile_ahead, finish
 from agents.checkpoint import Checkpointer, write_atomic
 from agents.config import (TrainConfig, config_from_json, config_json, env_steps_per_update, merge_resume_config,
                            num_devices, total_updates, validate, validate_stored)
@@ -146,9 +147,8 @@ def _train(config: TrainConfig, learner_cls: type | None = None) -> TrainResult:
         sinks = [WandbLogger(config)] if config.logger == "wandb" else []
     except BaseException:
         ckpt.close()
-        if chunk_ahead is not None:  # no compiling thread outlives a run that failed before training
-            chunk_ahead.thread.join()
         _undo_start(logdir, prepared)
+        finish(chunk_ahead)
         raise
     spu = env_steps_per_update(config)
     updates_total = total_updates(config)
@@ -169,11 +169,12 @@ def _train(config: TrainConfig, learner_cls: type | None = None) -> TrainResult:
     per_update = None  # seconds per update of the last chunk, compilation left out
     # With a time limit the chunk is compiled ahead (jit keeps the executable), so that the first chunk's speed
     # is not mistaken for the compilation's: judged by it, a run started with less than twice its compile time
-    # left would stop after one chunk. The logged time of the first chunk still includes the compilation.
+    # left would stop after one chunk. The first chunk's logged time includes its compiling, less the part that ran
+    # beside init (`chunk_ahead`).
     status = "done"
     try:
         timed = config.stop_after_seconds and updates_done < stop_updates  # a resume to evaluate runs no chunk
-        t0 = time.perf_counter()  # the chunk's compiling left once init is done counts as the first chunk's
+        t0 = time.perf_counter()
         if chunk_ahead is not None:
             chunk_ahead.join()
         compile_seconds = time.perf_counter() - t0 + (compile_ahead(programs, state) if timed else 0.0)
@@ -251,9 +252,7 @@ def _train(config: TrainConfig, learner_cls: type | None = None) -> TrainResult:
         logger.close()
         ckpt.close()
         _restore_sigint(previous_handler)
-        if ahead is not None and ahead.thread.is_alive():  # a run that ends early waits for its compile
-            print("waiting for the evaluation's compile to end ...", file=sys.stderr, flush=True)
-            ahead.thread.join()
+        finish(ahead, chunk_ahead)  # a run that ends early waits for its compiles
     note = programs.learner.progress_note(updates_done)
     return TrainResult(state, updates_done * spu, status, logdir, config, eval_metrics, last_metrics, note)
 

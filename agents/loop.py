@@ -450,7 +450,8 @@ class Programs:
 
     def chunk_ahead(self, keys) -> Ahead:
         """Compiles `chunk` in a thread for the state `init(keys)` will return: a fresh run's two compilations overlap
-        (the chunk's, the larger, while `init` compiles and runs)."""
+        (the chunk's, the larger, while `init` compiles and runs). `init` is traced here, before the thread starts,
+        so no env code is traced in two threads at once (`envs.fast_mjx` patches MJX process-wide while tracing)."""
         like = self.init.eval_shape(keys)
         precision = jax.config.jax_default_matmul_precision
 

@@ -8,9 +8,9 @@ Each seed is one `train.py PRESET --seed S --stop-at-success STOP` process of it
 the target), timed from its start to its exit: importing, compiling (no persistent compilation cache unless
 `--cache-dir`), training until every training episode batch reaches STOP (or the preset's budget ends) and the final
 evaluation on fresh episodes. Options after `--` go to train.py unchanged. Reported per seed: the wall clock, the
-training's own clock (its chunks of updates, the first with compiling; the rest is start-up, checkpoints and the final
-evaluation), the env steps trained, the training success at the stop and the evaluation's success; a seed counts as a
-result when its evaluation reaches the target.
+training's own clock (its chunks of updates, the first with the compiling left once the state is initialised; the rest
+is start-up, checkpoints and the final evaluation), the env steps trained, the training success at the stop and the
+evaluation's success; a seed counts as a result when its evaluation reaches the target.
 
 Writes `--out`.json (every seed, command, code version, device, date) and `--out`.md (the table).
 """
@@ -69,8 +69,8 @@ def run_seed(preset: str, seed: int, target: float, logdir: str, extra: list[str
 
 def training_clock(rows: list[dict]) -> dict:
     """Where a one-seed run's training time went, from its metrics.csv `rows`' `wall_seconds` (each log's chunk of
-    updates, the first one's compiling included): the first chunk, all chunks, and the env steps per second after
-    the first."""
+    updates, the first one's compiling included, less what ran beside init): the first chunk, all chunks, and the
+    env steps per second after the first."""
     seconds = [float(r["wall_seconds"]) for r in rows]
     steps = float(rows[-1]["env_steps"]) - float(rows[0]["env_steps"])
     return {"first_log_seconds": seconds[0], "first_log_env_steps": int(float(rows[0]["env_steps"])),
@@ -94,7 +94,7 @@ def markdown(preset: str, target: float, rows: list[dict], stamp: dict, stop_at:
     flags = f" XLA_FLAGS: `{xla_flags}`." if xla_flags else ""
     lines = [f"`{preset}` to {100 * target:.1f} % reached{stop}", "",
              f"Command: `{stamp['command']}`; code {stamp['code']}; {stamp['device']}; {stamp['date']}.{flags}", "",
-             "| seed | wall clock (s) | training chunks (s) | first chunk (s, compiling included) | env steps | training success at the stop "
+             "| seed | wall clock (s) | training chunks (s) | first chunk (s, compiling left after init included) | env steps | training success at the stop "
              "| evaluation reached | target met |",
              "|---:|---:|---:|---:|---:|---:|---:|---|"]
     for r in rows:

@@ -21,7 +21,7 @@ class LRU:
             raise ValueError(f"size={size}: allowed is at least 1.")
         self.size = size
         self._entries: collections.OrderedDict = collections.OrderedDict()
-        self._lock = threading.Lock()  # the driver compiles its evaluation in a thread while training traces
+        self._lock = threading.Lock()  # the driver compiles programs in threads (agents.ahead) while others trace
 
     def get(self, key: Hashable, make: Callable):
         with self._lock:

@@ -97,10 +97,14 @@ def test_the_thread_has_ended_when_the_run_returns(tmp_path, monkeypatch):
 
 
 def test_the_thread_has_ended_when_the_run_fails(tmp_path, monkeypatch):
-    slow_compile(monkeypatch, 1.5)
+    class Unjoined(Ahead):
+        def join(self):  # the failure comes before the thread is waited for
+            pass
+
+    monkeypatch.setattr(loop.Programs, "evaluation_ahead",
+                        lambda self, learner_states: Unjoined(lambda: time.sleep(1.5), "the evaluation"))
     monkeypatch.setattr(driver, "evaluates_ahead", lambda *args: True)
     monkeypatch.setattr(driver, "evaluate", lambda *args: (_ for _ in ()).throw(RuntimeError("the evaluation failed")))
-    monkeypatch.setattr(Ahead, "join", lambda self: None)  # the failure comes before the thread is waited for
     with pytest.raises(RuntimeError, match="the evaluation failed"):
         driver.train(presets.make_config("point-mass-ppo", logdir=str(tmp_path / "r"), eval_envs=29, **RUN))
     assert ahead_threads() == []

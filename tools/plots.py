@@ -67,7 +67,8 @@ X_AXES = {
     "wall_clock": "training wall-clock (s)",
 }
 """Horizontal axes of the curves: env steps per seed, or the running sum of the logged chunk times
-(`wall_seconds`: compilation included, start-up, checkpoint saves and the final evaluation not).
+(`wall_seconds`: compilation included, less what ran beside the state's initialisation; start-up, checkpoint saves
+and the final evaluation not).
 Compare wall-clock curves only between runs made alone on one device of one kind."""
 
 

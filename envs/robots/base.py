@@ -141,7 +141,7 @@ class Robot(abc.ABC):
         in-place edit of this robot's `mj_model` reaches MJX through `put_on_device` only, never the shared copy)."""
         if self._device is not None:
             return self._device
-        with _SHARED_LOCK:  # the final evaluation may be traced in a thread (agents.ahead.Ahead)
+        with _SHARED_LOCK:  # programs may be traced in threads (agents.ahead.Ahead)
             key = (type(self), self.gravity_compensation, self.integrator, jax.default_backend())
             if key not in _SHARED:
                 fresh = type(self)(gravity_compensation=self.gravity_compensation, integrator=self.integrator)
