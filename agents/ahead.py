@@ -8,6 +8,7 @@ import threading
 import time
 import warnings
 
+import jax
 import jax.numpy as jnp
 
 
@@ -33,6 +34,18 @@ class Ahead:
         if self.error is not None:
             warnings.warn(f"compiling {self.what} ahead failed ({self.error!r}); it is compiled on use", stacklevel=2)
             self.error = None
+
+
+def compiling(program, *args, what: str) -> Ahead:
+    """`program.lower(*args).compile()` in a thread, at the caller's matmul precision (a context of the caller's
+    thread, which the compiling thread enters: else the call would compile again at the caller's)."""
+    precision = jax.config.jax_default_matmul_precision
+
+    def compile_it():
+        with jax.default_matmul_precision(precision):
+            program.lower(*args).compile()
+
+    return Ahead(compile_it, what)
 
 
 def finish(*aheads: Ahead | None) -> None:

@@ -137,8 +137,9 @@ def _train(config: TrainConfig, learner_cls: type | None = None) -> TrainResult:
                       "the resumed run logs those steps again.", file=sys.stderr)
         else:
             programs = programs_for(config, learner_cls)
-            chunk_ahead = programs.chunk_ahead(seed_keys(config))
-            state = programs.init(seed_keys(config))
+            keys = seed_keys(config)
+            chunk_ahead = programs.chunk_ahead(keys)
+            state = programs.init(keys)
             fallback = getattr(state.env_state, "metrics", {}).get("reset_fallback")
             if fallback is not None:  # options whose samplers cannot succeed: refused before any training
                 validation.resets_succeed(config.env_name, config.env, envs.default_config(config.env_name),

@@ -35,7 +35,7 @@ import jax.numpy as jnp
 from flax import struct
 from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
 
-from agents.ahead import Ahead
+from agents.ahead import Ahead, compiling
 
 AXIS = "dev"
 MULTI_DEVICE_MODES = ("shard_map", "gspmd")
@@ -452,24 +452,10 @@ class Programs:
         """Compiles `chunk` in a thread for the state `init(keys)` will return: a fresh run's two compilations overlap
         (the chunk's, the larger, while `init` compiles and runs). `init` is traced here, before the thread starts,
         so no env code is traced in two threads at once (`envs.fast_mjx` patches MJX process-wide while tracing)."""
-        like = self.init.eval_shape(keys)
-        precision = jax.config.jax_default_matmul_precision
-
-        def compile_it():
-            with jax.default_matmul_precision(precision):
-                self.chunk.lower(like, jnp.int32(1)).compile()
-
-        return Ahead(compile_it, "the training chunk")
+        return compiling(self.chunk, self.init.eval_shape(keys), jnp.int32(1), what="the training chunk")
 
     def evaluation_ahead(self, learner_states) -> Ahead:
         """Compiles `evaluate` in a thread for learner states shaped and placed like `learner_states` (read now: the
         arrays may be donated to a chunk meanwhile), so that calling it later runs at once."""
         like = jax.tree.map(lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype, sharding=x.sharding), learner_states)
-        key = jax.eval_shape(jax.random.PRNGKey, 0)
-        precision = jax.config.jax_default_matmul_precision  # a context of this thread: the compile's thread enters it
-
-        def compile_it():
-            with jax.default_matmul_precision(precision):
-                self.evaluate.lower(like, key).compile()
-
-        return Ahead(compile_it, "the evaluation")
+        return compiling(self.evaluate, like, jax.eval_shape(jax.random.PRNGKey, 0), what="the evaluation")
