@@ -222,8 +222,8 @@ def test_tables_show_the_sample_std_of_a_population_std():
     assert rc.sample_std({"std_units": 0.0041, "units": 5}) == pytest.approx(0.0045840, abs=1e-7)
 
 
-def _ttr_report(*walls, preset="ur5e-reach-ppo-plus", target=0.96, first_seed=100):
-    return {"preset": preset, "target": target, "stop_at": 0.975,
+def _ttr_report(*walls, preset="ur5e-reach-ppo-plus", target=0.96, first_seed=100, options=()):
+    return {"preset": preset, "target": target, "stop_at": 0.975, "train_options": list(options),
             "seeds": [{"seed": first_seed + i, "wall_seconds": w, "reached_target": w < 150} for i, w in enumerate(walls)]}
 
 
@@ -252,3 +252,8 @@ def test_eval_settings_cell_lists_the_further_settings_in_order():
 def test_time_to_result_cell_refuses_reports_of_two_presets():
     with pytest.raises(ValueError, match="differ in preset"):
         rc.time_to_result_cell([_ttr_report(100.0), _ttr_report(100.0, preset="ur5e-reach-ppo")], [])
+
+
+def test_time_to_result_cell_refuses_reports_of_two_train_options():
+    with pytest.raises(ValueError, match="train options"):
+        rc.time_to_result_cell([_ttr_report(100.0), _ttr_report(100.0, options=("--algo.num-envs", "16384"))], [])

@@ -123,8 +123,9 @@ def thousands(rate_per_s: float) -> str:
 def time_to_result_cell(reports: list[dict], cold_seeds: list[int]) -> str:
     """benchmarks/time_to_result.py's `reports` of one setting: the seeds' wall clocks with the compilation cache
     filled, and those of `cold_seeds` (into an empty cache), and how many evaluations met the target."""
-    if len({(r["preset"], r["target"], r["stop_at"]) for r in reports}) != 1:
-        raise ValueError("time-to-result reports differ in preset, target or stop_at: allowed are reports of one setting.")
+    if len({(r["preset"], r["target"], r["stop_at"], tuple(r.get("train_options", ()))) for r in reports}) != 1:
+        raise ValueError("time-to-result reports differ in preset, target, stop_at or train options: allowed are "
+                         "reports of one setting.")
     seeds = [s for r in reports for s in r["seeds"]]
     cells = []
     for label, group in (("with the compilation cache", [s for s in seeds if s["seed"] not in cold_seeds]),

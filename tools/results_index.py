@@ -164,7 +164,8 @@ def _time_to_result_row(ctx: Context, readme: dict) -> list[str]:
     first = reports[0]
     dates = sorted({r["date"] for r in reports})
     return [f"UR5e reach, seconds to a policy at >= {100 * first['target']:.0f} % reached, fresh seeds, compiling and the "
-            f"final evaluation included (`{first['preset']}`, training stopped at {100 * first['stop_at']:.1f} %; "
+            f"final evaluation included (`{' '.join([first['preset'], *first.get('train_options', [])])}`, training "
+            f"stopped at {100 * first['stop_at']:.1f} %; "
             f"{dates[0] if len(dates) == 1 else dates[0] + ' to ' + dates[-1]})", "", "",
             time_to_result_cell(reports, readme["cache_cold_seeds"])]
 
