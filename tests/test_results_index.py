@@ -257,3 +257,11 @@ def test_time_to_result_cell_refuses_reports_of_two_presets():
 def test_time_to_result_cell_refuses_reports_of_two_train_options():
     with pytest.raises(ValueError, match="train options"):
         rc.time_to_result_cell([_ttr_report(100.0), _ttr_report(100.0, options=("--algo.num-envs", "16384"))], [])
+
+
+def test_time_to_result_row_names_the_train_options(tmp_path):
+    report = dict(_ttr_report(91.0, options=("--algo.num-envs", "16384")), date="2026-11-30")
+    (tmp_path / "results").mkdir()
+    (tmp_path / "results" / "ttr.json").write_text(json.dumps(report))
+    row = ri._time_to_result_row(rc.Context(str(tmp_path)), {"time_to_result_files": ["ttr.json"], "cache_cold_seeds": []})
+    assert "(`ur5e-reach-ppo-plus --algo.num-envs 16384`, training stopped at 97.5 %; 2026-11-30)" in row[0]
