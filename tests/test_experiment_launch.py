@@ -177,12 +177,14 @@ def test_a_job_its_user_cancelled_is_noted_as_killed_not_submitted_again(tmp_pat
         pytest.skip(why)
     job_id = subprocess.run(["sbatch", "--parsable", "-o", "/dev/null", "--wrap", "sleep 120"], capture_output=True,
                             text=True, check=True).stdout.strip().split(";")[0]
+    assert launch.slurm_listed(job_id) is True  # pending or running
     subprocess.run(["scancel", job_id], check=True)
     for _ in range(60):
-        if launch.slurm_state(job_id) == "CANCELLED":
+        if launch.slurm_state(job_id) == "CANCELLED" and launch.slurm_listed(job_id) is not True:
             break
         subprocess.run(["sleep", "1"])
     assert launch.slurm_state(job_id) == "CANCELLED"
+    assert launch.slurm_listed(job_id) is not True  # gone from squeue (or unknown to it)
     logdir = str(tmp_path / "run" / "seeds-0-0")
     launch.note_job(logdir, status="running", attempts=1, error=None, log="slurm.err")
     said = []
@@ -190,6 +192,41 @@ def test_a_job_its_user_cancelled_is_noted_as_killed_not_submitted_again(tmp_pat
     assert not launch._after_job(_EndedJob(tmp_path, job_id), "e/r", "seeds-0-0", logdir, config, 0, said.append)
     assert said[-1] == (f"[e/r seeds-0-0] job {job_id} ended: killed (job {job_id} ended without a result "
                         "(CANCELLED); log slurm.err)")
+
+
+class _ResultJob(_EndedJob):
+    """A job whose result file is written (a return, or the exception of a stopped attempt)."""
+
+    def __init__(self, folder, job_id="7"):
+        super().__init__(folder, job_id)
+        self.paths.result_pickle = folder / "result.pkl"
+        self.paths.result_pickle.write_bytes(b"")
+
+
+def test_a_slurm_job_still_listed_has_not_ended_though_an_attempt_left_a_result(tmp_path, monkeypatch):
+    """A job that requeued itself keeps its id while an earlier attempt's result file lies in its folder."""
+    monkeypatch.setattr(launch, "slurm_listed", lambda job_id: True)
+    assert not launch.job_ended(_ResultJob(tmp_path), "slurm")
+    monkeypatch.setattr(launch, "slurm_listed", lambda job_id: False)
+    assert launch.job_ended(_ResultJob(tmp_path), "slurm")
+    assert launch.job_ended(_EndedJob(tmp_path), "slurm")  # gone without a result: killed
+
+
+def test_without_squeue_a_slurm_job_has_ended_once_its_result_is_written(tmp_path, monkeypatch):
+    monkeypatch.setattr(launch, "slurm_listed", lambda job_id: None)
+    assert launch.job_ended(_ResultJob(tmp_path), "slurm")
+    assert not launch.job_ended(_EndedJob(tmp_path), "slurm")
+
+
+def test_a_job_gone_after_stopping_to_requeue_is_submitted_again_until_the_requeues_run_out(tmp_path):
+    logdir = str(tmp_path / "run" / "seeds-0-0")
+    launch.note_job(logdir, status="interrupted", attempts=1, error=None)
+    said = []
+    config = launch.LaunchConfig(executor="slurm", max_requeues=2)
+    assert launch._after_job(_ResultJob(tmp_path), "e/r", "seeds-0-0", logdir, config, 1, said.append)
+    assert "stopped to requeue itself but is gone" in said[-1]
+    assert not launch._after_job(_ResultJob(tmp_path), "e/r", "seeds-0-0", logdir, config, 2, said.append)
+    assert said[-1] == "[e/r seeds-0-0] job 7 ended: interrupted"
 
 
 def test_a_finished_job_keeps_the_status_its_code_wrote(tmp_path):

@@ -298,19 +298,25 @@ def gpu_slots(gpus_per_part: int) -> list[list[int]]:
 
 
 def job_ended(job, executor: str) -> bool:
-    """Whether a submitted job has ended: its result file is written (a return or an exception), or its process
-    (local) or its Slurm job (no longer in `squeue`: killed without a result) is gone. Slurm clusters without
-    accounting have no `sacct`, which submitit's own wait needs for a job killed without a result."""
-    if job.paths.result_pickle.exists():
-        return True
+    """Whether a submitted job has ended. Local: its result file is written (a return or an exception) or its process
+    is gone. Slurm: `squeue` no longer lists it, whether or not it wrote a result (clusters without accounting have
+    no `sacct`, which submitit's own wait needs for a job killed without one). A listed job has not ended even with a
+    result file: a job that requeued itself keeps its id, and its stopped attempt may have left one (the requeue's
+    own stop signal can end `scontrol requeue` and so raise in the job, after Slurm took the requeue)."""
     if executor == "local":
-        return job.done()
+        return job.paths.result_pickle.exists() or job.done()
+    listed = slurm_listed(job.job_id)
+    return job.paths.result_pickle.exists() if listed is None else not listed
+
+
+def slurm_listed(job_id: str) -> bool | None:
+    """Whether `squeue` lists the job (pending, running, requeued or completing); None where it cannot say."""
     try:
-        listed = subprocess.run(["squeue", "-h", "-j", str(job.job_id), "-o", "%i"], capture_output=True, text=True,
+        listed = subprocess.run(["squeue", "-h", "-j", str(job_id), "-o", "%i"], capture_output=True, text=True,
                                 timeout=60)
     except (OSError, subprocess.SubprocessError):
-        return False
-    return listed.returncode == 0 and not listed.stdout.strip()
+        return None
+    return bool(listed.stdout.strip()) if listed.returncode == 0 else None
 
 
 def slurm_state(job_id: str) -> str:
@@ -330,8 +336,9 @@ def slurm_state(job_id: str) -> str:
 
 def _after_job(job, key: str, part: str, logdir: str, config: "LaunchConfig", resubmits: int, log) -> bool:
     """Reports how a part's job ended (its job file's status). A job that ended without a word (its file still says
-    running: killed) is noted as killed; on Slurm, one killed by the cluster (`KILLED_STATES`) is to be submitted
-    again while `config.max_requeues` allows. Returns whether to submit it again."""
+    running: killed) is noted as killed; on Slurm, one killed by the cluster (`KILLED_STATES`), or one that stopped
+    to requeue itself and is gone (its requeue failed), is to be submitted again while `config.max_requeues` allows.
+    Returns whether to submit it again."""
     note = read_job(logdir) or {}
     if note.get("status") in ("submitted", "running") and not job.paths.result_pickle.exists():
         state = slurm_state(job.job_id) if config.executor == "slurm" else ""
@@ -341,6 +348,10 @@ def _after_job(job, key: str, part: str, logdir: str, config: "LaunchConfig", re
             return True
         note = note_job(logdir, status="killed", ended=now(),
                         error=f"job {job.job_id} ended without a result ({state or 'its process died'})")
+    elif note.get("status") == "interrupted" and config.executor == "slurm" and resubmits < config.max_requeues:
+        log(f"[{key} {part}] job {job.job_id} stopped to requeue itself but is gone; submitting the part again (it "
+            "resumes from its newest checkpoint)")
+        return True
     log(f"[{key} {part}] job {job.job_id} ended: {note.get('status', 'unknown')}"
         + (f" ({note['error']}; log {note.get('log')})" if note.get("error") else ""))
     return False
