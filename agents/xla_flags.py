@@ -8,10 +8,14 @@ critics in SAC's, independent pieces of a physics substep; PPO trains about a th
 (results: throughput study). The kernels and their numbers are the same; only their order changes.
 A program may need more GPU memory with it.
 
-`apply()` adds the flag to `XLA_FLAGS` when
+By default XLA does not capture `while` loops (our `lax.scan`s) in those graphs, so the host launches every
+iteration's graph itself; `+WHILE` puts the loops in the graphs: the env's rollouts, fast SAC on one GPU and
+PPO on two GPUs train about 7 % faster (results: throughput study), again with the same kernels and numbers.
+
+`apply()` adds each flag to `XLA_FLAGS` when
 
 - a CUDA plugin of jaxlib is installed (CPU-only installs are left alone),
-- `XLA_FLAGS` does not already choose a scheduling mode (yours wins), and
+- `XLA_FLAGS` does not already set the flag (yours wins), and
 - `REACH_AVOID_XLA_DEFAULTS` is not "0" (set it to 0 to run with XLA's own defaults).
 
 XLA reads `XLA_FLAGS` once, when JAX starts its first backend: import `agents` (or `train`) before
@@ -30,7 +34,7 @@ import warnings
 
 import jax  # importing starts no backend: XLA_FLAGS is read when the first one starts
 
-GPU_FLAGS = ("--xla_gpu_command_buffer_scheduling_mode=CONCURRENT",)
+GPU_FLAGS = ("--xla_gpu_command_buffer_scheduling_mode=CONCURRENT", "--xla_gpu_enable_command_buffer=+WHILE")
 """Added to XLA_FLAGS on machines with a CUDA jaxlib plugin."""
 OPT_OUT = "REACH_AVOID_XLA_DEFAULTS"
 CACHE_VARIABLE = "JAX_COMPILATION_CACHE_DIR"

@@ -8,23 +8,28 @@ import pytest
 from agents import xla_flags
 
 FLAG = "--xla_gpu_command_buffer_scheduling_mode"
+LOOPS = "--xla_gpu_enable_command_buffer"
+DEFAULTS = FLAG + "=CONCURRENT " + LOOPS + "=+WHILE"
 
 
 def test_adds_the_flag_on_a_gpu_machine_and_keeps_the_users_flags():
     env = {"XLA_FLAGS": "--xla_force_host_platform_device_count=2"}
     assert xla_flags.apply(env, gpu=True)
-    assert env["XLA_FLAGS"] == "--xla_force_host_platform_device_count=2 " + FLAG + "=CONCURRENT"
+    assert env["XLA_FLAGS"] == "--xla_force_host_platform_device_count=2 " + DEFAULTS
     assert not xla_flags.apply(env, gpu=True)  # already there: unchanged
     assert env["XLA_FLAGS"].count(FLAG) == 1
     fresh = {}
     assert xla_flags.apply(fresh, gpu=True)
-    assert fresh["XLA_FLAGS"] == FLAG + "=CONCURRENT"
+    assert fresh["XLA_FLAGS"] == DEFAULTS
 
 
 def test_the_users_choice_the_opt_out_and_cpu_machines_leave_xla_flags_alone():
-    mine = {"XLA_FLAGS": FLAG + "=LHS"}
+    mine = {"XLA_FLAGS": FLAG + "=LHS " + LOOPS + "=FUSION"}
     assert not xla_flags.apply(mine, gpu=True)
-    assert mine["XLA_FLAGS"] == FLAG + "=LHS"
+    assert mine["XLA_FLAGS"] == FLAG + "=LHS " + LOOPS + "=FUSION"
+    one_of_mine = {"XLA_FLAGS": FLAG + "=LHS"}
+    assert xla_flags.apply(one_of_mine, gpu=True)
+    assert one_of_mine["XLA_FLAGS"] == FLAG + "=LHS " + LOOPS + "=+WHILE"  # the other default still added
     opted_out = {"REACH_AVOID_XLA_DEFAULTS": "0"}
     assert not xla_flags.apply(opted_out, gpu=True)
     assert "XLA_FLAGS" not in opted_out
