@@ -9,8 +9,8 @@ critics in SAC's, independent pieces of a physics substep; PPO trains about a th
 A program may need more GPU memory with it.
 
 By default XLA does not capture `while` loops (our `lax.scan`s) in those graphs, so the host launches every
-iteration's graph itself; `+WHILE` puts the loops in the graphs: the env's rollouts, fast SAC on one GPU and
-PPO on two GPUs train about 7 % faster (results: throughput study), again with the same kernels and numbers.
+iteration's graph itself; `+WHILE` puts the loops in the graphs, with the same kernels: env-only rollouts, fast
+SAC on one GPU and PPO on two GPUs ran about 7 % faster, PPO on one GPU as fast (results: throughput study).
 
 `apply()` adds each flag to `XLA_FLAGS` when
 

@@ -142,7 +142,7 @@ def readme_table(ctx: Context) -> list[list[str]]:
     rows.append([f"UR5e reach / reach-avoid env steps/s, 8,192 envs (env only, {meta['date']})",
                  f"{thousands(PAPER_THROUGHPUT['ur5e-reach'])} / {thousands(PAPER_THROUGHPUT['ur5e-reach-avoid'])}",
                  "", f"{thousands(env['ur5e-reach']['steps_per_s'])} / {thousands(env['ur5e-reach-avoid']['steps_per_s'])}"])
-    train = ctx.json("throughput/train_throughput.json")
+    train = ctx.json(readme["ppo_throughput_file"])  # benchmarks/train_throughput.py on `ur5e-reach-ppo`
     rows.append([f"UR5e reach PPO training env steps/s, 1 seed, 8,192 envs per GPU ({train['meta']['date']})", "", "",
                  per_gpu_count(train["rows"])])
     sac = ctx.json(readme["sac_fast_throughput_file"])  # benchmarks/train_throughput.py on the fast SAC preset
