@@ -410,13 +410,13 @@ def test_sb3_vec_env_adapter_reports_terminal_obs_and_time_limits():
 def test_sb3_ppo_trains_through_the_bridge():
     sb3 = pytest.importorskip("stable_baselines3", reason="stable-baselines3 is in the dev extra")
     from stable_baselines3.common.env_checker import check_env as sb3_check_env
+    from stable_baselines3.common.logger import Logger
     from stable_baselines3.common.vec_env import VecMonitor
 
     sb3_check_env(eg.make("point-mass"), warn=False)
     venv = VecMonitor(eg.to_sb3(eg.make_vec("point-mass", 4)), info_keywords=("target_reached",))
-    from stable_baselines3.common.logger import Logger
     model = sb3.PPO("MlpPolicy", venv, n_steps=64, batch_size=128, n_epochs=2, seed=0, device="cpu")
-    model.set_logger(Logger(folder=None, output_formats=[]))  # else SB3 leaves an empty SB3-<date> folder in /tmp
+    model.set_logger(Logger(folder=None, output_formats=[]))  # else SB3 leaves an empty SB3-<date> folder in the temp folder
     model.learn(total_timesteps=512)
     assert model.num_timesteps >= 512
     episodes = list(model.ep_info_buffer)

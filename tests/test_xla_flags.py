@@ -12,31 +12,40 @@ LOOPS = "--xla_gpu_enable_command_buffer"
 DEFAULTS = FLAG + "=CONCURRENT " + LOOPS + "=+WHILE"
 
 
-def test_adds_the_flag_on_a_gpu_machine_and_keeps_the_users_flags():
-    env = {"XLA_FLAGS": "--xla_force_host_platform_device_count=2"}
+@pytest.mark.parametrize("before, after", [
+    ("", DEFAULTS),  # nothing set: both defaults
+    ("--xla_force_host_platform_device_count=2", "--xla_force_host_platform_device_count=2 " + DEFAULTS),  # kept
+    (FLAG + "=LHS", FLAG + "=LHS " + LOOPS + "=+WHILE"),  # the user's scheduling mode wins, the loops flag added
+    (LOOPS + "=FUSION", LOOPS + "=FUSION " + FLAG + "=CONCURRENT"),  # the user's command buffer types win
+])
+def test_adds_the_defaults_a_gpu_machines_flags_lack(before, after):
+    env = {"XLA_FLAGS": before}
     assert xla_flags.apply(env, gpu=True)
-    assert env["XLA_FLAGS"] == "--xla_force_host_platform_device_count=2 " + DEFAULTS
-    assert not xla_flags.apply(env, gpu=True)  # already there: unchanged
-    assert env["XLA_FLAGS"].count(FLAG) == 1
-    fresh = {}
-    assert xla_flags.apply(fresh, gpu=True)
-    assert fresh["XLA_FLAGS"] == DEFAULTS
+    assert env["XLA_FLAGS"] == after
 
 
-def test_the_users_choice_the_opt_out_and_cpu_machines_leave_xla_flags_alone():
+def test_a_second_apply_changes_nothing():
+    env = {}
+    xla_flags.apply(env, gpu=True)
+    assert not xla_flags.apply(env, gpu=True)
+
+
+def test_the_users_choice_of_both_flags_is_left_alone():
     mine = {"XLA_FLAGS": FLAG + "=LHS " + LOOPS + "=FUSION"}
     assert not xla_flags.apply(mine, gpu=True)
     assert mine["XLA_FLAGS"] == FLAG + "=LHS " + LOOPS + "=FUSION"
-    one_of_mine = {"XLA_FLAGS": FLAG + "=LHS"}
-    assert xla_flags.apply(one_of_mine, gpu=True)
-    assert one_of_mine["XLA_FLAGS"] == FLAG + "=LHS " + LOOPS + "=+WHILE"  # the other default still added
+
+
+def test_the_opt_out_leaves_xla_flags_alone():
     opted_out = {"REACH_AVOID_XLA_DEFAULTS": "0"}
     assert not xla_flags.apply(opted_out, gpu=True)
     assert "XLA_FLAGS" not in opted_out
+
+
+def test_a_cpu_machine_leaves_xla_flags_alone():
     cpu = {"XLA_FLAGS": ""}
     assert not xla_flags.apply(cpu, gpu=False)
     assert cpu["XLA_FLAGS"] == ""
-
 
 
 @pytest.fixture

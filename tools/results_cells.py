@@ -138,7 +138,8 @@ def time_to_result_cell(reports: list[dict], cold_seeds: list[int]) -> str:
 
 
 def per_gpu_count(rows: list[dict]) -> str:
-    """"893,471 on 1 GPU, 1,627,793 on 2": a train_throughput report's training rate per device count (no variants)."""
+    """A train_throughput report's training rate per device count (no variants): "R1 on 1 GPU, R2 on 2", each R in
+    env steps/s with thousands separators."""
     rates = [(r["devices"], thousands(r["train_steps_per_s"])) for r in rows if r.get("variant") is None]
     return ", ".join(f"{rate} on {n}" + (" GPU" if i == 0 else "") for i, (n, rate) in enumerate(rates))
 

@@ -143,8 +143,9 @@ def readme_table(ctx: Context) -> list[list[str]]:
                  f"{thousands(PAPER_THROUGHPUT['ur5e-reach'])} / {thousands(PAPER_THROUGHPUT['ur5e-reach-avoid'])}",
                  "", f"{thousands(env['ur5e-reach']['steps_per_s'])} / {thousands(env['ur5e-reach-avoid']['steps_per_s'])}"])
     train = ctx.json(readme["ppo_throughput_file"])  # benchmarks/train_throughput.py on `ur5e-reach-ppo`
-    rows.append([f"UR5e reach PPO training env steps/s, 1 seed, 8,192 envs per GPU ({train['meta']['date']})", "", "",
-                 per_gpu_count(train["rows"])])
+    row = next(r for r in train["rows"] if r["setting"] == "1dev")
+    rows.append([f"UR5e reach PPO training env steps/s, 1 seed, {row['num_envs']:,} envs per GPU ({train['meta']['date']})",
+                 "", "", per_gpu_count(train["rows"])])
     sac = ctx.json(readme["sac_fast_throughput_file"])  # benchmarks/train_throughput.py on the fast SAC preset
     row = next(r for r in sac["rows"] if r["setting"] == "1dev")
     rows.append([f"UR5e reach fast SAC training env steps/s, 1 seed, {row['num_envs']:,} envs per GPU ({sac['meta']['date']})",
