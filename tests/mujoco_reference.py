@@ -53,13 +53,20 @@ def colliding_configuration(robot, seed):
             return q
 
 
-def obstacles_model(robot, radii):
+def obstacles_model(robot, radii, every_geom: bool = False):
     """`contact_model` with one obstacle sphere per entry of `radii`: the MJCF's `obstacle` and copies
-    of it (`obstacle1`, ...), each in the same `<pair>`s with the robot geoms as the original."""
+    of it (`obstacle1`, ...), each in the same `<pair>`s with the robot geoms as the original; with
+    `every_geom`, paired with every robot geom (what a moving obstacle is checked against)."""
     from envs.robots.base import ASSETS
     spec = mujoco.MjSpec.from_file(str(ASSETS / robot.xml_file))
     partners = [p.geomname1 if p.geomname2 == "obstacle" else p.geomname2 for p in spec.pairs
                 if "obstacle" in (p.geomname1, p.geomname2)]
+    if every_geom:
+        unpaired = [robot.mj_model.geom(int(g)).name for g in robot.robot_geoms]
+        unpaired = [name for name in unpaired if name not in partners]
+        for geom in unpaired:
+            spec.add_pair(geomname1=geom, geomname2="obstacle")
+        partners += unpaired
     for j in range(1, len(radii)):
         body = spec.worldbody.add_body(name=f"obstacle{j}", mocap=True, pos=[0.5, 0, -5])
         body.add_geom(name=f"obstacle{j}", type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[radii[j], 0, 0], contype=0,

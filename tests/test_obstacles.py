@@ -229,20 +229,22 @@ def test_sampled_obstacles_clear_of_start_pose_and_target(moving):
     target = np.asarray(state.info["target_pos"])
     assert (np.linalg.norm(pos - target[:, None], axis=-1) > radii + cfg.target_radius).all()
     for q, p, r in zip(np.asarray(state.pipeline_state.qpos), pos, radii):
-        contacts, distances, _ = obstacle_contacts(obstacles_model(env.robot, r), q, p)
+        contacts, distances, _ = obstacle_contacts(obstacles_model(env.robot, r, every_geom=True), q, p)
         assert not contacts
         assert distances.min() > 0
 
 
 @pytest.mark.parametrize("name", ["ur5e-reach-avoid", "panda-reach-avoid"])
-def test_several_obstacles_collide_as_in_mujoco(name):
-    env = envs.make(name, num_obstacles=3, obstacle_radius_range=(0.03, 0.15), substeps=2)
-    robot = env.robot
+@pytest.mark.parametrize("motion", ["static", "linear"])
+def test_several_obstacles_collide_as_in_mujoco(name, motion):
+    """Static obstacles against the model's obstacle pairs, moving ones against every robot geom."""
+    env = envs.make(name, num_obstacles=3, obstacle_radius_range=(0.03, 0.15), obstacle_motion=motion, substeps=2)
+    robot, checked = env.robot, env.checked_geoms
     rng = np.random.default_rng(2)
     qpos = rng.uniform(robot.joint_low, robot.joint_high, size=(120, robot.nq)).astype(np.float32)
     kin = jax.jit(robot.kinematics)(qpos)
-    # Three obstacles near random robot geoms, each touching one about a third of the time.
-    geoms = rng.choice(robot.obstacle_geoms, size=(len(qpos), 3))
+    # Three obstacles near random checked geoms, each touching one about a third of the time.
+    geoms = rng.choice(checked, size=(len(qpos), 3))
     centers = np.asarray(kin.geom_xpos)[np.arange(len(qpos))[:, None], geoms] + rng.normal(scale=0.2, size=(len(qpos), 3, 3))
     radii = rng.uniform(0.03, 0.15, size=(len(qpos), 3)).astype(np.float32)
     info = {"obstacle_pos": jnp.asarray(centers.reshape(-1, 9), jnp.float32), "obstacle_radius": jnp.asarray(radii)}
@@ -250,18 +252,19 @@ def test_several_obstacles_collide_as_in_mujoco(name):
     @jax.jit
     @jax.vmap
     def ours(gx, gm, info):
-        per_geom = env.per_obstacle(info, lambda c, r: robot.obstacle_distances(gx, gm, c, r))
+        per_geom = env.per_obstacle(info, lambda c, r: robot.obstacle_distances(gx, gm, c, r, checked))
         return per_geom, env.collision_distances(gx, gm, info)[1]
 
     per_geom, closest = map(np.asarray, ours(kin.geom_xpos, kin.geom_xmat, info))
     colliding = clear = 0
+    model = lambda r: obstacles_model(robot, r, every_geom=motion != "static")  # noqa: E731
     for q, c, r, d, m in zip(qpos, centers.astype(np.float32), radii, per_geom, closest):
-        contacts, reference, robot_geoms = obstacle_contacts(obstacles_model(robot, r), q, c)
-        assert list(robot_geoms) == list(robot.obstacle_geoms)
+        contacts, reference, robot_geoms = obstacle_contacts(model(r), q, c)
+        assert list(robot_geoms) == list(checked)
         np.testing.assert_allclose(d, reference, atol=1e-4)  # every (obstacle, geom) signed distance
         np.testing.assert_allclose(m, reference.min(), atol=1e-4)  # the step's check: the closest of all
         for j in range(3):
-            for geom, value in zip(robot.obstacle_geoms, d[j]):
+            for geom, value in zip(checked, d[j]):
                 if abs(value) >= BORDERLINE:
                     assert (value < 0) == ((j, int(geom)) in contacts), (q, j, geom, value)
         if abs(m) >= BORDERLINE:
@@ -273,9 +276,10 @@ def test_several_obstacles_collide_as_in_mujoco(name):
 
 
 def _crossing_direction(robot, q, point, radii, others, rng, reach=0.2, region=0.6):
-    """A direction u such that an obstacle of radius radii[0] at point -+ reach*u is clear of the arm at q
-    (CPU MuJoCo, 1 cm margin) and inside the cube; the other obstacles stay at `others`."""
-    model = obstacles_model(robot, radii)
+    """A direction u such that an obstacle of radius radii[0] at point -+ reach*u is clear of the arm at q, every
+    robot geom as for a moving obstacle (CPU MuJoCo, 1 cm margin), and inside the cube; the other obstacles stay at
+    `others`."""
+    model = obstacles_model(robot, radii, every_geom=True)
     for _ in range(500):
         u = rng.normal(size=3)
         u /= np.linalg.norm(u)
@@ -318,7 +322,7 @@ def test_moving_obstacles_checked_at_every_substep_as_in_mujoco(moving):
             motion["center"][e, 0], motion["velocity"][e, 0] = point - 0.2 * u, 0.0
         info["obstacle_radius"][e] = radii
         ends = [point - 0.2 * u + k * 0.2 * u * crossing[e] for k in range(3)]
-        model = obstacles_model(robot, radii)
+        model = obstacles_model(robot, radii, every_geom=True)
         verdicts = [bool(obstacle_contacts(model, q0[e], np.vstack([p[None], others]))[0]) for p in ends]
         assert verdicts == [False, bool(crossing[e]), False], verdicts  # MuJoCo: only substep 1 collides
         expected_end.append(ends[2])
@@ -328,6 +332,36 @@ def test_moving_obstacles_checked_at_every_substep_as_in_mujoco(moving):
     np.testing.assert_array_equal(after.metrics["self_collision"], 0.0)
     # The state after the step holds the obstacles where they are at its end (2 substeps).
     np.testing.assert_allclose(np.asarray(after.info["obstacle_pos"]).reshape(N, 3, 3)[:, 0], expected_end, atol=1e-5)
+
+
+@pytest.mark.parametrize("name, fixed", [("ur5e-reach-avoid", ["base", "shoulder"]),
+                                         ("panda-reach-avoid", ["link0", "link1"])])
+def test_moving_obstacles_are_checked_against_the_geoms_no_joint_moves(name, fixed):
+    """The model's obstacle pairs leave out the base and the first link (no joint moves them, so a static obstacle
+    sampled clear of them never touches them); a moving obstacle is checked against every robot geom."""
+    static = envs.make(name, num_obstacles=3, substeps=2)
+    linear = envs.make(name, num_obstacles=3, obstacle_motion="linear", substeps=2)
+    robot = linear.robot
+    assert [robot.mj_model.geom(int(g)).name for g in robot.fixed_geoms] == fixed
+    assert list(linear.checked_geoms) == list(robot.robot_geoms)
+    assert list(static.checked_geoms) == list(robot.obstacle_geoms)
+
+
+def test_a_moving_obstacle_in_the_base_collides():
+    """An obstacle of radius 0.05 whose centre is 0.1 m below the base sphere's (radius 0.075) overlaps it by 2.5 cm:
+    a collision when obstacles move; with static ones the base is not checked (the paper's pairs)."""
+    env = envs.make("ur5e-reach-avoid", num_obstacles=3, obstacle_radius=0.05, obstacle_motion="linear", substeps=2)
+    static = envs.make("ur5e-reach-avoid", num_obstacles=3, obstacle_radius=0.05, substeps=2)
+    robot = env.robot
+    kin = robot.kinematics(jnp.zeros(robot.nq))
+    base = int(robot.mj_model.geom("base").id)
+    center = np.asarray(kin.geom_xpos)[base] + np.array([0.0, 0.0, -0.1])
+    far = np.array([0.0, 0.0, -0.5])  # the other two, below the mounting plane
+    info = {"obstacle_pos": jnp.asarray(np.concatenate([center, far, far]), jnp.float32)}
+    by_hand = np.linalg.norm(center - np.asarray(kin.geom_xpos)[base]) - 0.075 - 0.05
+    np.testing.assert_allclose(by_hand, -0.025, atol=1e-6)
+    np.testing.assert_allclose(env.collision_distances(kin.geom_xpos, kin.geom_xmat, info)[1], by_hand, atol=1e-5)
+    assert static.collision_distances(kin.geom_xpos, kin.geom_xmat, info)[1] > 0
 
 
 def test_observations_and_penalty_of_several_moving_obstacles(moving):

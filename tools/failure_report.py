@@ -54,16 +54,19 @@ def _names(robot, geoms) -> list[str]:
     return [robot.mj_model.geom(int(g)).name for g in geoms]
 
 
-def classify(robot, records: dict, obstacle_radius: float | None = None) -> list[dict]:
+def classify(robot, records: dict, obstacle_radius: float | None = None, geoms=None) -> list[dict]:
     """One dict per env: outcome, step (episode length), start clearance and, by outcome, the
     colliding pair / geom or the final distance. `records` as `evaluation.rollout` returns them;
     with obstacles in them and their radii (`obstacle_radius`, or recorded per episode), also whether
-    one lies between the end effector and the target at the start (and, for misses, at the end)."""
+    one lies between the end effector and the target at the start (and, for misses, at the end).
+    `geoms`: the robot geoms the env checks against obstacles (its `checked_geoms`; default the model's
+    obstacle pairs)."""
     import jax
     import jax.numpy as jnp
 
     from envs import collision
 
+    geoms = robot.obstacle_geoms if geoms is None else geoms
     metrics = records["metrics"]
     qpos = np.asarray(records["qpos"])
     length = np.asarray(records["length"]).astype(int)
@@ -89,7 +92,7 @@ def classify(robot, records: dict, obstacle_radius: float | None = None) -> list
             return positions[step, np.arange(n)].reshape(n, count, 3), radii[step, np.arange(n)]
 
         centres, radius_end = at(last)
-        surface = np.stack([np.asarray(jax.vmap(lambda c, x, m: robot.obstacle_distances(x, m, c, 0.0))(
+        surface = np.stack([np.asarray(jax.vmap(lambda c, x, m: robot.obstacle_distances(x, m, c, 0.0, geoms))(
             jnp.asarray(centres[:, j]), kin_end.geom_xpos, kin_end.geom_xmat)) - radius_end[:, j, None]
             for j in range(count)], axis=1)  # (env, obstacle, geom)
         obstacle_end = surface.min(axis=1)  # each geom's distance to the nearest obstacle's surface
@@ -126,7 +129,7 @@ def classify(robot, records: dict, obstacle_radius: float | None = None) -> list
         if metrics["episode/self_collision"][i] > 0:
             row.update(outcome="self collision", what=pair_names[int(np.argmin(self_end[i]))])
         elif metrics.get("episode/obstacle_collision", np.zeros(n))[i] > 0:
-            geom = robot.obstacle_geoms[int(np.argmin(obstacle_end[i]))]
+            geom = geoms[int(np.argmin(obstacle_end[i]))]
             row.update(outcome="obstacle collision", what=_names(robot, [geom])[0])
         elif metrics["episode/target_reached"][i] > 0:
             row.update(outcome="reached")
@@ -324,7 +327,8 @@ def main(argv: list[str] | None = None) -> dict:
     env_name = args.env or policy.train_env_name
     config = envs.make_config(env_name, policy.train_env_config)
     records = evaluation.rollout(policy, env_name, config, num_envs=args.num_envs, eval_seed=args.seed, unit=args.unit)
-    rows = classify(envs.from_config(env_name, config).robot, records, getattr(config, "obstacle_radius", None))
+    env = envs.from_config(env_name, config)
+    rows = classify(env.robot, records, getattr(config, "obstacle_radius", None), getattr(env, "checked_geoms", None))
     summary = summarize(rows, getattr(config, "joint_limit_margin", NEAR_LIMIT))
     title = f"{args.checkpoint} (seed {policy.units[args.unit]}) on {env_name}, eval seed {args.seed}"
     print(markdown(summary, title))

@@ -111,6 +111,9 @@ class Robot(abc.ABC):
         self.self_pairs = pairs[~with_obstacle]
         self.obstacle_geoms = np.sort(np.where(pairs[with_obstacle, 0] == obstacle_geom,
                                                pairs[with_obstacle, 1], pairs[with_obstacle, 0]))
+        # The model's obstacle pairs leave out the geoms no joint moves (the base; the first link, which only spins
+        # about its own axis): a static obstacle sampled clear of them never touches them, a moving one can.
+        self.fixed_geoms = np.setdiff1d(self.robot_geoms, self.obstacle_geoms)
         # Links for the paper's link-to-obstacle distances: the bodies that can touch an obstacle.
         self.link_bodies = np.unique(model.geom_bodyid[self.obstacle_geoms])
         self.link_geom_body = np.searchsorted(self.link_bodies, model.geom_bodyid[self.obstacle_geoms])

@@ -89,9 +89,17 @@ class ReachAvoid(Reach):
         centers, radii = self.obstacles(info)
         return jnp.stack([fn(centers[j], radii[j]) for j in range(centers.shape[0])])
 
+    @property
+    def checked_geoms(self):
+        """Robot geoms whose contact with an obstacle is a collision: the model's obstacle pairs (the geoms a joint
+        moves; the paper's static obstacle can touch no other), and every robot geom when obstacles move, since a
+        moving one can run into the base and the first link too."""
+        return self.robot.robot_geoms if self.motion.moves else self.robot.obstacle_geoms
+
     def collision_distances(self, geom_xpos, geom_xmat, info):
         self_min = jnp.min(self.robot.self_distances(geom_xpos, geom_xmat))
-        obstacle = self.per_obstacle(info, lambda c, r: self.robot.obstacle_distances(geom_xpos, geom_xmat, c, r))
+        geoms = self.checked_geoms
+        obstacle = self.per_obstacle(info, lambda c, r: self.robot.obstacle_distances(geom_xpos, geom_xmat, c, r, geoms))
         return jnp.stack([self_min, jnp.min(obstacle)])
 
     def link_distances(self, data, xpos, info):
