@@ -45,7 +45,8 @@ def first_contacts(env, info, geom_xpos, geom_xmat, geoms) -> jax.Array:
 
 def measure(env, num_envs: int, seed: int = 0) -> dict:
     """`num_envs` episode starts of `env` (moving obstacles): per episode the first contact with the fixed geoms and
-    with a standing arm's geoms; the shares of episodes with one, and the quartiles of the fixed geoms' step."""
+    with a standing arm's geoms; the shares of episodes with one, the quartiles of the fixed geoms' step, and the
+    share of starts the sampler did not find among its candidates (`reset_fallback`)."""
     if not env.motion.moves:
         raise ValueError(f"obstacle_motion={env.config.obstacle_motion!r} is invalid here: allowed is a moving one "
                          "(a static obstacle starts clear of the arm and stays there).")
@@ -63,6 +64,7 @@ def measure(env, num_envs: int, seed: int = 0) -> dict:
     hit = fixed >= 0
     return {"episodes": num_envs, "fixed_geoms": [robot.mj_model.geom(int(g)).name for g in robot.fixed_geoms],
             "fixed_share": float(hit.mean()), "standing_share": float((standing >= 0).mean()),
+            "fallback_share": float(np.mean(states.metrics["reset_fallback"])),
             "fixed_step_quartiles": np.percentile(fixed[hit], [25, 50, 75]).tolist() if hit.any() else None,
             "episode_length": env.config.episode_length}
 
@@ -72,11 +74,11 @@ def markdown(meta: dict, rows: dict) -> str:
              f"Command: `{meta['command']}`, code {meta['code']}; {meta['num_envs']:,} episode starts per preset "
              f"(reset key {meta['seed']}).", "",
              "| preset | env | geoms no joint moves | an obstacle runs into them | first at control step (quartiles) "
-             "| an arm standing still is hit |", "|---|---|---|---:|---|---:|"]
+             "| an arm standing still is hit | starts not found among the candidates |", "|---|---|---|---:|---|---:|---:|"]
     for name, r in rows.items():
         q = "" if r["fixed_step_quartiles"] is None else " / ".join(f"{v:.0f}" for v in r["fixed_step_quartiles"])
         lines.append(f"| {name} | {r['env_name']} | {', '.join(r['fixed_geoms'])} | {100 * r['fixed_share']:.1f} % | "
-                     f"{q} of {r['episode_length']} | {100 * r['standing_share']:.1f} % |")
+                     f"{q} of {r['episode_length']} | {100 * r['standing_share']:.1f} % | {100 * r['fallback_share']:.2f} % |")
     return "\n".join(lines) + "\n"
 
 

@@ -17,6 +17,10 @@ from envs.robots import first_valid
 from envs.tasks.reach import Reach
 
 
+PATH_STRIDE = 5
+"""Control steps between two readings of a moving obstacle's path when it is drawn (`path_clear_of_fixed_geoms`)."""
+
+
 class ReachAvoid(Reach):
     """Reach with sphere obstacles sampled per episode; see `ReachAvoidConfig`."""
 
@@ -37,7 +41,8 @@ class ReachAvoid(Reach):
     def sample_task(self, key, kin0, target):
         """Each obstacle's centre uniform in the cube around the base, its position at time 0 clear of
         the initial pose (every robot geom, the base included) and not swallowing the target; its
-        radius and motion are drawn with the candidate, so the check sees them."""
+        radius and motion are drawn with the candidate, so the check sees them. A moving obstacle's path
+        over the episode also stays clear of the geoms no joint moves (`path_clear_of_fixed_geoms`)."""
         cfg, robot = self.config, self.robot
         region = cfg.obstacle_region
         shape = (cfg.num_obstacles, self.candidates("obstacle"))
@@ -47,16 +52,17 @@ class ReachAvoid(Reach):
         else:
             radii = jax.random.uniform(jax.random.fold_in(key, 1), shape, minval=cfg.radius_bounds[0],
                                        maxval=cfg.radius_bounds[1])
-        start, params = centers, {}
+        start, params, clear_path = centers, {}, True
         if self.motion.moves:
             speeds = jax.random.uniform(jax.random.fold_in(key, 2), shape, minval=cfg.obstacle_speed_range[0],
                                         maxval=cfg.obstacle_speed_range[1])
             params = self.motion.sample(jax.random.fold_in(key, 3), centers, speeds, cfg.obstacle_period, region)
             start, _ = self.motion.state(params, 0.0, cfg.obstacle_period, region)
+            clear_path = self.path_clear_of_fixed_geoms(params, radii, kin0)
         to_robot = robot.obstacle_distances(kin0.geom_xpos, kin0.geom_xmat, start, radii[..., None],
                                             geoms=robot.robot_geoms)
         clear_of_target = jnp.linalg.norm(start - target, axis=-1) > radii + cfg.target_radius
-        index, ok = first_valid(jnp.all(to_robot > 0.0, axis=-1) & clear_of_target)
+        index, ok = first_valid(jnp.all(to_robot > 0.0, axis=-1) & clear_of_target & clear_path)
         pick = lambda x: x[jnp.arange(cfg.num_obstacles), index]  # noqa: E731  (each obstacle's first valid candidate)
         info = {"obstacle_pos": jnp.ravel(pick(start))}
         if cfg.obstacle_radius_range is not None:
@@ -65,6 +71,24 @@ class ReachAvoid(Reach):
             info["obstacle_motion"] = jax.tree.map(pick, params)
             info = self.task_at(info, 0)
         return info, jnp.all(ok)
+
+    def path_clear_of_fixed_geoms(self, params, radii, kin0):
+        """Whether each candidate motion keeps its obstacle clear of the geoms no joint moves (`robot.fixed_geoms`)
+        for the whole episode: an obstacle that runs into them collides whatever the policy does. The path is read
+        every `PATH_STRIDE` control steps, each reading asked to be clear by half the way the fastest obstacle goes
+        between two readings, so no time in between can touch."""
+        cfg, robot = self.config, self.robot
+        readings = -(-cfg.episode_length // PATH_STRIDE) + 1
+        times = jnp.minimum(jnp.arange(readings) * PATH_STRIDE, cfg.episode_length) * self.dt
+        margin = 0.5 * cfg.obstacle_speed_range[1] * PATH_STRIDE * self.dt
+
+        def clear_at(t):
+            position, _ = self.motion.state(params, t, cfg.obstacle_period, cfg.obstacle_region)
+            distances = robot.obstacle_distances(kin0.geom_xpos, kin0.geom_xmat, position, radii[..., None],
+                                                 geoms=robot.fixed_geoms)
+            return jnp.all(distances > margin, axis=-1)
+
+        return jnp.all(jax.vmap(clear_at)(times), axis=0)
 
     def task_at(self, info, physics_step):
         """Moving obstacles: their positions and velocities at physics step `physics_step`."""
