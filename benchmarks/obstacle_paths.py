@@ -76,9 +76,10 @@ def markdown(meta: dict, rows: dict) -> str:
              "| preset | env | geoms no joint moves | an obstacle runs into them | first at control step (quartiles) "
              "| an arm standing still is hit | starts not found among the candidates |", "|---|---|---|---:|---|---:|---:|"]
     for name, r in rows.items():
-        q = "" if r["fixed_step_quartiles"] is None else " / ".join(f"{v:.0f}" for v in r["fixed_step_quartiles"])
+        q = ("none" if r["fixed_step_quartiles"] is None
+             else " / ".join(f"{v:.0f}" for v in r["fixed_step_quartiles"]) + f" of {r['episode_length']}")
         lines.append(f"| {name} | {r['env_name']} | {', '.join(r['fixed_geoms'])} | {100 * r['fixed_share']:.1f} % | "
-                     f"{q} of {r['episode_length']} | {100 * r['standing_share']:.1f} % | {100 * r['fallback_share']:.2f} % |")
+                     f"{q} | {100 * r['standing_share']:.1f} % | {100 * r['fallback_share']:.2f} % |")
     return "\n".join(lines) + "\n"
 
 
