@@ -12,24 +12,25 @@ from mujoco_reference import obstacle_contacts, obstacles_model
 
 FAST = dict(num_obstacles=3, obstacle_motion="linear", obstacle_radius_range=(0.05, 0.1),
             obstacle_speed_range=(1.0, 2.0), episode_length=40)
-"""Fast obstacles, short episodes (1.6 s): 3 of the 12 episodes of reset seed 2 hit an arm standing still (4 ran into
-the base or the first link before the sampler kept paths clear of them)."""
+"""Fast obstacles, short episodes (1.6 s): some episodes hit an arm standing still, some do not."""
 
 
 def test_first_contacts_match_mujoco_step_by_step():
     env = envs.make("ur5e-reach-avoid", **FAST)
-    robot, n = env.robot, 12
-    states = jax.vmap(env.reset)(jax.random.split(jax.random.PRNGKey(2), n))
+    robot, n = env.robot, 6
+    states = jax.jit(jax.vmap(env.reset))(jax.random.split(jax.random.PRNGKey(5), n))  # 2 of these 6 hit a standing arm
     data = states.pipeline_state
     ours = np.asarray(jax.vmap(lambda i, x, m: obstacle_paths.first_contacts(env, i, x, m, robot.robot_geoms))(
         states.info, data.geom_xpos, data.geom_xmat))
+    positions = np.asarray(jax.jit(jax.vmap(jax.vmap(lambda i, k: env.task_at(i, k)["obstacle_pos"], (None, 0)), (0, None)))(
+        states.info, np.arange(env.config.episode_length + 1) * env.config.substeps))  # (episode, control step, 9)
     expected = []
     for e in range(n):
         info = jax.tree.map(lambda x: x[e], states.info)
         model = obstacles_model(robot, np.asarray(info["obstacle_radius"]), every_geom=True)
         first = -1
         for step in range(env.config.episode_length + 1):
-            centers = np.asarray(env.task_at(info, step * env.config.substeps)["obstacle_pos"]).reshape(3, 3)
+            centers = positions[e, step].reshape(3, 3)
             _, distances, _ = obstacle_contacts(model, np.asarray(data.qpos[e]), centers)
             if distances.min() < 0:
                 first = step
@@ -44,7 +45,7 @@ def test_no_sampled_path_runs_into_the_geoms_no_joint_moves():
     env = envs.make("ur5e-reach-avoid", **FAST)
     result = obstacle_paths.measure(env, 12, seed=2)
     assert result["fixed_geoms"] == ["base", "shoulder"]
-    assert result["fixed_share"] == 0.0
+    assert result["fixed_share"] == 0.0  # 4 of these 12 ran into the base or the first link before paths were checked
     assert result["standing_share"] == pytest.approx(3 / 12)
 
 
@@ -58,7 +59,7 @@ def test_sampled_paths_stay_clear_of_the_fixed_geoms_at_every_physics_substep():
     """The sampler reads each path every few control steps with a margin; read at every substep, none touches."""
     env = envs.make("ur5e-reach-avoid", **FAST)
     robot, cfg = env.robot, env.config
-    states = jax.vmap(env.reset)(jax.random.split(jax.random.PRNGKey(3), 12))
+    states = jax.jit(jax.vmap(env.reset))(jax.random.split(jax.random.PRNGKey(3), 12))
     data = states.pipeline_state
 
     def closest(info, geom_xpos, geom_xmat):
