@@ -264,9 +264,10 @@ class ReachAvoidConfig(ReachConfig):
     a random phase and period obstacle_period, its amplitude capped to stay in the cube. A closed-form
     function of episode time (`envs.obstacles`): the collision check uses the obstacles' positions at
     every physics substep, the penalty and the observation those at the end of the step. A moving
-    obstacle starts clear of the initial pose and the target and may cross both later. Like the
-    static one, a moving obstacle is checked against the robot geoms of the MJCF's obstacle pairs (not
-    the base and the shoulder capsule, which the policy cannot move out of its way)."""
+    obstacle starts clear of the initial pose and the target and may cross both later. It is checked
+    against every robot geom (`ReachAvoid.checked_geoms`), and drawn with a path that stays clear of the
+    geoms no joint moves, the base and the first link, which no policy could move out of its way
+    (`ReachAvoid.path_clear_of_fixed_geoms`; a reset that falls back, `reset_fallback`, is not held to it)."""
     obstacle_speed_range: tuple[float, float] = (0.05, 0.2)
     """(min, max) speed (m/s) drawn per obstacle and episode: linear's speed, sinusoid's peak speed
     (amplitude = speed * period / 2 pi before the cap); ignored for static."""

@@ -74,9 +74,10 @@ class ReachAvoid(Reach):
 
     def path_clear_of_fixed_geoms(self, params, radii, kin0):
         """Whether each candidate motion keeps its obstacle clear of the geoms no joint moves (`robot.fixed_geoms`)
-        for the whole episode: an obstacle that runs into them collides whatever the policy does. The path is read
-        every `PATH_STRIDE` control steps, each reading asked to be clear by half the way the fastest obstacle goes
-        between two readings, so no time in between can touch."""
+        for the whole episode (`config.episode_length` steps; a longer wrapper episode is not covered): an obstacle
+        that runs into them collides whatever the policy does. The path is read every `PATH_STRIDE` control steps,
+        each reading asked to be clear by half the way the fastest obstacle goes between two readings, so no time in
+        between can touch."""
         cfg, robot = self.config, self.robot
         readings = -(-cfg.episode_length // PATH_STRIDE) + 1
         times = jnp.minimum(jnp.arange(readings) * PATH_STRIDE, cfg.episode_length) * self.dt
@@ -117,7 +118,8 @@ class ReachAvoid(Reach):
     def checked_geoms(self):
         """Robot geoms whose contact with an obstacle is a collision: the model's obstacle pairs (the geoms a joint
         moves; the paper's static obstacle can touch no other), and every robot geom when obstacles move, since a
-        moving one can run into the base and the first link too."""
+        moving one could reach the base and the first link too (its path is drawn clear of them; a fallback reset's
+        is not). The penalty and the link-distance observations stay on the pairs' links, which a policy moves."""
         return self.robot.robot_geoms if self.motion.moves else self.robot.obstacle_geoms
 
     def collision_distances(self, geom_xpos, geom_xmat, info):
