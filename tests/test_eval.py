@@ -998,6 +998,25 @@ def test_failure_report_follows_several_moving_obstacles_of_their_own_radii():
     assert rows[1]["what"] == robot.mj_model.geom(int(nearest)).name
 
 
+def test_failure_report_names_the_base_when_moving_obstacles_are_checked_against_it():
+    """An obstacle of radius 0.05 m 0.1 m below the base sphere's centre (radius 0.075) overlaps only the base: the
+    report names it among the geoms a moving-obstacle env checks (`checked_geoms`), and cannot among the pairs'."""
+    from tools import failure_report
+
+    robot, free, _, target = _free_arm_and_target(n=1)
+    moving = envs.make("ur5e-reach-avoid", num_obstacles=1, obstacle_motion="linear")
+    base = int(robot.mj_model.geom("base").id)
+    centre = np.asarray(robot.kinematics(free).geom_xpos)[base] + [0.0, 0.0, -0.1]
+    metrics = {"episode/self_collision": np.zeros(1), "episode/obstacle_collision": np.ones(1),
+               "episode/target_reached": np.zeros(1), "episode/distance": np.array([0.4])}
+    records = {"qpos": np.tile(free, (5, 1, 1)), "target_pos": target, "obstacle_pos": np.tile(centre, (5, 1, 1)),
+               "length": np.array([4]), "metrics": metrics}
+    row, = failure_report.classify(robot, records, obstacle_radius=0.05, geoms=moving.checked_geoms)
+    assert row["what"] == "base"
+    np.testing.assert_allclose(row["final_obstacle_clearance"], 0.1 - 0.075 - 0.05, atol=1e-5)
+    assert failure_report.classify(robot, records, obstacle_radius=0.05)[0]["what"] != "base"
+
+
 def test_point_segment_distance_on_hand_computed_geometry():
     """What failure_report's obstacle_between measures: a sphere's clearance from the end effector's
     straight line to the target (`envs.collision.point_segment_distance` minus the radius)."""
