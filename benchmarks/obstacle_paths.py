@@ -35,9 +35,9 @@ def first_contacts(env, info, geom_xpos, geom_xmat, geoms) -> jax.Array:
     steps = jnp.arange(cfg.episode_length + 1)
 
     def closest(step):
-        centers, radii = env.obstacles(env.task_at(info, step * cfg.substeps))
-        return jnp.min(jnp.stack([env.robot.obstacle_distances(geom_xpos, geom_xmat, centers[j], radii[j], geoms)
-                                  for j in range(centers.shape[0])]))
+        at_step = env.task_at(info, step * cfg.substeps)
+        return jnp.min(env.per_obstacle(at_step, lambda c, r: env.robot.obstacle_distances(geom_xpos, geom_xmat, c, r,
+                                                                                            geoms)))
 
     touching = jax.vmap(closest)(steps) < 0
     return jnp.where(jnp.any(touching), jnp.argmax(touching), -1)
