@@ -3,22 +3,25 @@
 #
 #   REACH_AVOID_CODE_VERSION=<commit> bash dev/train_within.sh SECONDS EXPERIMENT/RUN [EXPERIMENT/RUN ...]
 #   bash dev/train_within.sh --pack     # a later command on the same warm host: pack what finished since
+#   TRAIN_GPU=1 bash dev/train_within.sh ...   # one launch per GPU, each with its own folder and archive
 #
 # Installs the wheels of .whl/, copies the tree to /tmp/x/repo and runs `tools.experiments launch ... --executor
 # local --max-seeds 1` there (one seed per GPU), recording into the copy's results/experiments: the parts the tree
 # already holds are not trained again. It shows the launch's first output after at most 30 s (a refused launch ends
 # the command then, with its exit status), waits until the launch ends or SECONDS have passed since the script
 # started, and packs the parts finished since it started (their runs/ files under results/experiments/), the job logs
-# and the launch log into $OUT/experiments.tgz: `tar xzf experiments.tgz` in the tree puts the parts in place. Give
+# and the launch log into $OUT/experiments.tgz (experiments-gpuN.tgz with TRAIN_GPU=N): `tar xzf experiments.tgz` in the tree puts the parts in place. Give
 # SECONDS about 30 less than the command's limit; the script exits 3 when the deadline came first. Parts still
 # training then go on while the host stays warm; the script refuses to start another launch until they end.
 set -u
-work=/tmp/x
+gpu="${TRAIN_GPU:-}"
+work=/tmp/x${gpu:+-gpu$gpu}
+archive="experiments${gpu:+-gpu$gpu}.tgz"
 
 pack() {  # the parts recorded since the launch started, with the job and launch logs
   (cd "$work/repo" && find results/experiments -path '*/runs/*' -type f -newer "$work/started" -print0) \
     > "$work/parts.list"
-  tar czf "$OUT/experiments.tgz" -C "$work/repo" --null -T "$work/parts.list" -C "$work" jobs launch.log
+  tar czf "$OUT/$archive" -C "$work/repo" --null -T "$work/parts.list" -C "$work" jobs launch.log
   echo "packed $(tr -cd '\0' < "$work/parts.list" | wc -c) files of finished parts"
 }
 
@@ -43,8 +46,9 @@ if running; then
   exit 2
 fi
 
-python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site .whl/*.whl \
-  || exit 1
+# One install at a time where several launches (TRAIN_GPU) start together.
+$(command -v flock >/dev/null && echo flock /tmp/site.lock) python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade \
+  --target /tmp/site .whl/*.whl || exit 1
 # A fresh copy of the tree and job logs; the runs' folders ($work/runs: a part stopped early resumes from its
 # checkpoint) and the compilation cache ($work/jc) are kept.
 rm -rf "$work/repo" "$work/jobs"
@@ -54,6 +58,7 @@ cd "$work/repo" || exit 1
 touch "$work/started"
 export PYTHONPATH="/tmp/site:$PWD" PYTHONUNBUFFERED=1 REACH_AVOID_CODE_VERSION
 nvidia-smi -L
+[ -n "$gpu" ] && export CUDA_VISIBLE_DEVICES="$gpu"
 python3 -m tools.experiments launch "$@" --executor local --max-seeds 1 --runs-dir "$work/runs" \
   --jobs-dir "$work/jobs" --compilation-cache "$work/jc" > "$work/launch.log" 2>&1 &
 launch=$!

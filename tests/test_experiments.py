@@ -474,6 +474,9 @@ def test_equal_runs_train_once_and_the_record_keeps_finished_parts(tmp_path):
     assert state.storage(second, same, registry) == ("first", "base")
     assert state.storage(second, other, registry) == ("second", "other")
     assert state.storage(second, same, {"second": second}) == ("second", "same")  # not registered together: its own
+    apart = dataclasses.replace(same, shares=False)
+    second_apart = spec.Experiment("second", "", "", (apart, other), metrics=("target_reached",), curves=())
+    assert state.storage(second_apart, apart, {"first": first, "second": second_apart}) == ("second", "same")
     _part(base, runs_dir, "first", "base", 0, 2, steps=[10240], evaluated=10240)
 
     st = state.run_state(second, same, runs_dir, out, registry)

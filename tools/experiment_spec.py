@@ -64,6 +64,9 @@ class Run:
     """The row's name in the table ("" = `name`)."""
     paper: dict = dataclasses.field(default_factory=dict)
     """The paper's numbers for this run, {metric: value} (rates in [0, 1], distances in m): a `paper_row`."""
+    shares: bool = True
+    """Whether the run trains in the folder of the first registered run with the same training config; False where
+    the code under that config has changed the task since that run trained (its parts would be another task's)."""
 
     @property
     def title(self) -> str:

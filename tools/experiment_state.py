@@ -267,9 +267,10 @@ def recipe(run: Run) -> str:
 
 def storage(experiment: Experiment, run: Run, registry: dict | None = None) -> tuple[str, str]:
     """(experiment, run) whose folder trains `run`: the first run of the registry with the same recipe (so an
-    experiment's baseline that another experiment also has trains once), else the run's own."""
+    experiment's baseline that another experiment also has trains once), else the run's own (always where the run
+    does not share, `Run.shares`)."""
     registry = EXPERIMENTS if registry is None else registry
-    if registry.get(experiment.name) is experiment:
+    if run.shares and registry.get(experiment.name) is experiment:
         key = recipe(run)
         for exp in registry.values():
             for other in exp.runs:
