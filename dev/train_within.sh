@@ -2,7 +2,6 @@
 # Trains registered runs on a GPU host that takes one command of limited length (see README.md):
 #
 #   REACH_AVOID_CODE_VERSION=<commit> bash dev/train_within.sh SECONDS EXPERIMENT/RUN [EXPERIMENT/RUN ...]
-#   bash dev/train_within.sh --pack     # a later command on the same warm host: pack what finished since
 #   TRAIN_GPU=1 bash dev/train_within.sh ...   # one launch per GPU, each with its own folder and archive
 #
 # Installs the wheels of .whl/, copies the tree to /tmp/x/repo and runs `tools.experiments launch ... --executor
@@ -10,9 +9,10 @@
 # already holds are not trained again. It shows the launch's first output after at most 30 s (a refused launch ends
 # the command then, with its exit status), waits until the launch ends or SECONDS have passed since the script
 # started, and packs the parts finished since it started (their runs/ files under results/experiments/), the job logs
-# and the launch log into $OUT/experiments.tgz (experiments-gpuN.tgz with TRAIN_GPU=N): `tar xzf experiments.tgz` in the tree puts the parts in place. Give
-# SECONDS about 30 less than the command's limit; the script exits 3 when the deadline came first. Parts still
-# training then go on while the host stays warm; the script refuses to start another launch until they end.
+# and the launch log into $OUT/experiments.tgz (experiments-gpuN.tgz with TRAIN_GPU=N): `tar xzf experiments.tgz` in
+# the tree puts the parts in place. Give SECONDS about 30 less than the command's limit; the script exits 3 when the
+# deadline came first. Parts still training then stop with the command (the host ends its processes); the same call
+# in a later command on the warm host resumes them from their last checkpoint, since the runs folder is kept.
 set -u
 gpu="${TRAIN_GPU:-}"
 work=/tmp/x${gpu:+-gpu$gpu}
@@ -25,15 +25,7 @@ pack() {  # the parts recorded since the launch started, with the job and launch
   echo "packed $(tr -cd '\0' < "$work/parts.list" | wc -c) files of finished parts"
 }
 
-running() { [ -f "$work/launch.pid" ] && kill -0 "$(cat "$work/launch.pid")" 2>/dev/null; }
-
 : "${OUT:?the folder that comes back}"
-if [ "${1:-}" = "--pack" ]; then
-  running && echo "the launch is still running; packing what finished so far"
-  tail -n 20 "$work/launch.log"
-  pack
-  exit 0
-fi
 if [ $# -lt 2 ] || ! [[ $1 =~ ^[0-9]+$ ]]; then
   echo "usage: REACH_AVOID_CODE_VERSION=<commit> bash dev/train_within.sh SECONDS EXPERIMENT/RUN [...]" >&2
   exit 2
@@ -41,14 +33,9 @@ fi
 deadline=$(( $(date +%s) + $1 ))
 shift
 : "${REACH_AVOID_CODE_VERSION:?set it to the commit the tree holds (the copy has no .git)}"
-if running; then
-  echo "a launch from an earlier command is still running (pid $(cat "$work/launch.pid")): --pack, or wait" >&2
-  exit 2
-fi
-
 # One install at a time where several launches (TRAIN_GPU) start together.
-$(command -v flock >/dev/null && echo flock /tmp/site.lock) python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade \
-  --target /tmp/site .whl/*.whl || exit 1
+$(command -v flock >/dev/null && echo flock /tmp/site.lock) python3 -m pip install -q --no-index --no-deps \
+  --no-compile --no-cache-dir --upgrade --target /tmp/site .whl/*.whl || exit 1
 # A fresh copy of the tree and job logs; the runs' folders ($work/runs: a part stopped early resumes from its
 # checkpoint) and the compilation cache ($work/jc) are kept.
 rm -rf "$work/repo" "$work/jobs"
@@ -62,7 +49,6 @@ nvidia-smi -L
 python3 -m tools.experiments launch "$@" --executor local --max-seeds 1 --runs-dir "$work/runs" \
   --jobs-dir "$work/jobs" --compilation-cache "$work/jc" > "$work/launch.log" 2>&1 &
 launch=$!
-echo "$launch" > "$work/launch.pid"
 for _ in $(seq 30); do
   kill -0 "$launch" 2>/dev/null || break
   sleep 1
