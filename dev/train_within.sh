@@ -2,20 +2,29 @@
 # Trains registered runs on a GPU host that takes one command of limited length (see README.md):
 #
 #   REACH_AVOID_CODE_VERSION=<commit> bash dev/train_within.sh SECONDS EXPERIMENT/RUN [EXPERIMENT/RUN ...]
-#   TRAIN_GPU=1 bash dev/train_within.sh ...   # one launch per GPU, each with its own folder and archive
+#   TRAIN_GPU=1 bash dev/train_within.sh ...   # this GPU alone, its own folders and archive
 #
-# Installs the wheels of .whl/, copies the tree to /tmp/x/repo and runs `tools.experiments launch ... --executor
-# local --max-seeds 1` there (one seed per GPU), recording into the copy's results/experiments: the parts the tree
-# already holds are not trained again. It shows the launch's first output after at most 30 s (a refused launch ends
-# the command then, with its exit status), waits until the launch ends or SECONDS have passed since the script
-# started, and packs the parts finished since it started (their runs/ files under results/experiments/), the job logs
-# and the launch log into $OUT/experiments.tgz (experiments-gpuN.tgz with TRAIN_GPU=N): `tar xzf experiments.tgz` in
-# the tree puts the parts in place. Give SECONDS about 30 less than the command's limit; the script exits 3 when the
-# deadline came first. Parts still training then stop with the command (the host ends its processes); the same call
-# in a later command on the warm host resumes them from their last checkpoint, since the runs folder is kept.
+# TRAIN_GPU=N gives each GPU its own list of runs (one launch per GPU, started side by side), where one launch would
+# hand its parts to the GPUs in a single order. A part resumes only under the TRAIN_GPU it started with.
+#
+# Installs the wheels of .whl/, copies the tree to /tmp/x/repo (/tmp/x-gpuN/repo) and runs `tools.experiments launch
+# ... --executor local --max-seeds 1` there (one seed per GPU), recording into the copy's results/experiments: the
+# parts the tree already holds are not trained again. It shows the launch's first output after at most 30 s (a refused
+# launch ends the command then, with its exit status), waits until the launch ends or SECONDS have passed since the
+# script started, and packs the parts finished since it started (their runs/ files under results/experiments/), the
+# job logs and the launch log into $OUT/experiments.tgz (experiments-gpuN.tgz with TRAIN_GPU=N): `tar xzf
+# experiments.tgz` in the tree puts the parts in place. Give SECONDS about 30 less than the command's limit; the
+# script exits 3 when the deadline came first. Parts still training then stop with the command (the host ends its
+# processes); the same call in a later command on the warm host resumes them from their last checkpoint, since the
+# runs folder is kept.
 set -u
 gpu="${TRAIN_GPU:-}"
+if [ -n "$gpu" ] && ! [[ $gpu =~ ^[0-9]+$ ]]; then
+  echo "TRAIN_GPU=$gpu is invalid: one GPU index (0, 1, ...)" >&2
+  exit 2
+fi
 work=/tmp/x${gpu:+-gpu$gpu}
+site=/tmp/site${gpu:+-gpu$gpu}  # each launch imports from its own copy, which no other install replaces under it
 archive="experiments${gpu:+-gpu$gpu}.tgz"
 
 pack() {  # the parts recorded since the launch started, with the job and launch logs
@@ -33,9 +42,14 @@ fi
 deadline=$(( $(date +%s) + $1 ))
 shift
 : "${REACH_AVOID_CODE_VERSION:?set it to the commit the tree holds (the copy has no .git)}"
-# One install at a time where several launches (TRAIN_GPU) start together.
-$(command -v flock >/dev/null && echo flock /tmp/site.lock) python3 -m pip install -q --no-index --no-deps \
-  --no-compile --no-cache-dir --upgrade --target /tmp/site .whl/*.whl || exit 1
+mkdir -p "$work"
+exec 9> "$work.lock"
+if command -v flock > /dev/null && ! flock -n 9; then
+  echo "another launch holds $work (TRAIN_GPU=${gpu:-unset}); wait for it" >&2
+  exit 2
+fi
+python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target "$site" .whl/*.whl \
+  || exit 1
 # A fresh copy of the tree and job logs; the runs' folders ($work/runs: a part stopped early resumes from its
 # checkpoint) and the compilation cache ($work/jc) are kept.
 rm -rf "$work/repo" "$work/jobs"
@@ -43,7 +57,7 @@ mkdir -p "$work/jobs"
 cp -r . "$work/repo"
 cd "$work/repo" || exit 1
 touch "$work/started"
-export PYTHONPATH="/tmp/site:$PWD" PYTHONUNBUFFERED=1 REACH_AVOID_CODE_VERSION
+export PYTHONPATH="$site:$PWD" PYTHONUNBUFFERED=1 REACH_AVOID_CODE_VERSION
 nvidia-smi -L
 [ -n "$gpu" ] && export CUDA_VISIBLE_DEVICES="$gpu"
 python3 -m tools.experiments launch "$@" --executor local --max-seeds 1 --runs-dir "$work/runs" \

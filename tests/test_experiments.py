@@ -474,9 +474,13 @@ def test_equal_runs_train_once_and_the_record_keeps_finished_parts(tmp_path):
     assert state.storage(second, same, registry) == ("first", "base")
     assert state.storage(second, other, registry) == ("second", "other")
     assert state.storage(second, same, {"second": second}) == ("second", "same")  # not registered together: its own
-    apart = dataclasses.replace(same, shares=False)
+    apart = dataclasses.replace(same, shares=False)  # the same config on a task the code has changed since
     second_apart = spec.Experiment("second", "", "", (apart, other), metrics=("target_reached",), curves=())
-    assert state.storage(second_apart, apart, {"first": first, "second": second_apart}) == ("second", "same")
+    later = spec.Run("later", "point-mass-ppo", dict(TOY_RUN), seeds=1, num_timesteps=10_240)
+    third = spec.Experiment("third", "", "", (later,), metrics=("target_reached",), curves=())
+    changed = {"first": first, "second": second_apart, "third": third}
+    assert state.storage(second_apart, apart, changed) == ("second", "same")
+    assert state.storage(third, later, changed) == ("second", "same")  # the new task's folder, not the first's
     _part(base, runs_dir, "first", "base", 0, 2, steps=[10240], evaluated=10240)
 
     st = state.run_state(second, same, runs_dir, out, registry)

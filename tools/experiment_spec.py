@@ -65,8 +65,9 @@ class Run:
     paper: dict = dataclasses.field(default_factory=dict)
     """The paper's numbers for this run, {metric: value} (rates in [0, 1], distances in m): a `paper_row`."""
     shares: bool = True
-    """Whether the run trains in the folder of the first registered run with the same training config; False where
-    the code under that config has changed the task since that run trained (its parts would be another task's)."""
+    """Whether the run trains in the folder of an earlier registered run with the same training config. False where
+    the code under that config has changed the task since that run trained (its parts would be another task's): the
+    run keeps its own folder, and later runs of that config share it instead."""
 
     @property
     def title(self) -> str:

@@ -267,15 +267,18 @@ def recipe(run: Run) -> str:
 
 def storage(experiment: Experiment, run: Run, registry: dict | None = None) -> tuple[str, str]:
     """(experiment, run) whose folder trains `run`: the first run of the registry with the same recipe (so an
-    experiment's baseline that another experiment also has trains once), else the run's own (always where the run
-    does not share, `Run.shares`)."""
+    experiment's baseline that another experiment also has trains once), or the last such run before it that does
+    not share (`Run.shares`: where the code changed the task under that recipe, runs from there on share its
+    folder), else the run's own (always where the run does not share)."""
     registry = EXPERIMENTS if registry is None else registry
     if run.shares and registry.get(experiment.name) is experiment:
-        key = recipe(run)
+        key, owner = recipe(run), None
         for exp in registry.values():
             for other in exp.runs:
-                if other is run or recipe(other) == key:
-                    return exp.name, other.name
+                if other is run:
+                    return owner or (exp.name, other.name)
+                if recipe(other) == key and (owner is None or not other.shares):
+                    owner = exp.name, other.name
     return experiment.name, run.name
 
 
