@@ -11,12 +11,12 @@
 # ... --executor local --max-seeds 1` there (one seed per GPU), recording into the copy's results/experiments: the
 # parts the tree already holds are not trained again. It shows the launch's first output after at most 30 s (a refused
 # launch ends the command then, with its exit status), waits until the launch ends or SECONDS have passed since the
-# script started, and packs the parts finished since it started (their runs/ files under results/experiments/), the
-# job logs and the launch log into $OUT/experiments.tgz (experiments-gpuN.tgz with TRAIN_GPU=N): `tar xzf
-# experiments.tgz` in the tree puts the parts in place. Give SECONDS about 30 less than the command's limit; the
-# script exits 3 when the deadline came first. Parts still training then stop with the command (the host ends its
-# processes); the same call in a later command on the warm host resumes them from their last checkpoint, since the
-# runs folder is kept.
+# script started, and packs the parts finished since it started (their runs/ files under results/experiments/), their
+# newest policy exports (exports/<experiment>/<run>/<part>/: for eval.py and tools.failure_report on a CPU), the job
+# logs and the launch log into $OUT/experiments.tgz (experiments-gpuN.tgz with TRAIN_GPU=N): `tar xzf ARCHIVE results`
+# in the tree puts the parts in place. Give SECONDS about 30 less than the command's limit; the script exits 3 when
+# the deadline came first. Parts still training then stop with the command (the host ends its processes); the same
+# call in a later command on the warm host resumes them from their last checkpoint, since the runs folder is kept.
 set -u
 gpu="${TRAIN_GPU:-}"
 if [ -n "$gpu" ] && ! [[ $gpu =~ ^[0-9]+$ ]]; then
@@ -27,11 +27,26 @@ work=/tmp/x${gpu:+-gpu$gpu}
 site=/tmp/site${gpu:+-gpu$gpu}  # each launch imports from its own copy, which no other install replaces under it
 archive="experiments${gpu:+-gpu$gpu}.tgz"
 
-pack() {  # the parts recorded since the launch started, with the job and launch logs
+exports() {  # the policy export of each part evaluated since the launch started, as exports/<exp>/<run>/<part>/
+  rm -rf "$work/exports"
+  mkdir -p "$work/exports"
+  (cd "$work/runs" 2>/dev/null && find . -name eval.json -newer "$work/started") | while read -r done; do
+    part=$(dirname "$done")
+    step=$(ls "$work/runs/$part/checkpoints" 2>/dev/null | grep -E '^[0-9]+$' | sort -n | tail -n 1)
+    policy="$work/runs/$part/checkpoints/$step/policy"
+    if [ -n "$step" ] && [ -f "$policy/policy.json" ]; then
+      mkdir -p "$work/exports/$part" && cp "$policy"/policy.* "$work/exports/$part/"
+    fi
+  done
+}
+
+pack() {  # the parts recorded since the launch started, with their policy exports and the job and launch logs
   (cd "$work/repo" && find results/experiments -path '*/runs/*' -type f -newer "$work/started" -print0) \
     > "$work/parts.list"
-  tar czf "$OUT/$archive" -C "$work/repo" --null -T "$work/parts.list" -C "$work" jobs launch.log
-  echo "packed $(tr -cd '\0' < "$work/parts.list" | wc -c) files of finished parts"
+  exports
+  tar czf "$OUT/$archive" -C "$work/repo" --null -T "$work/parts.list" -C "$work" jobs launch.log exports
+  echo "packed $(tr -cd '\0' < "$work/parts.list" | wc -c) files of finished parts and" \
+    "$(find "$work/exports" -name policy.json | wc -l) policy exports (eval.py --checkpoint exports/EXP/RUN/PART)"
 }
 
 : "${OUT:?the folder that comes back}"
