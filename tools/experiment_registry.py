@@ -381,13 +381,23 @@ register(Experiment(
 # the first link: results/obstacles/README.md): the runs above trained on the old one and are not mixed with these.
 register(Experiment(
     "obstacles-dodge-clear", "Among 3 moving obstacles drawn clear of the base, every robot geom checked: predicted "
-    "link distances, a joint-limit penalty and longer training (the presets' budgets 1 seed, the longer ones 5)",
+    "link distances, a joint-limit penalty, collision penalties and longer training (screening: 1 seed a row; the "
+    "longer ones 5)",
     "not in the paper (the future work of its Discussion)",
     (Run("ur5e-ahead-jl", "ur5e-reach-avoid-ppo-moving3", {"env.observation": _MOVING3_PLUS_OBS + _AHEAD, **_JL},
          seeds=1, shares=False, label="ur5e, + link_obstacle_ahead, joint-limit penalty 0.05"),
      Run("ur5e-ahead-jl-400m", "ur5e-reach-avoid-ppo-moving3", {"env.observation": _MOVING3_PLUS_OBS + _AHEAD, **_JL},
          seeds=5, shares=False, num_timesteps=400_000_000,
          label="ur5e, + link_obstacle_ahead, joint-limit penalty 0.05, 400M steps"),
+     Run("ur5e-ahead-jl-cp10", "ur5e-reach-avoid-ppo-moving3",
+         {"env.observation": _MOVING3_PLUS_OBS + _AHEAD, **_JL, "env.collision_penalty": 10.0}, seeds=1, shares=False,
+         label="ur5e, + link_obstacle_ahead, joint-limit penalty 0.05, collision penalty 10"),
+     Run("ur5e-ahead-jl-obst0.5", "ur5e-reach-avoid-ppo-moving3",
+         {"env.observation": _MOVING3_PLUS_OBS + _AHEAD, **_JL, "env.w_obst": 0.5}, seeds=1, shares=False,
+         label="ur5e, + link_obstacle_ahead, joint-limit penalty 0.05, link-proximity penalty 0.5 (eq. 3; paper 0.1)"),
+     Run("ur5e-ahead-jl-tau0.2", "ur5e-reach-avoid-ppo-moving3",
+         {"env.observation": _MOVING3_PLUS_OBS + _AHEAD, **_JL, "env.obstacle_tau": 0.2}, seeds=1, shares=False,
+         label="ur5e, + link_obstacle_ahead, joint-limit penalty 0.05, link-proximity margin 0.2 m (eq. 3; paper 0.1)"),
      Run("panda-ahead", "panda-reach-avoid-ppo-moving3", {"env.observation": _MOVING3_OBS + _AHEAD}, seeds=1,
          shares=False, label="panda, + link_obstacle_ahead"),
      Run("panda-plus-ahead-300m", "panda-reach-avoid-ppo-moving3", {"env.observation": _MOVING3_PLUS_OBS + _AHEAD},
@@ -401,7 +411,9 @@ register(Experiment(
          "distance to the nearest obstacle moved on at its current velocity, 0.5 and 1 s ahead), the UR5e with "
          "ur5e-reach-ppo's weak joint-limit penalty (2.2 points more reach on one seed of the old task, against the "
          "five-seed mean), and budgets 2-3x the presets' (their curves were still rising at the end; each within 20 "
-         "minutes of one H200)."))
+         "minutes of one H200). The penalty rows aim at the collisions, which are all avoidable on this task: the "
+         "collision penalty (10 subtracted on a collision step) and eq. (3)'s link-proximity penalty, five times "
+         "stronger or with twice the margin."))
 
 _LATENCY_METRICS = _AVOID_METRICS + ("steps_in_target", "times_left_target")
 register(Experiment(
