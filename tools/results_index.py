@@ -103,6 +103,13 @@ def _experiment_cell(row: dict, paper_key: str) -> str:
     return f"{ours[0]} / {ours[1]} at {row['seeds_evaluated']} seeds x {millions(row['env_steps'])} steps"
 
 
+def _training_row(algo: str, report: dict) -> list[str]:
+    """The README's row of a `benchmarks/train_throughput.py` report: the training rate per GPU count."""
+    one = next(r for r in report["rows"] if r["setting"] == "1dev")
+    return [f"UR5e reach {algo} training env steps/s, 1 seed, {one['num_envs']:,} envs per GPU ({report['meta']['date']})",
+            "", "", per_gpu_count(report["rows"])]
+
+
 def readme_table(ctx: Context) -> list[list[str]]:
     """README.md's short table: the headline rows, the pseudo-IK baseline and the speeds. A headline row that
     results/index.json's `readme.from_experiments` names shows its registered experiment's run of the same config
@@ -142,14 +149,8 @@ def readme_table(ctx: Context) -> list[list[str]]:
     rows.append([f"UR5e reach / reach-avoid env steps/s, 8,192 envs (env only, {meta['date']})",
                  f"{thousands(PAPER_THROUGHPUT['ur5e-reach'])} / {thousands(PAPER_THROUGHPUT['ur5e-reach-avoid'])}",
                  "", f"{thousands(env['ur5e-reach']['steps_per_s'])} / {thousands(env['ur5e-reach-avoid']['steps_per_s'])}"])
-    train = ctx.json(readme["ppo_throughput_file"])  # benchmarks/train_throughput.py on `ur5e-reach-ppo`
-    row = next(r for r in train["rows"] if r["setting"] == "1dev")
-    rows.append([f"UR5e reach PPO training env steps/s, 1 seed, {row['num_envs']:,} envs per GPU ({train['meta']['date']})",
-                 "", "", per_gpu_count(train["rows"])])
-    sac = ctx.json(readme["sac_fast_throughput_file"])  # benchmarks/train_throughput.py on the fast SAC preset
-    row = next(r for r in sac["rows"] if r["setting"] == "1dev")
-    rows.append([f"UR5e reach fast SAC training env steps/s, 1 seed, {row['num_envs']:,} envs per GPU ({sac['meta']['date']})",
-                 "", "", per_gpu_count(sac["rows"])])
+    rows.append(_training_row("PPO", ctx.json(readme["ppo_throughput_file"])))  # on `ur5e-reach-ppo`
+    rows.append(_training_row("fast SAC", ctx.json(readme["sac_fast_throughput_file"])))  # on the fast SAC preset
     rows.append(_time_to_result_row(ctx, readme))
     wall, sweep = ctx.json(readme["eval_wall_clock_file"]), ctx.json(readme["eval_settings_file"])
     rows.append([f"eval.py on a shipped checkpoint (`ur5e-reach-ppo`, 5 seeds x 4,096 episodes), wall clock of the process ({wall['date']})",

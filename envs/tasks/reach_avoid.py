@@ -125,7 +125,8 @@ class ReachAvoid(Reach):
     def collision_distances(self, geom_xpos, geom_xmat, info):
         self_min = jnp.min(self.robot.self_distances(geom_xpos, geom_xmat))
         geoms = self.checked_geoms
-        obstacle = self.per_obstacle(info, lambda c, r: self.robot.obstacle_distances(geom_xpos, geom_xmat, c, r, geoms))
+        obstacle = self.per_obstacle(
+            info, lambda c, r: self.robot.obstacle_distances(geom_xpos, geom_xmat, c, r, geoms))
         return jnp.stack([self_min, jnp.min(obstacle)])
 
     def link_distances(self, data, xpos, info):
