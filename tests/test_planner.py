@@ -256,6 +256,34 @@ def test_a_task_in_two_runs_keeps_the_first_runs_rows(table_run, tmp_path):
     assert [len(t["rows"]) for t in merged["tasks"]] == [0]
 
 
+@pytest.fixture
+def superseded_sweep(table_run, tmp_path):
+    """A merge whose first file re-ran the swept task with the planner row alone: the table takes that run's rows."""
+    out, report = table_run
+    rerun = dict(report, budgets=[], budget_task=None, code="rerun",
+                 tasks=[dict(report["tasks"][0], rows=report["tasks"][0]["rows"][:1])])
+    (tmp_path / "rerun.json").write_text(json.dumps(rerun))
+    planner_table.main(["--from-json", str(tmp_path / "rerun.json"), str(out / "planner.json"), "--out",
+                        str(tmp_path / "merged")])
+    return report, json.loads((tmp_path / "merged" / "planner.json").read_text())
+
+
+def test_a_sweep_whose_task_was_rerun_names_its_own_run(superseded_sweep):
+    report, merged = superseded_sweep
+    assert merged["budget_source"] == f"the sweep's own run (code {report['code']}, {report['date']})"
+
+
+def test_a_sweep_whose_task_was_rerun_keeps_its_own_rows_as_the_plots_reference(superseded_sweep):
+    report, merged = superseded_sweep
+    assert len(merged["budget_reference"]["rows"]) == len(report["tasks"][0]["rows"]) > len(merged["tasks"][0]["rows"])
+
+
+def test_a_sweep_of_the_tables_own_run_has_no_source_note(table_run, tmp_path):
+    out, _ = table_run
+    planner_table.main(["--from-json", str(out / "planner.json"), "--out", str(tmp_path / "merged")])
+    assert "budget_source" not in json.loads((tmp_path / "merged" / "planner.json").read_text())
+
+
 def test_merging_two_sweeps_is_refused(table_run, tmp_path):
     out, _ = table_run
     with pytest.raises(ValueError, match="2 budget sweeps"):

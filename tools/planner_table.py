@@ -129,8 +129,10 @@ def gap(task: dict) -> float | None:
     return 100.0 * (reached[0] - max(reached[1:])) if len(reached) > 1 else None
 
 
-def markdown(tasks: list[dict], budget_rows: list[dict], budget_task: str | None = None) -> str:
-    """The planner against each export per task, the gap per task, then the budget sweep (on `budget_task`)."""
+def markdown(tasks: list[dict], budget_rows: list[dict], budget_task: str | None = None,
+             budget_source: str | None = None) -> str:
+    """The planner against each export per task, the gap per task, then the budget sweep (on `budget_task`; with
+    `budget_source`, the sweep's own run, named because the table's rows of that task come from another one)."""
     head = "| task | policy | episodes | " + " | ".join(h for _, h, _ in COLUMNS) + " | model steps / step | ms / step |"
     lines = [head, "|" + "---|" * (head.count("|") - 1)]
     for task in tasks:
@@ -146,7 +148,8 @@ def markdown(tasks: list[dict], budget_rows: list[dict], budget_task: str | None
         g = gap(task)
         lines.append(f"| {task['task']} | {'-' if g is None else f'{g:+.1f}'} |")
     if budget_rows:
-        lines += ["", f"| planning budget on {budget_task} (samples x horizon) | model steps / step | reached % | "
+        where = f"{budget_task}, {budget_source}" if budget_source else budget_task
+        lines += ["", f"| planning budget on {where} (samples x horizon) | model steps / step | reached % | "
                       "self coll. % | obstacle coll. % | ms / step |", "|---|---:|---:|---:|---:|---:|"]
         for r in budget_rows:
             p = r["policy"]["planner"]
@@ -220,7 +223,7 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     if args.from_json:
         merged = merge(args.from_json, args.out)
-        print(markdown(merged["tasks"], merged["budgets"], merged["budget_task"]))
+        print(markdown(merged["tasks"], merged["budgets"], merged["budget_task"], merged.get("budget_source")))
         return 0
     for name in ("episodes", "seeds"):
         if getattr(args, name) < 1:
@@ -255,16 +258,21 @@ def write(out: str, report: dict) -> None:
     with open(os.path.join(out, "planner.json"), "w") as f:
         json.dump(jsonable(report), f, indent=2, default=str)
     with open(os.path.join(out, "table.md"), "w") as f:
-        f.write(markdown(report["tasks"], report["budgets"], report["budget_task"]))
+        f.write(markdown(report["tasks"], report["budgets"], report["budget_task"], report.get("budget_source")))
     if report["budgets"]:
-        task = next((t for t in report["tasks"] if t["task"] == report["budget_task"]), None)
-        plot_budget(report["budgets"], task, report["budget_task"], os.path.join(out, "budget.png"))
+        task = report.get("budget_reference") or next(
+            (t for t in report["tasks"] if t["task"] == report["budget_task"]), None)
+        title = report["budget_task"] + (f"\n{report['budget_source']}" if report.get("budget_source") else "")
+        plot_budget(report["budgets"], task, title, os.path.join(out, "budget.png"))
 
 
 def merge(paths: list[str], out: str) -> dict:
     """One report of several planner.json files (their tasks in order; a task in several files keeps the first
     file's rows, so a sweep made apart with fewer episodes adds only its sweep), each source's command, code,
-    device and date kept under "sources"; at the top, the merge's command and the sources' codes, devices, dates."""
+    device and date kept under "sources"; at the top, the merge's command and the sources' codes, devices, dates.
+    When the table's rows of the swept task come from another file than the sweep, the sweep keeps its own file's
+    rows of that task as its reference (`budget_reference`) and names its run (`budget_source`): the two may be
+    runs of different code."""
     reports = [json.load(open(path)) for path in paths]
     swept = [r for r in reports if r.get("budgets")]
     if len(swept) > 1:
@@ -280,6 +288,11 @@ def merge(paths: list[str], out: str) -> dict:
               "tasks": list(first.values()),
               "budget_task": swept[0]["budget_task"] if swept else None,
               "budgets": swept[0]["budgets"] if swept else []}
+    if swept:
+        own = next((t for t in swept[0]["tasks"] if t["task"] == swept[0]["budget_task"]), None)
+        if own is not None and first.get(own["task"]) is not own:
+            merged["budget_reference"] = own
+            merged["budget_source"] = f"the sweep's own run (code {swept[0]['code']}, {swept[0]['date']})"
     os.makedirs(out, exist_ok=True)
     write(out, merged)
     return merged
