@@ -1017,6 +1017,34 @@ def test_failure_report_names_the_base_when_moving_obstacles_are_checked_against
     assert failure_report.classify(robot, records, obstacle_radius=0.05)[0]["what"] != "base"
 
 
+def test_failure_report_tells_whose_motion_brought_an_obstacle_collision(monkeypatch):
+    """Four obstacle collisions at step 4, asked over the last 3 steps (from step 1): an obstacle that comes down onto
+    a still arm; an arm that swings its end effector into a still obstacle; an arm and an obstacle that each move
+    only part of the way (both needed); an obstacle on a still end effector all along (either alone)."""
+    from tools import failure_report
+
+    monkeypatch.setattr(failure_report, "APPROACH_STEPS", 3)
+    robot, hit_pose, ee, target = _free_arm_and_target(n=4)
+    away_pose = hit_pose.copy()
+    away_pose[0] += 1.0  # the shoulder pan turned 1 rad: the end effector about half a metre to the side
+    above = ee + [0.0, 0.0, 0.4]
+    assert _clearances(robot, away_pose, ee, 0.05).min() > 0.1  # the swung-away arm is clear of the contact point
+    assert _clearances(robot, hit_pose, above, 0.05).min() > 0.1  # and the arm clear of the point above it
+    steps = 4
+    qpos = np.tile(hit_pose, (steps + 1, 4, 1))
+    qpos[:2, 1:3] = away_pose  # envs 1 and 2 swing in after step 1
+    obstacle = np.tile(ee, (steps + 1, 4, 1))
+    obstacle[:2, [0, 2]] = above  # envs 0 and 2: the obstacle comes down after step 1
+    metrics = {"episode/self_collision": np.zeros(4), "episode/obstacle_collision": np.ones(4),
+               "episode/target_reached": np.zeros(4), "episode/distance": np.full(4, 0.4)}
+    records = {"qpos": qpos, "target_pos": target, "obstacle_pos": obstacle, "length": np.full(4, steps),
+               "metrics": metrics}
+    rows = failure_report.classify(robot, records, obstacle_radius=0.05)
+    assert [r["approach"] for r in rows] == ["obstacle", "arm", "both", "either"]
+    summary = failure_report.summarize(rows)
+    assert summary["collisions"]["obstacle_approach"] == {"obstacle": 1, "arm": 1, "both": 1, "either": 1}
+
+
 def test_point_segment_distance_on_hand_computed_geometry():
     """What failure_report's obstacle_between measures: a sphere's clearance from the end effector's
     straight line to the target (`envs.collision.point_segment_distance` minus the radius)."""

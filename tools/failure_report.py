@@ -14,7 +14,9 @@ pin there: reaching on may need a full turn back the other way) and, with obstac
 static or moving, each where it is at that step), whether the straight line from the end effector to
 the target crosses an obstacle's sphere at the start and, for misses, at the end (`obstacle_between`:
 an obstacle in the end effector's way), and how close the robot's geoms end to the nearest obstacle's
-surface (`final_obstacle_clearance`). Outcomes are also
+surface (`final_obstacle_clearance`). An obstacle collision also records whose motion over its last
+`APPROACH_STEPS` steps brought the contact (`approach`): the arm's alone, the obstacle's alone, either alone,
+or only both together (each asked by holding the other where it was). Outcomes are also
 binned by the target's height above the robot's mounting plane (`by_target_height`), and each
 episode records how far its end effector starts from the target (`start_distance`), how far it moved
 over the episode's last `END_STEPS` steps (`end_motion`: near 0 when the arm has stopped) and the
@@ -45,6 +47,9 @@ evaluated config's own."""
 HEIGHT_BINS = (0.0, 0.1, 0.3, 0.5)
 """Edges (m) of the target-height bins (height above the robot's mounting plane z = 0); the outer
 bins are open."""
+APPROACH_STEPS = 10
+"""Steps before an obstacle collision over which `approach` asks whose motion brought the contact (0.4 s at the
+arms' 25 Hz control)."""
 PROXIMITY = 0.1
 """Clearance (m) under which the robot counts as near the obstacle: the default `obstacle_tau` of the
 paper's proximity penalty (eq. 3; the env measures it from the link origins, `link_distance`)."""
@@ -91,11 +96,21 @@ def classify(robot, records: dict, obstacle_radius: float | None = None, geoms=N
             """(centres (env, obstacle, 3), radii (env, obstacle)) at each env's `step`."""
             return positions[step, np.arange(n)].reshape(n, count, 3), radii[step, np.arange(n)]
 
+        def clearances(kin, where, radius):
+            """Each robot geom's distance to each obstacle's surface, (env, obstacle, geom)."""
+            return np.stack([np.asarray(jax.vmap(lambda c, x, m: robot.obstacle_distances(x, m, c, 0.0, geoms))(
+                jnp.asarray(where[:, j]), kin.geom_xpos, kin.geom_xmat)) - radius[:, j, None]
+                for j in range(count)], axis=1)
+
         centres, radius_end = at(last)
-        surface = np.stack([np.asarray(jax.vmap(lambda c, x, m: robot.obstacle_distances(x, m, c, 0.0, geoms))(
-            jnp.asarray(centres[:, j]), kin_end.geom_xpos, kin_end.geom_xmat)) - radius_end[:, j, None]
-            for j in range(count)], axis=1)  # (env, obstacle, geom)
+        surface = clearances(kin_end, centres, radius_end)
         obstacle_end = surface.min(axis=1)  # each geom's distance to the nearest obstacle's surface
+        # The counterfactuals of `approach`: the arm held in its pose APPROACH_STEPS before the end while the
+        # obstacles move on, and the obstacles held where they were then while the arm moves on.
+        before = np.maximum(last - APPROACH_STEPS, 0)
+        kin_before = robot.kinematics(jnp.asarray(qpos[before, np.arange(n)]))
+        arm_held = clearances(kin_before, centres, radius_end).min(axis=(1, 2))
+        obstacles_held = clearances(kin_end, *at(before)).min(axis=(1, 2))
     if between:
         # an obstacle's sphere on the segment from the end effector to the target (any of them)
         target = jnp.asarray(np.asarray(records["target_pos"])[0])
@@ -130,7 +145,8 @@ def classify(robot, records: dict, obstacle_radius: float | None = None, geoms=N
             row.update(outcome="self collision", what=pair_names[int(np.argmin(self_end[i]))])
         elif metrics.get("episode/obstacle_collision", np.zeros(n))[i] > 0:
             geom = geoms[int(np.argmin(obstacle_end[i]))]
-            row.update(outcome="obstacle collision", what=_names(robot, [geom])[0])
+            row.update(outcome="obstacle collision", what=_names(robot, [geom])[0],
+                       approach=_approach(arm_held[i], obstacles_held[i], obstacle_end[i].min()))
         elif metrics["episode/target_reached"][i] > 0:
             row.update(outcome="reached")
         else:
@@ -139,6 +155,15 @@ def classify(robot, records: dict, obstacle_radius: float | None = None, geoms=N
                 row["obstacle_between"]["end"] = bool(blocked_end[i])
         out.append(row)
     return out
+
+
+def _approach(arm_held: float, obstacles_held: float, contact: float) -> str:
+    """Whose motion a collision needed: the obstacles' alone ("obstacle": it comes as close with the arm held),
+    the arm's alone ("arm"), "either" alone, or only "both" together. `contact`: the clearance at the collision's
+    recorded pose (a contact between recorded poses can leave it above 0), the closeness that counts as the same."""
+    reach = max(contact, 0.0)
+    obstacle, arm = arm_held <= reach, obstacles_held <= reach
+    return "either" if obstacle and arm else "obstacle" if obstacle else "arm" if arm else "both"
 
 
 def _median_by_outcome(by: dict, field: str) -> dict:
@@ -171,6 +196,9 @@ def summarize(rows: list[dict], near_limit: float = NEAR_LIMIT) -> dict:
             "within_first_5_steps": float(np.mean(steps <= 5)),
             "start_clearance_median": float(np.median([r["start_clearance"] for r in collided])),
         }
+        if by["obstacle collision"] and "approach" in by["obstacle collision"][0]:
+            summary["collisions"]["obstacle_approach"] = dict(collections.Counter(
+                r["approach"] for r in by["obstacle collision"]).most_common())
     summary["start_clearance_median_all"] = float(np.median([r["start_clearance"] for r in rows]))
     if by["missed"]:
         index, labels = _bins([r["final_distance"] for r in by["missed"]], (0.0,) + MISS_BINS)
@@ -225,6 +253,9 @@ def markdown(summary: dict, title: str) -> str:
                       f"{pct(c['within_first_5_steps'])}; start clearance (median) of collided episodes "
                       f"{c['start_clearance_median'] * 100:.1f} cm against {summary['start_clearance_median_all'] * 100:.1f} cm "
                       "over all episodes"]
+        if "obstacle_approach" in c:
+            lines += ["", f"obstacle collisions by whose motion over the last {APPROACH_STEPS} steps brought the "
+                          "contact: " + ", ".join(f"{k} {v}" for k, v in c["obstacle_approach"].items())]
     if "missed_final_distance" in summary:
         lines += ["", "missed episodes by final distance: " + ", ".join(
             f"{k}: {v}" for k, v in summary["missed_final_distance"].items())]
