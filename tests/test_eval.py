@@ -1138,6 +1138,23 @@ def test_failure_report_json_names_what_made_it(tmp_path, monkeypatch):
     assert report["date"] == datetime.date.today().isoformat()
 
 
+def test_failure_report_reads_the_code_version_before_rewriting_its_file(tmp_path, monkeypatch):
+    """A report that rewrites a tracked file must not find the tree modified by its own rewrite: the code version is
+    read before the file is opened (here the stubbed version is what the file holds when it is read)."""
+    from agents import provenance
+    from tools import failure_report
+
+    monkeypatch.setattr(evaluation, "rollout", lambda *a, **k: None)
+    monkeypatch.setattr(failure_report, "classify", lambda *a, **k: [])
+    monkeypatch.setattr(failure_report, "summarize", lambda rows, near_limit=None: {"episodes": 0})
+    monkeypatch.setattr(failure_report, "markdown", lambda summary, title: "")
+    out, checkpoint = tmp_path / "report.json", os.path.join(ROOT, "results", "checkpoints", "ur5e-reach-ppo")
+    out.write_text("the report of an earlier run")
+    monkeypatch.setattr(provenance, "code_version", lambda: out.read_text())
+    failure_report.main(["--checkpoint", checkpoint, "--num-envs", "1", "--json", str(out)])
+    assert json.loads(out.read_text())["code"] == "the report of an earlier run"
+
+
 def test_a_part_observed_at_one_value_in_training_is_refused_where_it_changes():
     """A static-obstacle agent that observed obstacle_vel (always 0) saw it as one value: its normaliser, variance
     0, scales any motion to the clip (0 % reached where it reached 80 %: results/experiments/obstacles-moving3).

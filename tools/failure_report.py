@@ -357,6 +357,8 @@ def main(argv: list[str] | None = None) -> dict:
         raise ValueError(f"--num-envs {args.num_envs} is invalid: allowed is an integer >= 1.")
     env_name = args.env or policy.train_env_name
     config = envs.make_config(env_name, policy.train_env_config)
+    # What made it, read before the run: rewriting a tracked report would otherwise mark the code modified.
+    made = provenance.stamp(provenance.command(None if argv is None else [__file__] + list(argv)))
     records = evaluation.rollout(policy, env_name, config, num_envs=args.num_envs, eval_seed=args.seed, unit=args.unit)
     env = envs.from_config(env_name, config)
     rows = classify(env.robot, records, getattr(config, "obstacle_radius", None), getattr(env, "checked_geoms", None))
@@ -367,7 +369,6 @@ def main(argv: list[str] | None = None) -> dict:
         figure(summary, title, args.plot)
     if args.json:
         with open(args.json, "w") as f:
-            made = provenance.stamp(provenance.command(None if argv is None else [__file__] + list(argv)))
             json.dump({**made, "summary": summary, "episodes": rows}, f, indent=1)
     return summary
 
