@@ -1018,9 +1018,11 @@ def test_failure_report_names_the_base_when_moving_obstacles_are_checked_against
 
 
 def test_failure_report_tells_whose_motion_brought_an_obstacle_collision(monkeypatch):
-    """Four obstacle collisions at step 4, asked over the last 3 steps (from step 1): an obstacle that comes down onto
-    a still arm; an arm that swings its end effector into a still obstacle; an arm and an obstacle that each move
-    only part of the way (both needed); an obstacle on a still end effector all along (either alone)."""
+    """Four obstacle collisions, each asked over its last 3 steps: an obstacle that comes down onto a still arm and an
+    arm that swings its end effector into a still obstacle (both ending at step 4, so asked from step 1); an arm and
+    an obstacle that each move only part of the way (ending at step 3, asked from step 0: both needed); an obstacle on
+    a still end effector all along (either alone). Step 1 alone is away in the first two envs, so a window one step
+    off either way finds the contact there and answers "either"."""
     from tools import failure_report
 
     monkeypatch.setattr(failure_report, "APPROACH_STEPS", 3)
@@ -1032,17 +1034,20 @@ def test_failure_report_tells_whose_motion_brought_an_obstacle_collision(monkeyp
     assert _clearances(robot, hit_pose, above, 0.05).min() > 0.1  # and the arm clear of the point above it
     steps = 4
     qpos = np.tile(hit_pose, (steps + 1, 4, 1))
-    qpos[:2, 1:3] = away_pose  # envs 1 and 2 swing in after step 1
     obstacle = np.tile(ee, (steps + 1, 4, 1))
-    obstacle[:2, [0, 2]] = above  # envs 0 and 2: the obstacle comes down after step 1
+    obstacle[1, 0] = above  # env 0: the obstacle is away at step 1 only
+    qpos[1, 1] = away_pose  # env 1: the arm is away at step 1 only
+    qpos[0, 2], obstacle[0, 2] = away_pose, above  # env 2: both away at step 0, its window's start
     metrics = {"episode/self_collision": np.zeros(4), "episode/obstacle_collision": np.ones(4),
                "episode/target_reached": np.zeros(4), "episode/distance": np.full(4, 0.4)}
-    records = {"qpos": qpos, "target_pos": target, "obstacle_pos": obstacle, "length": np.full(4, steps),
+    records = {"qpos": qpos, "target_pos": target, "obstacle_pos": obstacle, "length": np.array([4, 4, 3, 4]),
                "metrics": metrics}
     rows = failure_report.classify(robot, records, obstacle_radius=0.05)
     assert [r["approach"] for r in rows] == ["obstacle", "arm", "both", "either"]
     summary = failure_report.summarize(rows)
     assert summary["collisions"]["obstacle_approach"] == {"obstacle": 1, "arm": 1, "both": 1, "either": 1}
+    np.testing.assert_allclose(rows[1]["approach_clearances"]["arm_held"],
+                               _clearances(robot, away_pose, ee, 0.05).min(), atol=1e-4)
 
 
 def test_point_segment_distance_on_hand_computed_geometry():

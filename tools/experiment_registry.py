@@ -304,7 +304,8 @@ register(Experiment(
     note="Aims at 92 % (UR5e) and 97 % (Panda) reached with collisions no worse than the paper's. The -plus "
          "observation (joint sin/cos and self-collision distances) cut the UR5e's self collisions from 3.5 to 0.3 % "
          "and the moving-obstacle rows (obstacles-dodge-clear) still rose past 2x the presets' budgets; the weak "
-         "joint-limit penalty added 2.2 points there (one seed). Screened on one seed a row first."))
+         "joint-limit penalty added 2.2 points to a moving-obstacle row of obstacles-dodge (one seed). Screened on "
+         "one seed a row first."))
 
 # The observations of the -moving3 presets (agents/presets.py: MOVING_OBSTACLES_3, the UR5e one with the plus
 # parts), spelled here as the plus ones are; a test holds them equal.

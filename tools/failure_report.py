@@ -16,7 +16,8 @@ the target crosses an obstacle's sphere at the start and, for misses, at the end
 an obstacle in the end effector's way), and how close the robot's geoms end to the nearest obstacle's
 surface (`final_obstacle_clearance`). An obstacle collision also records whose motion over its last
 `APPROACH_STEPS` steps brought the contact (`approach`): the arm's alone, the obstacle's alone, either alone,
-or only both together (each asked by holding the other where it was). Outcomes are also
+or only both together (each asked by holding the other where it was; `approach_clearances` holds the two
+clearances; a collision within the first `APPROACH_STEPS` steps is asked from the reset). Outcomes are also
 binned by the target's height above the robot's mounting plane (`by_target_height`), and each
 episode records how far its end effector starts from the target (`start_distance`), how far it moved
 over the episode's last `END_STEPS` steps (`end_motion`: near 0 when the arm has stopped) and the
@@ -146,7 +147,9 @@ def classify(robot, records: dict, obstacle_radius: float | None = None, geoms=N
         elif metrics.get("episode/obstacle_collision", np.zeros(n))[i] > 0:
             geom = geoms[int(np.argmin(obstacle_end[i]))]
             row.update(outcome="obstacle collision", what=_names(robot, [geom])[0],
-                       approach=_approach(arm_held[i], obstacles_held[i], obstacle_end[i].min()))
+                       approach=_approach(arm_held[i], obstacles_held[i], obstacle_end[i].min()),
+                       approach_clearances={"arm_held": float(arm_held[i]),
+                                            "obstacles_held": float(obstacles_held[i])})
         elif metrics["episode/target_reached"][i] > 0:
             row.update(outcome="reached")
         else:

@@ -172,7 +172,8 @@ def _scaled(summary: dict, key: str, scale: float) -> str:
 
 def plot_budget(budget_rows: list[dict], task: dict | None, title: str, path: str) -> None:
     """Reached and collision percentages against the planning budget (simulated steps per step, log scale), with
-    the task's best export's reached percentage as a dashed line (`task`: its table entry, if evaluated)."""
+    the task's best export's reached percentage as a dashed line (`task`: the sweep's entry of that task, if
+    evaluated: `swept_task`)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -260,10 +261,16 @@ def write(out: str, report: dict) -> None:
     with open(os.path.join(out, "table.md"), "w") as f:
         f.write(markdown(report["tasks"], report["budgets"], report["budget_task"], report.get("budget_source")))
     if report["budgets"]:
-        task = report.get("budget_reference") or next(
-            (t for t in report["tasks"] if t["task"] == report["budget_task"]), None)
+        task = swept_task(report)
         title = report["budget_task"] + (f"\n{report['budget_source']}" if report.get("budget_source") else "")
         plot_budget(report["budgets"], task, title, os.path.join(out, "budget.png"))
+
+
+def swept_task(report: dict) -> dict | None:
+    """The entry of the task a report's sweep ran on: its `budget_reference` where a merge kept one, else the
+    report's own entry of that task (None if the report did not evaluate it)."""
+    return report.get("budget_reference") or next((t for t in report["tasks"] if t["task"] == report["budget_task"]),
+                                                  None)
 
 
 def merge(paths: list[str], out: str) -> dict:
@@ -289,10 +296,11 @@ def merge(paths: list[str], out: str) -> dict:
               "budget_task": swept[0]["budget_task"] if swept else None,
               "budgets": swept[0]["budgets"] if swept else []}
     if swept:
-        own = next((t for t in swept[0]["tasks"] if t["task"] == swept[0]["budget_task"]), None)
+        own = swept_task(swept[0])
         if own is not None and first.get(own["task"]) is not own:
             merged["budget_reference"] = own
-            merged["budget_source"] = f"the sweep's own run (code {swept[0]['code']}, {swept[0]['date']})"
+            merged["budget_source"] = (swept[0].get("budget_source")
+                                       or f"the sweep's own run (code {swept[0]['code']}, {swept[0]['date']})")
     os.makedirs(out, exist_ok=True)
     write(out, merged)
     return merged
