@@ -30,11 +30,12 @@ REACH_OBSERVATIONS = (
 BACKENDS = ("auto", "mjx", "mujoco")
 JOINT_NOISE_MODELS = ("angles", "encoders")
 # Observation parts computed from the joint angles: with joint_noise_model="encoders" they come from the noisy ones.
-KINEMATIC_OBSERVATIONS = ("ee_pos", "ee_to_target", "self_dist", "link_obstacle_dist", "link_obstacle_ahead")
+KINEMATIC_OBSERVATIONS = ("ee_pos", "ee_to_target", "self_dist", "link_obstacle_dist", "link_obstacle_ahead",
+                          "link_obstacle_ahead_moving")
 MAX_LOOKAHEADS = 8
-"""Most horizons of the link_obstacle_ahead observation (each adds one number per link)."""
+"""Most horizons of the link_obstacle_ahead(_moving) observations (each adds one number per link)."""
 OBSTACLE_OBSERVATIONS = ("obstacle_pos", "obstacle_size", "link_obstacle_dist", "obstacle_radius", "obstacle_vel",
-                         "link_obstacle_ahead")
+                         "link_obstacle_ahead", "link_obstacle_ahead_moving")
 
 
 def _observed_if_set(field: str, std: float, observation: tuple[str, ...], noisy_parts: tuple[str, ...]) -> None:
@@ -289,7 +290,8 @@ class ReachAvoidConfig(ReachConfig):
     obstacle_lookahead: tuple[float, ...] = (0.5, 1.0)
     """Horizons (s) of the link_obstacle_ahead observation (not in the paper): per horizon and link, the distance
     link_obstacle_dist would have if every obstacle moved on at its current velocity for that long (the arm held
-    still; a bounce off the cube's faces is not foreseen). A prediction of where a moving obstacle meets the arm."""
+    still; a bounce off the cube's faces is not foreseen). A prediction of where a moving obstacle meets the arm.
+    link_obstacle_ahead_moving: the same with the arm moved on too, at its current joint velocities."""
 
     @property
     def radius_bounds(self) -> tuple[float, float]:
@@ -331,7 +333,7 @@ class ReachAvoidConfig(ReachConfig):
         positive("obstacle_period", self.obstacle_period)
         positive("obstacle_noise_std", self.obstacle_noise_std, strict=False)
         _observed_if_set("obstacle_noise_std", self.obstacle_noise_std, self.observation,
-                         ("obstacle_pos", "link_obstacle_dist", "link_obstacle_ahead"))
+                         ("obstacle_pos", "link_obstacle_dist", "link_obstacle_ahead", "link_obstacle_ahead_moving"))
         if not (isinstance(self.obstacle_lookahead, tuple) and 1 <= len(self.obstacle_lookahead) <= MAX_LOOKAHEADS):
             raise ValueError(f"obstacle_lookahead={self.obstacle_lookahead!r} is invalid: allowed is a tuple of 1 to "
                              f"{MAX_LOOKAHEADS} horizons (s).")

@@ -363,6 +363,56 @@ def test_a_moving_obstacle_in_the_base_collides():
     assert static.collision_distances(kin.geom_xpos, kin.geom_xmat, info)[1] > 0
 
 
+def test_the_moving_look_ahead_moves_the_arm_on_at_its_joint_velocities(moving):
+    """link_obstacle_ahead_moving: per horizon and link, the distance to the nearest obstacle's surface with the
+    obstacles moved on at their velocities and the arm at its joint velocities; the links' origins there from CPU
+    MuJoCo's kinematics at qpos + horizon * qvel, after a step of random actions (the arm moving)."""
+    import mujoco
+
+    env, robot = moving.env, moving.env.robot
+    actions = jax.random.uniform(jax.random.PRNGKey(3), (N, env.action_size), minval=-1.0, maxval=1.0)
+    state = moving.step(moving.start(seed=6), actions)
+    data = state.pipeline_state
+    assert np.min(np.linalg.norm(np.asarray(data.qvel), axis=-1)) > 0.1  # every arm moving
+    ahead = np.asarray(jax.vmap(lambda d, i: env.link_distances_ahead(d, d.xpos, i, arm_moving=True))(
+        data, state.info))
+    pos, radii = np.asarray(state.info["obstacle_pos"]), np.asarray(state.info["obstacle_radius"])
+    vel = np.asarray(state.info["obstacle_vel"])
+    nlinks, model = len(robot.link_bodies), robot.mj_model
+    reference = mujoco.MjData(model)
+    for i in range(N):
+        for k, horizon in enumerate(env.config.obstacle_lookahead):
+            reference.qpos[:robot.nq] = np.asarray(data.qpos[i], np.float64) + horizon * np.asarray(data.qvel[i])
+            mujoco.mj_kinematics(model, reference)
+            links = reference.xpos[robot.link_bodies]
+            centres = (pos[i] + horizon * vel[i]).reshape(3, 1, 3)
+            expected = (np.linalg.norm(links[None] - centres, axis=-1) - radii[i][:, None]).min(axis=0)
+            np.testing.assert_allclose(ahead[i, k * nlinks:(k + 1) * nlinks], expected, atol=1e-4)
+
+
+def test_the_moving_look_ahead_differs_from_the_arm_held_still(moving):
+    """With the arm moving, the prediction is not link_obstacle_ahead's (which holds the arm still)."""
+    env = moving.env
+    actions = jax.random.uniform(jax.random.PRNGKey(3), (N, env.action_size), minval=-1.0, maxval=1.0)
+    state = moving.step(moving.start(seed=6), actions)
+    data = state.pipeline_state
+    still = jax.vmap(env.link_distances_ahead)(data, data.xpos, state.info)
+    moving_on = jax.vmap(lambda d, i: env.link_distances_ahead(d, d.xpos, i, arm_moving=True))(data, state.info)
+    assert float(jnp.max(jnp.abs(moving_on - still))) > 0.05
+
+
+def test_the_moving_look_ahead_is_the_observation_part_of_that_name(moving):
+    """The part `link_obstacle_ahead_moving` of an env that observes it, on a moving arm's state, is that prediction
+    (two horizons x the links)."""
+    env = envs.make("ur5e-reach-avoid", **dict(MOVING, observation=MOVING["observation"] + ("link_obstacle_ahead_moving",)))
+    actions = jax.random.uniform(jax.random.PRNGKey(3), (N, env.action_size), minval=-1.0, maxval=1.0)
+    state = moving.step(moving.start(seed=6), actions)
+    data, ee_site = state.pipeline_state, env.robot.ee_site
+    obs = jax.vmap(lambda d, i: env.observation(d, d.xpos, d.site_xpos[ee_site], i))(data, state.info)
+    expected = jax.vmap(lambda d, i: env.link_distances_ahead(d, d.xpos, i, arm_moving=True))(data, state.info)
+    np.testing.assert_allclose(split_obs(env, obs)["link_obstacle_ahead_moving"], expected, atol=1e-6)
+
+
 def test_observations_and_penalty_of_several_moving_obstacles(moving):
     env, cfg, robot = moving.env, moving.env.config, moving.env.robot
     state = moving.start(seed=5)

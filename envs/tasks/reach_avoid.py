@@ -163,15 +163,24 @@ class ReachAvoid(Reach):
             # Per link, the nearest obstacle: one number per link whatever num_obstacles is.
             link_obstacle_dist=lambda: jnp.min(self.link_distances(data, xpos, info), axis=0),
             link_obstacle_ahead=lambda: self.link_distances_ahead(data, xpos, info),
+            link_obstacle_ahead_moving=lambda: self.link_distances_ahead(data, xpos, info, arm_moving=True),
         )
         return parts
 
-    def link_distances_ahead(self, data, xpos, info):
+    def link_distances_ahead(self, data, xpos, info, arm_moving: bool = False):
         """Per horizon of `obstacle_lookahead`, each link's distance to the nearest obstacle moved on at its current
-        velocity for that long (the arm held still): `[horizons * nlinks]`, horizon-major."""
-        ahead = [{**info, "obstacle_pos": info["obstacle_pos"] + horizon * _velocity(info)}
-                 for horizon in self.config.obstacle_lookahead]
-        return jnp.concatenate([jnp.min(self.link_distances(data, xpos, moved), axis=0) for moved in ahead])
+        velocity for that long, `[horizons * nlinks]`, horizon-major: the arm held still, or with `arm_moving` moved
+        on too at its joint velocities (most collisions need the arm's own motion: results/obstacles)."""
+        out = []
+        for horizon in self.config.obstacle_lookahead:
+            moved = {**info, "obstacle_pos": info["obstacle_pos"] + horizon * _velocity(info)}
+            if arm_moving:
+                kin = self.robot.kinematics(data.qpos + horizon * data.qvel)
+                out.append(jnp.min(self.link_distances(
+                    data.replace(geom_xpos=kin.geom_xpos, geom_xmat=kin.geom_xmat), kin.xpos, moved), axis=0))
+            else:
+                out.append(jnp.min(self.link_distances(data, xpos, moved), axis=0))
+        return jnp.concatenate(out)
 
 
 def _velocity(info) -> jax.Array:
