@@ -389,11 +389,15 @@ class ArmEnv(Env):
 
     def perceived(self, data, info, key):
         """(data, info) as the sensors report them: joint angles with `joint_noise_std` noise; with
-        `joint_noise_model="encoders"` the body and geom poses too, from the kinematics of the noisy angles."""
+        `joint_noise_model="encoders"` the body and geom poses too, from the kinematics of the noisy angles.
+        info["kinematic_qpos"]: the angles the poses come from (the true ones under `angles`), for parts that
+        compute poses of their own."""
         std = self.config.joint_noise_std
         if std > 0:
+            info = {**info, "kinematic_qpos": data.qpos}
             data = data.replace(qpos=data.qpos + std * jax.random.normal(jax.random.fold_in(key, 0), data.qpos.shape))
             if self.config.joint_noise_model == "encoders":
+                info["kinematic_qpos"] = data.qpos
                 kin = self.robot.kinematics(data.qpos)
                 data = data.replace(xpos=kin.xpos, geom_xpos=kin.geom_xpos, geom_xmat=kin.geom_xmat,
                                     site_xpos=kin.site_xpos)

@@ -138,7 +138,8 @@ class ReachConfig:
     joint_noise_model: Literal["angles", "encoders"] = "angles"
     """Which observation parts the joint noise reaches: `angles`, only joint_pos and joint_sin_cos; `encoders`,
     also every part a real arm computes from its encoder readings (ee_pos, ee_to_target, self_dist and, with
-    obstacles, link_obstacle_dist: the forward kinematics of the noisy angles). ee_vel is refused with
+    obstacles, link_obstacle_dist, link_obstacle_ahead and link_obstacle_ahead_moving: the forward kinematics of the
+    noisy angles). ee_vel is refused with
     `encoders` (it would need the previous step's noisy pose). Physics, reward and collisions stay exact."""
     action_latency: int = 0
     """0: a step applies its own action; 1: it applies the action of the step before (prev_action, so
@@ -291,7 +292,8 @@ class ReachAvoidConfig(ReachConfig):
     """Horizons (s) of the link_obstacle_ahead observation (not in the paper): per horizon and link, the distance
     link_obstacle_dist would have if every obstacle moved on at its current velocity for that long (the arm held
     still; a bounce off the cube's faces is not foreseen). A prediction of where a moving obstacle meets the arm.
-    link_obstacle_ahead_moving: the same with the arm moved on too, at its current joint velocities."""
+    link_obstacle_ahead_moving: the same with the arm moved on too, at its current joint velocities (stopping at
+    its joint limits)."""
 
     @property
     def radius_bounds(self) -> tuple[float, float]:

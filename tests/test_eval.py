@@ -1020,7 +1020,8 @@ def test_failure_report_names_the_base_when_moving_obstacles_are_checked_against
 def test_failure_report_tells_whose_motion_brought_an_obstacle_collision(monkeypatch):
     """Four obstacle collisions, each asked over its last 3 steps: an obstacle that comes down onto a still arm and an
     arm that swings its end effector into a still obstacle (both ending at step 4, so asked from step 1); an arm and
-    an obstacle that each move only part of the way (ending at step 3, asked from step 0: both needed); an obstacle on
+    an obstacle that each move only part of the way (ending at step 2, shorter than the window: asked from the reset,
+    both needed); an obstacle on
     a still end effector all along (either alone). Step 1 alone is away in the first two envs, so a window one step
     off either way finds the contact there and answers "either"."""
     from tools import failure_report
@@ -1040,12 +1041,13 @@ def test_failure_report_tells_whose_motion_brought_an_obstacle_collision(monkeyp
     qpos[0, 2], obstacle[0, 2] = away_pose, above  # env 2: both away at step 0, its window's start
     metrics = {"episode/self_collision": np.zeros(4), "episode/obstacle_collision": np.ones(4),
                "episode/target_reached": np.zeros(4), "episode/distance": np.full(4, 0.4)}
-    records = {"qpos": qpos, "target_pos": target, "obstacle_pos": obstacle, "length": np.array([4, 4, 3, 4]),
+    records = {"qpos": qpos, "target_pos": target, "obstacle_pos": obstacle, "length": np.array([4, 4, 2, 4]),
                "metrics": metrics}
     rows = failure_report.classify(robot, records, obstacle_radius=0.05)
     assert [r["approach"] for r in rows] == ["obstacle", "arm", "both", "either"]
     summary = failure_report.summarize(rows)
     assert summary["collisions"]["obstacle_approach"] == {"obstacle": 1, "arm": 1, "both": 1, "either": 1}
+    assert summary["collisions"]["approach_steps"] == 3
     np.testing.assert_allclose(rows[1]["approach_clearances"]["arm_held"],
                                _clearances(robot, away_pose, ee, 0.05).min(), atol=1e-4)
 

@@ -363,31 +363,68 @@ def test_a_moving_obstacle_in_the_base_collides():
     assert static.collision_distances(kin.geom_xpos, kin.geom_xmat, info)[1] > 0
 
 
-def test_the_moving_look_ahead_moves_the_arm_on_at_its_joint_velocities(moving):
+def _moving_arm(moving):
+    """The moving-obstacle envs after one step of random actions (every arm moving) and their info with noise keys."""
+    env = moving.env
+    actions = jax.random.uniform(jax.random.PRNGKey(3), (N, env.action_size), minval=-1.0, maxval=1.0)
+    state = moving.step(moving.start(seed=6), actions)
+    return state, {**state.info, "noise_key": jax.random.split(jax.random.PRNGKey(4), N)}
+
+
+@pytest.mark.parametrize("speed_up", [1.0, 30.0])
+def test_the_moving_look_ahead_moves_the_arm_on_at_its_joint_velocities(moving, speed_up):
     """link_obstacle_ahead_moving: per horizon and link, the distance to the nearest obstacle's surface with the
     obstacles moved on at their velocities and the arm at its joint velocities; the links' origins there from CPU
-    MuJoCo's kinematics at qpos + horizon * qvel, after a step of random actions (the arm moving)."""
+    MuJoCo's kinematics at qpos + horizon * qvel clipped to the joint ranges, after a step of random actions (and
+    with those velocities 30 times faster, which carries joints past their limits)."""
     import mujoco
 
     env, robot = moving.env, moving.env.robot
-    actions = jax.random.uniform(jax.random.PRNGKey(3), (N, env.action_size), minval=-1.0, maxval=1.0)
-    state = moving.step(moving.start(seed=6), actions)
-    data = state.pipeline_state
+    state, _ = _moving_arm(moving)
+    data = state.pipeline_state.replace(qvel=state.pipeline_state.qvel * speed_up)
     assert np.min(np.linalg.norm(np.asarray(data.qvel), axis=-1)) > 0.1  # every arm moving
     ahead = np.asarray(jax.vmap(lambda d, i: env.link_distances_ahead(d, d.xpos, i, arm_moving=True))(
         data, state.info))
     pos, radii = np.asarray(state.info["obstacle_pos"]), np.asarray(state.info["obstacle_radius"])
     vel = np.asarray(state.info["obstacle_vel"])
     nlinks, model = len(robot.link_bodies), robot.mj_model
-    reference = mujoco.MjData(model)
+    reference, past_a_limit = mujoco.MjData(model), False
     for i in range(N):
         for k, horizon in enumerate(env.config.obstacle_lookahead):
-            reference.qpos[:robot.nq] = np.asarray(data.qpos[i], np.float64) + horizon * np.asarray(data.qvel[i])
+            moved_on = np.asarray(data.qpos[i], np.float64) + horizon * np.asarray(data.qvel[i])
+            past_a_limit |= bool(np.any((moved_on < robot.joint_low) | (moved_on > robot.joint_high)))
+            reference.qpos[:robot.nq] = np.clip(moved_on, robot.joint_low, robot.joint_high)  # stopped at a limit
             mujoco.mj_kinematics(model, reference)
             links = reference.xpos[robot.link_bodies]
             centres = (pos[i] + horizon * vel[i]).reshape(3, 1, 3)
             expected = (np.linalg.norm(links[None] - centres, axis=-1) - radii[i][:, None]).min(axis=0)
             np.testing.assert_allclose(ahead[i, k * nlinks:(k + 1) * nlinks], expected, atol=1e-4)
+    assert past_a_limit or speed_up == 1.0  # the fast case exercises the stop at the limits
+
+
+def test_the_moving_look_ahead_measures_surfaces_at_the_moved_pose(moving):
+    """With link_distance="surface" the prediction measures the links' capsules where the arm will be: the env's own
+    surface distance at the geom poses CPU MuJoCo's kinematics gives for the moved-on angles."""
+    import mujoco
+
+    env = envs.make("ur5e-reach-avoid", **dict(MOVING, link_distance="surface"))
+    robot, model = env.robot, env.robot.mj_model
+    state, _ = _moving_arm(moving)
+    data, reference = state.pipeline_state, mujoco.MjData(model)
+    ahead = np.asarray(jax.vmap(lambda d, i: env.link_distances_ahead(d, d.xpos, i, arm_moving=True))(
+        data, state.info))
+    nlinks, horizon = len(robot.link_bodies), env.config.obstacle_lookahead[-1]
+    for i in range(N):
+        one = jax.tree.map(lambda x: x[i], data)
+        reference.qpos[:robot.nq] = np.clip(np.asarray(one.qpos) + horizon * np.asarray(one.qvel), robot.joint_low,
+                                            robot.joint_high)
+        mujoco.mj_kinematics(model, reference)
+        posed = one.replace(geom_xpos=jnp.asarray(reference.geom_xpos, jnp.float32),
+                            geom_xmat=jnp.asarray(reference.geom_xmat.reshape(-1, 3, 3), jnp.float32))
+        info = jax.tree.map(lambda x: x[i], state.info)
+        moved = {**info, "obstacle_pos": info["obstacle_pos"] + horizon * info["obstacle_vel"]}
+        expected = np.min(np.asarray(env.link_distances(posed, jnp.asarray(reference.xpos, jnp.float32), moved)), axis=0)
+        np.testing.assert_allclose(ahead[i, nlinks:], expected, atol=1e-4)
 
 
 def test_the_moving_look_ahead_differs_from_the_arm_held_still(moving):
@@ -411,6 +448,22 @@ def test_the_moving_look_ahead_is_the_observation_part_of_that_name(moving):
     obs = jax.vmap(lambda d, i: env.observation(d, d.xpos, d.site_xpos[ee_site], i))(data, state.info)
     expected = jax.vmap(lambda d, i: env.link_distances_ahead(d, d.xpos, i, arm_moving=True))(data, state.info)
     np.testing.assert_allclose(split_obs(env, obs)["link_obstacle_ahead_moving"], expected, atol=1e-6)
+
+
+@pytest.mark.parametrize("model", ["angles", "encoders"])
+def test_the_moving_look_ahead_sees_joint_noise_only_through_encoders(moving, model):
+    """Joint noise of 0.05 rad: under `angles` the prediction is the noiseless one (the noise reaches joint_pos
+    only); under `encoders` it comes from the noisy angles, centimetres away."""
+    state, info = _moving_arm(moving)
+    data = state.pipeline_state
+    env = envs.make("ur5e-reach-avoid", **dict(MOVING, joint_noise_std=0.05, joint_noise_model=model,
+                                                observation=("joint_pos", "link_obstacle_ahead_moving")))
+    obs = jax.vmap(lambda d, i: env.observation(d, d.xpos, d.site_xpos[env.robot.ee_site], i))(data, info)
+    parts = split_obs(env, obs)
+    exact = np.asarray(jax.vmap(lambda d, i: env.link_distances_ahead(d, d.xpos, i, arm_moving=True))(data, state.info))
+    assert np.max(np.abs(parts["joint_pos"] - np.asarray(data.qpos))) > 0.01  # the noise is on
+    deviation = np.max(np.abs(parts["link_obstacle_ahead_moving"] - exact))
+    assert (deviation < 1e-6) if model == "angles" else (deviation > 1e-3)
 
 
 def test_observations_and_penalty_of_several_moving_obstacles(moving):

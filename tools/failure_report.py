@@ -50,7 +50,7 @@ HEIGHT_BINS = (0.0, 0.1, 0.3, 0.5)
 bins are open."""
 APPROACH_STEPS = 10
 """Steps before an obstacle collision over which `approach` asks whose motion brought the contact (0.4 s at the
-arms' 25 Hz control)."""
+arms' 25 Hz control; from the reset for a collision within the first APPROACH_STEPS steps)."""
 PROXIMITY = 0.1
 """Clearance (m) under which the robot counts as near the obstacle: the default `obstacle_tau` of the
 paper's proximity penalty (eq. 3; the env measures it from the link origins, `link_distance`)."""
@@ -202,6 +202,7 @@ def summarize(rows: list[dict], near_limit: float = NEAR_LIMIT) -> dict:
         if by["obstacle collision"] and "approach" in by["obstacle collision"][0]:
             summary["collisions"]["obstacle_approach"] = dict(collections.Counter(
                 r["approach"] for r in by["obstacle collision"]).most_common())
+            summary["collisions"]["approach_steps"] = APPROACH_STEPS
     summary["start_clearance_median_all"] = float(np.median([r["start_clearance"] for r in rows]))
     if by["missed"]:
         index, labels = _bins([r["final_distance"] for r in by["missed"]], (0.0,) + MISS_BINS)

@@ -170,12 +170,15 @@ class ReachAvoid(Reach):
     def link_distances_ahead(self, data, xpos, info, arm_moving: bool = False):
         """Per horizon of `obstacle_lookahead`, each link's distance to the nearest obstacle moved on at its current
         velocity for that long, `[horizons * nlinks]`, horizon-major: the arm held still, or with `arm_moving` moved
-        on too at its joint velocities (most collisions need the arm's own motion: results/obstacles)."""
+        on too at its joint velocities, stopping at its joint limits (the agents' collisions measured in
+        results/obstacles mostly need the arm's own motion). The angles are those the other kinematic parts see."""
+        qpos = info.get("kinematic_qpos", data.qpos)
         out = []
         for horizon in self.config.obstacle_lookahead:
             moved = {**info, "obstacle_pos": info["obstacle_pos"] + horizon * _velocity(info)}
             if arm_moving:
-                kin = self.robot.kinematics(data.qpos + horizon * data.qvel)
+                ahead = jnp.clip(qpos + horizon * data.qvel, self.robot.joint_low, self.robot.joint_high)
+                kin = self.robot.kinematics(ahead)
                 out.append(jnp.min(self.link_distances(
                     data.replace(geom_xpos=kin.geom_xpos, geom_xmat=kin.geom_xmat), kin.xpos, moved), axis=0))
             else:
