@@ -12,11 +12,12 @@ call first, then the median of `--repeats` timed calls, each ended by `block_unt
 Writes `<out>.json` (every number plus device, versions, command) and `<out>.md` (a table).
 
 `--variants` times each reach-avoid env once per named option set (`VARIANTS`: the paper's one
-static obstacle, 3 static, 3 moving) in the same run, each row with its fraction of the paper
-variant's rate at that size (list `paper` first; results/obstacles):
+static obstacle, 3 static, 3 moving, and 3 moving with the predicted link distances observed) in the
+same run, each row with its fraction of the paper variant's rate at that size (list `paper` first;
+results/obstacles):
 
     python -m benchmarks.env_throughput --envs ur5e-reach-avoid panda-reach-avoid --sizes 8192 \
-        --variants paper 3-static 3-moving --out results/throughput/obstacles
+        --variants paper 3-static 3-moving 3-moving-ahead 3-moving-ahead-moving --out results/throughput/obstacles
 """
 
 from __future__ import annotations
@@ -32,7 +33,6 @@ from pathlib import Path
 
 import agents  # noqa: F401  (first: the project's XLA settings, agents/xla_flags.py, as in training)
 import jax
-import jax.numpy as jnp
 import mujoco
 from mujoco import mjx
 
@@ -42,9 +42,13 @@ from agents.presets import MOVING_OBSTACLES_3
 from envs.fast_mjx import fast_mjx
 from envs.robots import ROBOTS
 
-VARIANTS = {"paper": {}, "3-static": dict(num_obstacles=3), "3-moving": MOVING_OBSTACLES_3}
+_AHEAD = MOVING_OBSTACLES_3["observation"] + ("link_obstacle_ahead",)
+VARIANTS = {"paper": {}, "3-static": dict(num_obstacles=3), "3-moving": MOVING_OBSTACLES_3,
+            "3-moving-ahead": dict(MOVING_OBSTACLES_3, observation=_AHEAD),
+            "3-moving-ahead-moving": dict(MOVING_OBSTACLES_3, observation=_AHEAD + ("link_obstacle_ahead_moving",))}
 """Reach-avoid option sets for `--variants` (options beyond the paper's, see `ReachAvoidConfig`); the
-moving one is the `-moving3` presets' obstacle setting."""
+moving ones are the `-moving3` presets' obstacle setting, the last two with the link distances predicted with the
+arm held still, then also with it moving on (the cost of observing them)."""
 
 
 def time_calls(fn, args, repeats):

@@ -654,3 +654,14 @@ def test_render_draws_every_obstacle_at_its_radius():
             assert np.abs(small - empty).sum(-1).astype(bool).sum() > 20, f"obstacle {j} not drawn"
             large = scene.draw(q, target, shown.ravel(), np.full(3, 0.2)).astype(int)
             assert np.abs(large - empty).sum(-1).astype(bool).sum() > 4 * np.abs(small - empty).sum(-1).astype(bool).sum()
+
+
+def test_the_throughput_variants_add_both_predictions_to_the_moving_setting():
+    """benchmarks.env_throughput's last variant observes the 3-moving setting plus both look-aheads: 2 parts x 2
+    horizons x the links more numbers."""
+    from benchmarks.env_throughput import VARIANTS
+
+    sizes = {v: envs.make("ur5e-reach-avoid", **VARIANTS[v]).observation_size
+             for v in ("3-moving", "3-moving-ahead-moving")}
+    nlinks = len(envs.make("ur5e-reach-avoid").robot.link_bodies)
+    assert sizes["3-moving-ahead-moving"] - sizes["3-moving"] == 2 * 2 * nlinks
