@@ -376,7 +376,7 @@ def test_the_moving_look_ahead_moves_the_arm_on_at_its_joint_velocities(moving, 
     """link_obstacle_ahead_moving: per horizon and link, the distance to the nearest obstacle's surface with the
     obstacles moved on at their velocities and the arm at its joint velocities; the links' origins there from CPU
     MuJoCo's kinematics at qpos + horizon * qvel clipped to the joint ranges, after a step of random actions (and
-    with those velocities 30 times faster, which carries joints past their limits)."""
+    with those velocities 30 times faster, which takes joints past their limits)."""
     import mujoco
 
     env, robot = moving.env, moving.env.robot

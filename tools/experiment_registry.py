@@ -308,8 +308,8 @@ register(Experiment(
     note="Aims at 92 % (UR5e) and 97 % (Panda) reached with collisions no worse than the paper's. The -plus "
          "settings (joint sin/cos and self-collision distances observed, no joint-limit penalty) cut the UR5e's self "
          "collisions from 3.5 to 0.3 % and the moving-obstacle rows (obstacles-dodge-clear) still rose past 2x the "
-         "presets' budgets; the weak "
-         "joint-limit penalty added 2.2 points to a moving-obstacle row of obstacles-dodge (one seed). Screened on "
+         "presets' budgets; the weak joint-limit penalty added 2.2 points to a moving-obstacle row of "
+         "obstacles-dodge (one seed). Screened on "
          "one seed a row first. ur5e-plus-dense-cp10 joins the two best UR5e levers so far: the -plus settings "
          "(88.5 %, 5 seeds at 160M) and reach-avoid-reward's dense reward with a collision penalty of 10 (89.6 %, 3 "
          "seeds at 192M, with the paper's observation and a joint-limit penalty of 1.0, and 3.5 % self and 4.7 % "
@@ -456,7 +456,7 @@ register(Experiment(
          "collisions of the two UR5e policies analysed need the arm's own motion (results/obstacles): the -moving "
          "rows add link_obstacle_ahead_moving, the same prediction with the arm moved on at its joint velocities; "
          "ur5e-ahead-vel-jl observes the joint velocities without it, to tell the prediction from the velocity "
-         "information it carries."))
+         "information in it."))
 
 _LATENCY_METRICS = _AVOID_METRICS + ("steps_in_target", "times_left_target")
 register(Experiment(

@@ -176,13 +176,12 @@ class ReachAvoid(Reach):
         out = []
         for horizon in self.config.obstacle_lookahead:
             moved = {**info, "obstacle_pos": info["obstacle_pos"] + horizon * _velocity(info)}
+            posed, links = data, xpos
             if arm_moving:
-                ahead = jnp.clip(qpos + horizon * data.qvel, self.robot.joint_low, self.robot.joint_high)
-                kin = self.robot.kinematics(ahead)
-                out.append(jnp.min(self.link_distances(
-                    data.replace(geom_xpos=kin.geom_xpos, geom_xmat=kin.geom_xmat), kin.xpos, moved), axis=0))
-            else:
-                out.append(jnp.min(self.link_distances(data, xpos, moved), axis=0))
+                kin = self.robot.kinematics(
+                    jnp.clip(qpos + horizon * data.qvel, self.robot.joint_low, self.robot.joint_high))
+                posed, links = data.replace(geom_xpos=kin.geom_xpos, geom_xmat=kin.geom_xmat), kin.xpos
+            out.append(jnp.min(self.link_distances(posed, links, moved), axis=0))
         return jnp.concatenate(out)
 
 
