@@ -996,6 +996,7 @@ def test_failure_report_follows_several_moving_obstacles_of_their_own_radii():
         np.testing.assert_allclose(rows[i]["final_obstacle_clearance"], expected.min(), atol=1e-4)
     nearest = robot.obstacle_geoms[int(np.argmin(_clearances(robot, free, ee, 0.12)))]
     assert rows[1]["what"] == robot.mj_model.geom(int(nearest)).name
+    assert "obstacle_after_target" not in failure_report.summarize(rows)["collisions"]  # no steps_in_target recorded
 
 
 def test_failure_report_names_the_base_when_moving_obstacles_are_checked_against_it():
@@ -1040,14 +1041,19 @@ def test_failure_report_tells_whose_motion_brought_an_obstacle_collision(monkeyp
     qpos[1, 1] = away_pose  # env 1: the arm is away at step 1 only
     qpos[0, 2], obstacle[0, 2] = away_pose, above  # env 2: both away at step 0, its window's start
     metrics = {"episode/self_collision": np.zeros(4), "episode/obstacle_collision": np.ones(4),
-               "episode/target_reached": np.zeros(4), "episode/distance": np.full(4, 0.4)}
+               "episode/target_reached": np.zeros(4), "episode/distance": np.full(4, 0.4),
+               "episode/steps_in_target": np.array([0.0, 2.0, 0.0, 5.0])}  # envs 1 and 3 had reached the target
     records = {"qpos": qpos, "target_pos": target, "obstacle_pos": obstacle, "length": np.array([4, 4, 2, 4]),
                "metrics": metrics}
     rows = failure_report.classify(robot, records, obstacle_radius=0.05)
     assert [r["approach"] for r in rows] == ["obstacle", "arm", "both", "either"]
+    assert [r["steps_in_target"] for r in rows] == [0, 2, 0, 5]
     summary = failure_report.summarize(rows)
     assert summary["collisions"]["obstacle_approach"] == {"obstacle": 1, "arm": 1, "both": 1, "either": 1}
     assert summary["collisions"]["approach_steps"] == 3
+    assert summary["collisions"]["obstacle_after_target"] == 2
+    assert summary["collisions"]["obstacle_approach_after_target"] == {"arm": 1, "either": 1}
+    assert "had reached the target: 2 (arm 1, either 1)" in failure_report.markdown(summary, "t")
     np.testing.assert_allclose(rows[1]["approach_clearances"]["arm_held"],
                                _clearances(robot, away_pose, ee, 0.05).min(), atol=1e-4)
 
