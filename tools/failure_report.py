@@ -18,8 +18,8 @@ surface (`final_obstacle_clearance`). An obstacle collision also records whose m
 `APPROACH_STEPS` steps brought the contact (`approach`): the arm's alone, the obstacle's alone, either alone,
 or only both together (each asked by holding the other where it was; `approach_clearances` holds the two
 clearances; a collision within the first `APPROACH_STEPS` steps is asked from the reset), and how many steps
-the end effector had been in the target up to it (`steps_in_target`, the colliding step included: > 0 when the
-arm was hit after reaching).
+the end effector had been in the target before it (`steps_in_target`: a colliding step never counts as in the
+target; > 0 when the arm was hit after reaching).
 Outcomes are also binned by the target's height above the robot's mounting plane (`by_target_height`), and each
 episode records how far its end effector starts from the target (`start_distance`), how far it moved
 over the episode's last `END_STEPS` steps (`end_motion`: near 0 when the arm has stopped) and the
@@ -152,7 +152,7 @@ def classify(robot, records: dict, obstacle_radius: float | None = None, geoms=N
                        approach=_approach(arm_held[i], obstacles_held[i], obstacle_end[i].min()),
                        approach_clearances={"arm_held": float(arm_held[i]),
                                             "obstacles_held": float(obstacles_held[i])})
-            if "episode/steps_in_target" in metrics:  # steps in the target up to the colliding one
+            if "episode/steps_in_target" in metrics:  # steps in the target before the colliding one
                 row["steps_in_target"] = int(metrics["episode/steps_in_target"][i])
         elif metrics["episode/target_reached"][i] > 0:
             row.update(outcome="reached")
@@ -207,8 +207,8 @@ def summarize(rows: list[dict], near_limit: float = NEAR_LIMIT) -> dict:
             summary["collisions"]["obstacle_approach"] = dict(collections.Counter(
                 r["approach"] for r in by["obstacle collision"]).most_common())
             summary["collisions"]["approach_steps"] = APPROACH_STEPS
-        after = [r for r in by["obstacle collision"] if r.get("steps_in_target", 0) > 0]
         if by["obstacle collision"] and "steps_in_target" in by["obstacle collision"][0]:
+            after = [r for r in by["obstacle collision"] if r["steps_in_target"] > 0]
             summary["collisions"]["obstacle_after_target"] = len(after)
             if "approach" in by["obstacle collision"][0]:
                 summary["collisions"]["obstacle_approach_after_target"] = dict(collections.Counter(
