@@ -1054,8 +1054,32 @@ def test_failure_report_tells_whose_motion_brought_an_obstacle_collision(monkeyp
     assert summary["collisions"]["obstacle_after_target"] == 2
     assert summary["collisions"]["obstacle_approach_after_target"] == {"arm": 1, "either": 1}
     assert "had reached the target: 2 (arm 1, either 1)" in failure_report.markdown(summary, "t")
+    assert "in_target_before" not in rows[0]  # no target radius given
     np.testing.assert_allclose(rows[1]["approach_clearances"]["arm_held"],
                                _clearances(robot, away_pose, ee, 0.05).min(), atol=1e-4)
+
+
+def test_failure_report_tells_whether_the_arm_was_in_its_target_on_the_step_before_an_obstacle_collision():
+    """All three envs collide at step 3. Env 0's target lies 2 cm from the end effector of a still arm (CPU MuJoCo);
+    env 1's on it, the arm swung away on the colliding step only; env 2's on it, the arm away on the step before
+    only. With a target radius of 1 cm only env 1 was in the target on step 2; with 3 cm envs 0 and 1."""
+    from tools import failure_report
+
+    robot, free, ee, target = _free_arm_and_target(steps=3, n=3)
+    target[:, 0], target[:, 1:] = ee + [0.02, 0.0, 0.0], ee
+    away = free.copy()
+    away[0] += 1.0  # the shoulder pan turned 1 rad: the end effector about half a metre aside
+    qpos = np.tile(free, (4, 3, 1))
+    qpos[3, 1], qpos[2, 2] = away, away
+    metrics = {"episode/self_collision": np.zeros(3), "episode/obstacle_collision": np.ones(3),
+               "episode/target_reached": np.zeros(3), "episode/distance": np.zeros(3)}
+    records = {"qpos": qpos, "target_pos": target, "obstacle_pos": np.tile(ee, (4, 3, 1)),
+               "length": np.array([3, 3, 3]), "metrics": metrics}
+    rows = failure_report.classify(robot, records, obstacle_radius=0.05, target_radius=0.01)
+    assert [r["in_target_before"] for r in rows] == [False, True, False]
+    assert failure_report.summarize(rows)["collisions"]["obstacle_in_target_before"] == 1
+    wider = failure_report.classify(robot, records, obstacle_radius=0.05, target_radius=0.03)
+    assert [r["in_target_before"] for r in wider] == [True, True, False]
 
 
 def test_point_segment_distance_on_hand_computed_geometry():

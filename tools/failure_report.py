@@ -19,7 +19,8 @@ surface (`final_obstacle_clearance`). An obstacle collision also records whose m
 or only both together (each asked by holding the other where it was; `approach_clearances` holds the two
 clearances; a collision within the first `APPROACH_STEPS` steps is asked from the reset), and how many steps
 the end effector had been in the target before it (`steps_in_target`: a colliding step never counts as in the
-target; > 0 when the arm was hit after reaching).
+target; > 0 when the arm was hit after reaching) and whether it was in the target on the step before
+(`in_target_before`).
 Outcomes are also binned by the target's height above the robot's mounting plane (`by_target_height`), and each
 episode records how far its end effector starts from the target (`start_distance`), how far it moved
 over the episode's last `END_STEPS` steps (`end_motion`: near 0 when the arm has stopped) and the
@@ -62,13 +63,15 @@ def _names(robot, geoms) -> list[str]:
     return [robot.mj_model.geom(int(g)).name for g in geoms]
 
 
-def classify(robot, records: dict, obstacle_radius: float | None = None, geoms=None) -> list[dict]:
+def classify(robot, records: dict, obstacle_radius: float | None = None, geoms=None,
+             target_radius: float | None = None) -> list[dict]:
     """One dict per env: outcome, step (episode length), start clearance and, by outcome, the
     colliding pair / geom or the final distance. `records` as `evaluation.rollout` returns them;
     with obstacles in them and their radii (`obstacle_radius`, or recorded per episode), also whether
     one lies between the end effector and the target at the start (and, for misses, at the end).
     `geoms`: the robot geoms the env checks against obstacles (its `checked_geoms`; default the model's
-    obstacle pairs)."""
+    obstacle pairs). With `target_radius` (m), an obstacle collision also tells whether the end effector was in the
+    target on the step before it (`in_target_before`)."""
     import jax
     import jax.numpy as jnp
 
@@ -124,11 +127,16 @@ def classify(robot, records: dict, obstacle_radius: float | None = None, geoms=N
                            < radius[:, j] for j in range(count)], axis=0)
 
         blocked_start, blocked_end = blocked(kin_start, np.zeros(n, int)), blocked(kin_end, last)
-    target_height = start_distance = None
+    target_height = start_distance = in_target_before = None
     if "target_pos" in records:
-        target0 = np.asarray(records["target_pos"])[0]
+        targets = np.asarray(records["target_pos"])
+        target0 = targets[0]
         target_height = target0[:, 2]
         start_distance = np.linalg.norm(np.asarray(kin_start.ee_pos) - target0, axis=-1)
+        if target_radius is not None:  # the end effector on the step before each episode's last one
+            prev = np.clip(length - 1, 0, qpos.shape[0] - 1)
+            ee_prev = np.asarray(robot.kinematics(jnp.asarray(qpos[prev, np.arange(n)])).ee_pos)
+            in_target_before = np.linalg.norm(ee_prev - targets[prev, np.arange(n)], axis=-1) < target_radius
     pair_names = [" / ".join(_names(robot, pair)) for pair in robot.self_pairs]
     joint_names = [robot.mj_model.joint(j).name for j in range(robot.nq)]
     margin = np.minimum(end_q - robot.joint_low, robot.joint_high - end_q)
@@ -154,6 +162,8 @@ def classify(robot, records: dict, obstacle_radius: float | None = None, geoms=N
                                             "obstacles_held": float(obstacles_held[i])})
             if "episode/steps_in_target" in metrics:  # steps in the target before the colliding one
                 row["steps_in_target"] = int(metrics["episode/steps_in_target"][i])
+            if in_target_before is not None:
+                row["in_target_before"] = bool(in_target_before[i])
         elif metrics["episode/target_reached"][i] > 0:
             row.update(outcome="reached")
         else:
@@ -213,6 +223,9 @@ def summarize(rows: list[dict], near_limit: float = NEAR_LIMIT) -> dict:
             if "approach" in by["obstacle collision"][0]:
                 summary["collisions"]["obstacle_approach_after_target"] = dict(collections.Counter(
                     r["approach"] for r in after).most_common())
+        if by["obstacle collision"] and "in_target_before" in by["obstacle collision"][0]:
+            summary["collisions"]["obstacle_in_target_before"] = sum(r["in_target_before"]
+                                                                     for r in by["obstacle collision"])
     summary["start_clearance_median_all"] = float(np.median([r["start_clearance"] for r in rows]))
     if by["missed"]:
         index, labels = _bins([r["final_distance"] for r in by["missed"]], (0.0,) + MISS_BINS)
@@ -274,6 +287,9 @@ def markdown(summary: dict, title: str) -> str:
             by_approach = ", ".join(f"{k} {v}" for k, v in c.get("obstacle_approach_after_target", {}).items())
             lines += ["", "obstacle collisions after the end effector had reached the target: "
                           f"{c['obstacle_after_target']}" + (f" ({by_approach})" if by_approach else "")]
+        if "obstacle_in_target_before" in c:
+            lines += ["", f"obstacle collisions with the end effector in the target on the step before: "
+                          f"{c['obstacle_in_target_before']}"]
     if "missed_final_distance" in summary:
         lines += ["", "missed episodes by final distance: " + ", ".join(
             f"{k}: {v}" for k, v in summary["missed_final_distance"].items())]
@@ -379,7 +395,8 @@ def main(argv: list[str] | None = None) -> dict:
     made = provenance.stamp(provenance.command(None if argv is None else [__file__] + list(argv)))
     records = evaluation.rollout(policy, env_name, config, num_envs=args.num_envs, eval_seed=args.seed, unit=args.unit)
     env = envs.from_config(env_name, config)
-    rows = classify(env.robot, records, getattr(config, "obstacle_radius", None), getattr(env, "checked_geoms", None))
+    rows = classify(env.robot, records, getattr(config, "obstacle_radius", None), getattr(env, "checked_geoms", None),
+                    getattr(config, "target_radius", None))
     summary = summarize(rows, getattr(config, "joint_limit_margin", NEAR_LIMIT))
     title = f"{args.checkpoint} (seed {policy.units[args.unit]}) on {env_name}, eval seed {args.seed}"
     print(markdown(summary, title))
