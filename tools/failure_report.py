@@ -288,7 +288,7 @@ def markdown(summary: dict, title: str) -> str:
             lines += ["", "obstacle collisions after the end effector had reached the target: "
                           f"{c['obstacle_after_target']}" + (f" ({by_approach})" if by_approach else "")]
         if "obstacle_in_target_before" in c:
-            lines += ["", f"obstacle collisions with the end effector in the target on the step before: "
+            lines += ["", "obstacle collisions with the end effector in the target on the step before: "
                           f"{c['obstacle_in_target_before']}"]
     if "missed_final_distance" in summary:
         lines += ["", "missed episodes by final distance: " + ", ".join(
