@@ -213,19 +213,19 @@ def summarize(rows: list[dict], near_limit: float = NEAR_LIMIT) -> dict:
             "within_first_5_steps": float(np.mean(steps <= 5)),
             "start_clearance_median": float(np.median([r["start_clearance"] for r in collided])),
         }
-        if by["obstacle collision"] and "approach" in by["obstacle collision"][0]:
-            summary["collisions"]["obstacle_approach"] = dict(collections.Counter(
-                r["approach"] for r in by["obstacle collision"]).most_common())
+        obstacle = by["obstacle collision"]
+        fields = obstacle[0] if obstacle else {}  # what the rows record (reports made before a field lack it)
+        approaches = lambda rows: dict(collections.Counter(r["approach"] for r in rows).most_common())
+        if "approach" in fields:
+            summary["collisions"]["obstacle_approach"] = approaches(obstacle)
             summary["collisions"]["approach_steps"] = APPROACH_STEPS
-        if by["obstacle collision"] and "steps_in_target" in by["obstacle collision"][0]:
-            after = [r for r in by["obstacle collision"] if r["steps_in_target"] > 0]
+        if "steps_in_target" in fields:
+            after = [r for r in obstacle if r["steps_in_target"] > 0]
             summary["collisions"]["obstacle_after_target"] = len(after)
-            if "approach" in by["obstacle collision"][0]:
-                summary["collisions"]["obstacle_approach_after_target"] = dict(collections.Counter(
-                    r["approach"] for r in after).most_common())
-        if by["obstacle collision"] and "in_target_before" in by["obstacle collision"][0]:
-            summary["collisions"]["obstacle_in_target_before"] = sum(r["in_target_before"]
-                                                                     for r in by["obstacle collision"])
+            if "approach" in fields:
+                summary["collisions"]["obstacle_approach_after_target"] = approaches(after)
+        if "in_target_before" in fields:
+            summary["collisions"]["obstacle_in_target_before"] = sum(r["in_target_before"] for r in obstacle)
     summary["start_clearance_median_all"] = float(np.median([r["start_clearance"] for r in rows]))
     if by["missed"]:
         index, labels = _bins([r["final_distance"] for r in by["missed"]], (0.0,) + MISS_BINS)
