@@ -430,8 +430,7 @@ def test_the_moving_look_ahead_measures_surfaces_at_the_moved_pose(moving):
 def test_the_moving_look_ahead_differs_from_the_arm_held_still(moving):
     """With the arm moving, the prediction is not link_obstacle_ahead's (which holds the arm still)."""
     env = moving.env
-    actions = jax.random.uniform(jax.random.PRNGKey(3), (N, env.action_size), minval=-1.0, maxval=1.0)
-    state = moving.step(moving.start(seed=6), actions)
+    state, _ = _moving_arm(moving)
     data = state.pipeline_state
     still = jax.vmap(env.link_distances_ahead)(data, data.xpos, state.info)
     moving_on = jax.vmap(lambda d, i: env.link_distances_ahead(d, d.xpos, i, arm_moving=True))(data, state.info)
@@ -442,8 +441,7 @@ def test_the_moving_look_ahead_is_the_observation_part_of_that_name(moving):
     """The part `link_obstacle_ahead_moving` of an env that observes it, on a moving arm's state, is that prediction
     (two horizons x the links)."""
     env = envs.make("ur5e-reach-avoid", **dict(MOVING, observation=MOVING["observation"] + ("link_obstacle_ahead_moving",)))
-    actions = jax.random.uniform(jax.random.PRNGKey(3), (N, env.action_size), minval=-1.0, maxval=1.0)
-    state = moving.step(moving.start(seed=6), actions)
+    state, _ = _moving_arm(moving)
     data, ee_site = state.pipeline_state, env.robot.ee_site
     obs = jax.vmap(lambda d, i: env.observation(d, d.xpos, d.site_xpos[ee_site], i))(data, state.info)
     expected = jax.vmap(lambda d, i: env.link_distances_ahead(d, d.xpos, i, arm_moving=True))(data, state.info)
