@@ -411,7 +411,7 @@ register(Experiment(
 register(Experiment(
     "obstacles-dodge-clear", "Among 3 moving obstacles drawn clear of the base, every robot geom checked: predicted "
     "link distances (the arm held still or moving on), a joint-limit penalty, collision penalties and longer "
-    "training (screening: 1 seed a row; the two long rows have 5)",
+    "training (screening: 1 seed a row; two long rows have 5 planned)",
     "not in the paper (the future work of its Discussion)",
     (Run("ur5e-ahead-jl", "ur5e-reach-avoid-ppo-moving3", {"env.observation": _MOVING3_PLUS_OBS + _AHEAD, **_JL},
          seeds=1, shares=False, label="ur5e, + link_obstacle_ahead, joint-limit penalty 0.05"),
