@@ -195,7 +195,10 @@ def state_specs(state: TrainState, learner: Learner):
         key=None, episode_return=0, episode_length=0, updates=None,
     )
     leaves, treedef = jax.tree.flatten(state)
-    axis_leaves = jax.tree.flatten(axes, is_leaf=lambda x: x is None)[0]
+    try:  # one axis per leaf of the state; an empty subtree of it (a None field) takes none
+        axis_leaves = treedef.flatten_up_to(axes)
+    except (ValueError, TypeError) as e:
+        raise ValueError("learner.env_axes returned a tree that does not match the learner state") from e
     if len(axis_leaves) != len(leaves):
         raise ValueError("learner.env_axes returned a tree that does not match the learner state")
     specs = [P() if a is None else P(*([None] * (a + 1) + [AXIS])) for a in axis_leaves]
