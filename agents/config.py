@@ -157,6 +157,10 @@ def validate(config: TrainConfig) -> None:
     if not 0 <= config.devices <= available:
         raise ValueError(f"devices={config.devices} is invalid: allowed are 0 (all) to {available} (local devices).")
     validate_stored(config, num_devices(config))
+    if getattr(config.algo, "failure_budget", None) is not None and getattr(config.env, "success", None) == "reach_and_terminate":
+        raise ValueError(f"algo.failure_budget={config.algo.failure_budget!r} is invalid with "
+                         "env.success='reach_and_terminate': the budget counts terminations as failures, and there "
+                         "reaching terminates too; allowed is env.success='reach_and_stay' (or no budget).")
     for name, low in (("num_timesteps", 1), ("seeds", 1), ("keep_checkpoints", 1), ("eval_last_steps", 1),
                       ("checkpoint_every", 0), ("log_every", 0), ("stop_after_steps", 0), ("eval_envs", 0)):
         if int(getattr(config, name)) < low:

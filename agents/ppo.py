@@ -92,6 +92,13 @@ class PPOConfig(networks.NetworkConfig):
     first (whose parameters give the update's initial advantages)."""
     value_hidden_sizes: tuple[int, ...] = (256, 256, 256)
     """Hidden layer widths of the value network."""
+    failure_budget: float | None = None
+    """PPO-Lagrangian (Ray et al. 2019, Safety Gym): the share of episodes allowed to end in a failure (a
+    termination: a collision, or NaN physics, in tasks where reaching does not terminate). A multiplier learned by
+    dual ascent is subtracted from each failure step's reward. None: no multiplier."""
+    multiplier_lr: float = 10.0
+    """Dual-ascent step of that multiplier after each update: it grows by multiplier_lr x (the batch's share of
+    episodes ending in a failure - failure_budget), floored at 0."""
 
     @property
     def env_steps_per_update(self) -> int:
@@ -126,6 +133,9 @@ class PPOConfig(networks.NetworkConfig):
             validation.positive("algo." + name, getattr(self, name), strict=False)
         validation.choice("algo.lr_schedule", self.lr_schedule, LR_SCHEDULES)
         self.validate_networks("value_hidden_sizes")
+        if self.failure_budget is not None:
+            validation.in_range("algo.failure_budget", self.failure_budget, 0.0, 1.0)
+        validation.positive("algo.multiplier_lr", self.multiplier_lr)
 
 
 def _divisors_near(n: int, x: int) -> str:
@@ -219,6 +229,8 @@ class PPOState:
     value_stats: normalizer.RunningStats
     updates: jax.Array
     """Updates done (drives the learning-rate schedule)."""
+    multiplier: jax.Array | None = None
+    """The failure multiplier of PPO-Lagrangian (`failure_budget`); None without a budget."""
 
 
 class PPO:
@@ -263,8 +275,9 @@ class PPO:
         k_pi, k_v = jax.random.split(key)
         dummy = jnp.zeros((1, self.observation_size))
         params = {"policy": self.policy_net.init(k_pi, dummy), "value": self.value_net.init(k_v, dummy)}
+        multiplier = None if self.config.failure_budget is None else jnp.zeros(())
         return PPOState(params, self.optimizer.init(params), normalizer.init(self.observation_size), normalizer.init(()),
-                        jnp.zeros((), jnp.int32))
+                        jnp.zeros((), jnp.int32), multiplier)
 
     def env_axes(self, state: PPOState):
         return jax.tree.map(lambda _: None, state)
@@ -386,6 +399,8 @@ class PPO:
         # (T, envs, ...) -> (envs, unrolls, unroll_length, ...): unroll j of env e covers steps
         # j * unroll_length ... (j + 1) * unroll_length - 1.
         data = jax.tree.map(lambda x: jnp.moveaxis(x.reshape((n_seq, length) + x.shape[1:]), 2, 0), batch)
+        if state.multiplier is not None:
+            data = data._replace(reward=data.reward - state.multiplier * data.termination)
         data = data._replace(reward=data.reward * c.reward_scaling)
         lr = learning_rate(c, state.updates.astype(jnp.float32) / self.total_updates)
 
@@ -417,4 +432,17 @@ class PPO:
         if c.normalize_observations:
             obs_stats = normalizer.update(obs_stats, batch.obs, par.axis_name)
         metrics = {**metrics, "optim/learning_rate": lr, "value/target_mean": par.pmean(jnp.mean(targets0))}
-        return PPOState(params, opt_state, obs_stats, value_stats, state.updates + 1), metrics
+        multiplier = state.multiplier
+        if multiplier is not None:
+            multiplier, failure_share = self.dual_ascent(multiplier, batch, par)
+            metrics = {**metrics, "lagrange/multiplier": multiplier, "lagrange/failure_share": failure_share}
+        return PPOState(params, opt_state, obs_stats, value_stats, state.updates + 1, multiplier), metrics
+
+    def dual_ascent(self, multiplier, batch: Transition, par: Parallel):
+        """PPO-Lagrangian's multiplier step: (new multiplier, the share of the batch's ended episodes that failed).
+        A batch in which no episode ended leaves the multiplier as it is (its share reads 0)."""
+        c = self.config
+        failures, ended = par.psum((jnp.sum(batch.termination), jnp.sum(batch.done)))
+        share = failures / jnp.maximum(ended, 1.0)
+        step = jnp.where(ended > 0, c.multiplier_lr * (share - c.failure_budget), 0.0)
+        return jnp.maximum(multiplier + step, 0.0), share
