@@ -194,13 +194,11 @@ def state_specs(state: TrainState, learner: Learner):
         env_state=jax.tree.map(lambda _: 0, state.env_state),
         key=None, episode_return=0, episode_length=0, updates=None,
     )
-    leaves, treedef = jax.tree.flatten(state)
+    treedef = jax.tree.structure(state)
     try:  # one axis per leaf of the state; an empty subtree of it (a None field) takes none
         axis_leaves = treedef.flatten_up_to(axes)
     except (ValueError, TypeError) as e:
         raise ValueError("learner.env_axes returned a tree that does not match the learner state") from e
-    if len(axis_leaves) != len(leaves):
-        raise ValueError("learner.env_axes returned a tree that does not match the learner state")
     specs = [P() if a is None else P(*([None] * (a + 1) + [AXIS])) for a in axis_leaves]
     return jax.tree.unflatten(treedef, specs)
 
