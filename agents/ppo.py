@@ -93,12 +93,14 @@ class PPOConfig(networks.NetworkConfig):
     value_hidden_sizes: tuple[int, ...] = (256, 256, 256)
     """Hidden layer widths of the value network."""
     failure_budget: float | None = None
-    """PPO-Lagrangian (Ray et al. 2019, Safety Gym): the share of episodes allowed to end in a failure (a
-    termination: a collision, or NaN physics, in tasks where reaching does not terminate). A multiplier learned by
-    dual ascent is subtracted from each failure step's reward. None: no multiplier."""
-    multiplier_lr: float = 10.0
+    """PPO-Lagrangian (Ray et al. 2019, Safety Gym, with a cost of 1 per failure step): the share of the training
+    episodes allowed to end in a failure (a termination: a collision, or NaN physics, in tasks where reaching does
+    not terminate). A multiplier learned by dual ascent, in env-reward units, is subtracted from each failure
+    step's reward (besides env.collision_penalty, before reward_scaling). None: no multiplier."""
+    multiplier_lr: float = 3.0
     """Dual-ascent step of that multiplier after each update: it grows by multiplier_lr x (the batch's share of
-    episodes ending in a failure - failure_budget), floored at 0."""
+    episodes ending in a failure - failure_budget), floored at 0. Per update, so its pace follows
+    env_steps_per_update."""
 
     @property
     def env_steps_per_update(self) -> int:

@@ -41,7 +41,7 @@ def _ppo(**overrides) -> PPO:
 
 
 def test_dual_ascent_grows_the_multiplier_by_the_excess_failure_share():
-    """4 episodes ended (one by time), 1 of them failed: share 0.25; 0.5 + 10 x (0.25 - 0.05) = 2.5."""
+    """4 episodes ended (three by time), 1 of them failed: share 0.25; 0.5 + 10 x (0.25 - 0.05) = 2.5."""
     ppo = _ppo(failure_budget=0.05, multiplier_lr=10.0)
     termination = _flags([[0, 1, 0, 0], [0, 0, 0, 0], [0, 0, 0, 0]])
     truncation = _flags([[0, 0, 0, 0], [0, 0, 0, 0], [1, 0, 1, 1]])
@@ -64,23 +64,58 @@ def test_dual_ascent_keeps_the_multiplier_when_no_episode_ended():
     assert float(multiplier) == pytest.approx(0.7)
 
 
-def test_update_subtracts_the_multiplier_from_failure_steps_only():
-    """An update with multiplier 3 equals, parameter for parameter, a budget-free update on a batch whose failure
-    steps earn 3 less (the same initial parameters and keys)."""
-    termination = _flags([[0, 1, 0, 0], [0, 0, 0, 1], [0, 0, 0, 0]])
-    truncation = _flags([[0, 0, 0, 0], [0, 0, 0, 0], [1, 0, 1, 0]])
-    lagrangian, plain = _ppo(failure_budget=0.05), _ppo()
-    batch = _batch(plain, termination, truncation)
+_TERMINATION = _flags([[0, 1, 0, 0], [0, 0, 0, 1], [0, 0, 0, 0]])
+_TRUNCATION = _flags([[0, 0, 0, 0], [0, 0, 0, 0], [1, 0, 1, 0]])
+
+
+def _max_difference(a, b) -> float:
+    return max(float(jnp.max(jnp.abs(x - y))) for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b)))
+
+
+def test_update_subtracts_the_multiplier_from_failure_steps_before_scaling():
+    """An update with multiplier 3 and reward scaling 0.5 equals, parameter for parameter, a budget-free update on a
+    batch whose rewards are (r - 3 x failure) x 0.5, with scaling 1 (the same initial parameters and keys)."""
+    lagrangian, plain = _ppo(failure_budget=0.05, reward_scaling=0.5), _ppo()
+    batch = _batch(plain, _TERMINATION, _TRUNCATION)
     state = lagrangian.init(jax.random.PRNGKey(3)).replace(multiplier=jnp.float32(3.0))
     key = jax.random.PRNGKey(4)
-    got, metrics = lagrangian.update(state, batch, key, Parallel(4))
-    shaped = batch._replace(reward=batch.reward - 3.0 * termination)
+    got, _ = lagrangian.update(state, batch, key, Parallel(4))
+    shaped = batch._replace(reward=(batch.reward - 3.0 * _TERMINATION) * 0.5)
     want, _ = plain.update(plain.init(jax.random.PRNGKey(3)), shaped, key, Parallel(4))
+    assert _max_difference(got.params, want.params) < 1e-6
+
+
+def test_the_reference_update_differs_without_the_shaping():
+    """The comparison above is not vacuous: the same update on the unshaped, unscaled rewards moves elsewhere."""
+    plain = _ppo()
+    batch = _batch(plain, _TERMINATION, _TRUNCATION)
+    key = jax.random.PRNGKey(4)
     unshaped, _ = plain.update(plain.init(jax.random.PRNGKey(3)), batch, key, Parallel(4))
-    diff = lambda a, b: max(float(jnp.max(jnp.abs(x - y))) for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b)))
-    assert diff(got.params, want.params) < 1e-6
-    assert diff(unshaped.params, want.params) > 1e-4  # the shaping changes the update at all
-    assert float(metrics["lagrange/multiplier"]) == pytest.approx(3.0 + 10.0 * (2 / 4 - 0.05))
+    shaped, _ = plain.update(plain.init(jax.random.PRNGKey(3)),
+                             batch._replace(reward=(batch.reward - 3.0 * _TERMINATION) * 0.5), key, Parallel(4))
+    assert _max_difference(unshaped.params, shaped.params) > 1e-4
+
+
+def test_update_steps_the_multiplier_after_the_batch():
+    """2 failures among the 4 ended episodes: 3 + 10 x (0.5 - 0.05) = 7.5 in the new state."""
+    lagrangian = _ppo(failure_budget=0.05, multiplier_lr=10.0)
+    state = lagrangian.init(jax.random.PRNGKey(3)).replace(multiplier=jnp.float32(3.0))
+    new, _ = lagrangian.update(state, _batch(lagrangian, _TERMINATION, _TRUNCATION), jax.random.PRNGKey(4),
+                               Parallel(4))
+    assert float(new.multiplier) == pytest.approx(7.5)
+
+
+def test_dual_ascent_counts_the_episodes_of_every_device():
+    """Two devices (a vmapped axis with the mesh's name): one failure of 2 ended episodes on the first, none of 2 on
+    the second. Both take the global share 0.25 (0.5 + 10 x 0.2 = 2.5), not their own 0.5 and 0."""
+    ppo = _ppo(failure_budget=0.05, multiplier_lr=10.0)
+    termination = _flags([[[0, 1], [0, 0], [0, 0]], [[0, 0], [0, 0], [0, 0]]])
+    truncation = _flags([[[0, 0], [0, 0], [1, 0]], [[0, 0], [0, 0], [1, 1]]])
+    batches = [_batch(ppo, termination[d], truncation[d]) for d in range(2)]
+    stacked = jax.tree.map(lambda *x: jnp.stack(x), *batches)
+    par = Parallel(4, num_devices=2, axis_name="dev")
+    multiplier, _ = jax.vmap(lambda b: ppo.dual_ascent(jnp.float32(0.5), b, par), axis_name="dev")(stacked)
+    assert np.allclose(np.asarray(multiplier), 2.5)
 
 
 def test_a_state_without_a_budget_holds_no_multiplier():
