@@ -8,6 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from agents.checkpoint import Checkpointer
 from agents.config import TrainConfig, validate
 from agents.loop import Parallel, Transition
 from agents.ppo import PPO, PPOConfig
@@ -133,3 +134,13 @@ def test_a_budget_is_refused_where_reaching_terminates():
     config = TrainConfig(env_name="ur5e-reach-avoid", env=env, algo=PPOConfig(failure_budget=0.05))
     with pytest.raises(ValueError, match="algo.failure_budget=0.05 is invalid with env.success"):
         validate(config)
+
+
+def test_a_checkpoint_keeps_the_multiplier(tmp_path):
+    """What --resume continues from: the multiplier read back from an orbax checkpoint of the learner state."""
+    ppo = _ppo(failure_budget=0.05)
+    state = ppo.init(jax.random.PRNGKey(0)).replace(multiplier=jnp.float32(7.25))
+    checkpointer = Checkpointer(str(tmp_path))
+    checkpointer.save(1, state, {})
+    restored, _ = checkpointer.restore(1, ppo.init(jax.random.PRNGKey(1)))
+    assert float(restored.multiplier) == 7.25
