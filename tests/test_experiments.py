@@ -60,24 +60,25 @@ def test_every_run_has_a_budget_and_a_seed_count_its_experiment_explains():
 
 def test_the_registry_spells_the_plus_observations_as_the_presets_do():
     from agents.presets import make_config
-    from tools import experiment_registry as reg
+    from tools import registry_obstacles as obstacles
+    from tools import registry_paper_tasks as paper_tasks
 
-    assert make_config("ur5e-reach-ppo-plus").env.observation == reg._PLUS_OBS
-    assert make_config("ur5e-reach-avoid-ppo-plus").env.observation == reg._PLUS_AVOID_OBS
+    assert make_config("ur5e-reach-ppo-plus").env.observation == paper_tasks.PLUS_OBS
+    assert make_config("ur5e-reach-avoid-ppo-plus").env.observation == paper_tasks._PLUS_AVOID_OBS
     for env in ("ur5e-reach", "panda-reach"):
-        assert make_config(f"{env}-sac-fast").env.observation == reg._PLUS_OBS
+        assert make_config(f"{env}-sac-fast").env.observation == paper_tasks.PLUS_OBS
     for env in ("ur5e-reach-avoid", "panda-reach-avoid"):
-        assert make_config(f"{env}-sac-fast").env.observation == reg._PLUS_AVOID_OBS
-    assert make_config("panda-reach-avoid-ppo-moving3").env.observation == reg._MOVING3_OBS
-    assert make_config("ur5e-reach-avoid-ppo-moving3").env.observation == reg._MOVING3_PLUS_OBS
+        assert make_config(f"{env}-sac-fast").env.observation == paper_tasks._PLUS_AVOID_OBS
+    assert make_config("panda-reach-avoid-ppo-moving3").env.observation == obstacles._MOVING3_OBS
+    assert make_config("ur5e-reach-avoid-ppo-moving3").env.observation == obstacles._MOVING3_PLUS_OBS
 
 
 @pytest.mark.parametrize("field", ["num_obstacles", "obstacle_motion", "obstacle_radius_range", "obstacle_speed_range"])
 def test_the_registry_spells_the_moving_obstacles_as_the_presets_do(field):
     from agents.presets import make_config
-    from tools import experiment_registry as reg
+    from tools import registry_obstacles as obstacles
 
-    assert reg._MOVING3["env." + field] == getattr(make_config("ur5e-reach-avoid-ppo-moving3").env, field)
+    assert obstacles._MOVING3["env." + field] == getattr(make_config("ur5e-reach-avoid-ppo-moving3").env, field)
 
 
 def test_every_recorded_part_still_reads_as_its_registry_run():

@@ -1,7 +1,7 @@
 """What an experiment is: `Run` (a preset, field overrides, seeds and a budget), `Cross` (a cross-evaluation of
 a run's policies) and `Experiment` (runs, table columns, figure curves), the registry `EXPERIMENTS` and
 `register`, and the paper's numbers (`paper_table`, `paper_row`: assets/paper_numbers.json). The registered
-experiments are in `tools/experiment_registry.py`; `tools/experiments.py` trains, lists and tabulates them.
+experiments are gathered by `tools/experiment_registry.py`; `tools/experiments.py` trains, lists and tabulates them.
 
 Only the standard library at the top: the results index reads the registry without importing jax.
 """
