@@ -161,6 +161,9 @@ def validate(config: TrainConfig) -> None:
         raise ValueError(f"algo.failure_budget={config.algo.failure_budget!r} is invalid with "
                          "env.success='reach_and_terminate': the budget counts terminations as failures, and there "
                          "reaching terminates too; allowed is env.success='reach_and_stay' (or no budget).")
+    if getattr(config.algo, "multiplier_start", 0) >= config.num_timesteps:
+        raise ValueError(f"algo.multiplier_start={config.algo.multiplier_start} is invalid with num_timesteps="
+                         f"{config.num_timesteps}: the multiplier would never start; allowed is fewer env steps.")
     for name, low in (("num_timesteps", 1), ("seeds", 1), ("keep_checkpoints", 1), ("eval_last_steps", 1),
                       ("checkpoint_every", 0), ("log_every", 0), ("stop_after_steps", 0), ("eval_envs", 0)):
         if int(getattr(config, name)) < low:

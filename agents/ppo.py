@@ -101,6 +101,9 @@ class PPOConfig(networks.NetworkConfig):
     """Dual-ascent step of that multiplier after each update: it grows by multiplier_lr x (the batch's share of
     episodes ending in a failure - failure_budget), floored at 0. Per update, so its pace follows
     env_steps_per_update."""
+    multiplier_start: int = 0
+    """Env steps before that dual ascent begins: the multiplier stays 0 until then, so the agent learns to reach
+    before failures cost it more (a curriculum). Counted in whole updates of env_steps_per_update."""
 
     @property
     def env_steps_per_update(self) -> int:
@@ -138,6 +141,10 @@ class PPOConfig(networks.NetworkConfig):
         if self.failure_budget is not None:
             validation.in_range("algo.failure_budget", self.failure_budget, 0.0, 1.0)
         validation.positive("algo.multiplier_lr", self.multiplier_lr)
+        validation.integer("algo.multiplier_start", self.multiplier_start, 0)
+        if self.multiplier_start and self.failure_budget is None:
+            raise ValueError(f"algo.multiplier_start={self.multiplier_start} is invalid without algo.failure_budget: "
+                             "allowed is 0, or a budget beside it.")
 
 
 def _divisors_near(n: int, x: int) -> str:
@@ -436,15 +443,17 @@ class PPO:
         metrics = {**metrics, "optim/learning_rate": lr, "value/target_mean": par.pmean(jnp.mean(targets0))}
         multiplier = state.multiplier
         if multiplier is not None:
-            multiplier, failure_share = self.dual_ascent(multiplier, batch, par)
+            multiplier, failure_share = self.dual_ascent(multiplier, batch, par, state.updates)
             metrics = {**metrics, "lagrange/multiplier": multiplier, "lagrange/failure_share": failure_share}
         return PPOState(params, opt_state, obs_stats, value_stats, state.updates + 1, multiplier), metrics
 
-    def dual_ascent(self, multiplier, batch: Transition, par: Parallel):
-        """PPO-Lagrangian's multiplier step: (new multiplier, the share of the batch's ended episodes that failed).
-        A batch in which no episode ended leaves the multiplier as it is (its share reads 0)."""
+    def dual_ascent(self, multiplier, batch: Transition, par: Parallel, updates):
+        """PPO-Lagrangian's multiplier step after update number `updates` (from 0): (new multiplier, the share of
+        the batch's ended episodes that failed). A batch in which no episode ended, or one collected before
+        `multiplier_start` env steps, leaves the multiplier as it is."""
         c = self.config
         failures, ended = par.psum((jnp.sum(batch.termination), jnp.sum(batch.done)))
         share = failures / jnp.maximum(ended, 1.0)
-        step = jnp.where(ended > 0, c.multiplier_lr * (share - c.failure_budget), 0.0)
+        started = updates >= -(-c.multiplier_start // c.env_steps_per_update)  # whole updates, rounded up
+        step = jnp.where((ended > 0) & started, c.multiplier_lr * (share - c.failure_budget), 0.0)
         return jnp.maximum(multiplier + step, 0.0), share

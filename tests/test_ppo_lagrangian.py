@@ -46,7 +46,7 @@ def test_dual_ascent_grows_the_multiplier_by_the_excess_failure_share():
     ppo = _ppo(failure_budget=0.05, multiplier_lr=10.0)
     termination = _flags([[0, 1, 0, 0], [0, 0, 0, 0], [0, 0, 0, 0]])
     truncation = _flags([[0, 0, 0, 0], [0, 0, 0, 0], [1, 0, 1, 1]])
-    multiplier, share = ppo.dual_ascent(jnp.float32(0.5), _batch(ppo, termination, truncation), Parallel(4))
+    multiplier, share = ppo.dual_ascent(jnp.float32(0.5), _batch(ppo, termination, truncation), Parallel(4), 0)
     assert float(share) == pytest.approx(0.25)
     assert float(multiplier) == pytest.approx(2.5)
 
@@ -55,14 +55,35 @@ def test_dual_ascent_floors_the_multiplier_at_zero():
     """No failure among 2 ended episodes: 0.1 + 10 x (0 - 0.05) = -0.4, floored at 0."""
     ppo = _ppo(failure_budget=0.05, multiplier_lr=10.0)
     truncation = _flags([[0, 0, 0, 0], [0, 0, 0, 0], [1, 1, 0, 0]])
-    multiplier, _ = ppo.dual_ascent(jnp.float32(0.1), _batch(ppo, jnp.zeros((3, 4)), truncation), Parallel(4))
+    multiplier, _ = ppo.dual_ascent(jnp.float32(0.1), _batch(ppo, jnp.zeros((3, 4)), truncation), Parallel(4), 0)
     assert float(multiplier) == 0.0
 
 
 def test_dual_ascent_keeps_the_multiplier_when_no_episode_ended():
     ppo = _ppo(failure_budget=0.05, multiplier_lr=10.0)
-    multiplier, _ = ppo.dual_ascent(jnp.float32(0.7), _batch(ppo, jnp.zeros((3, 4)), jnp.zeros((3, 4))), Parallel(4))
+    multiplier, _ = ppo.dual_ascent(jnp.float32(0.7), _batch(ppo, jnp.zeros((3, 4)), jnp.zeros((3, 4))), Parallel(4), 0)
     assert float(multiplier) == pytest.approx(0.7)
+
+
+def _delayed(updates):
+    """The first test's batch after update number `updates`, with the ascent starting at 25 env steps: 12 steps an
+    update (batch_size 2 x num_minibatches 2 x unroll_length 3), so from update 3 (25 / 12 rounded up) on."""
+    ppo = _ppo(failure_budget=0.05, multiplier_lr=10.0, multiplier_start=25)
+    termination = _flags([[0, 1, 0, 0], [0, 0, 0, 0], [0, 0, 0, 0]])
+    truncation = _flags([[0, 0, 0, 0], [0, 0, 0, 0], [1, 0, 1, 1]])
+    return ppo.dual_ascent(jnp.float32(0.5), _batch(ppo, termination, truncation), Parallel(4), jnp.int32(updates))
+
+
+def test_dual_ascent_holds_the_multiplier_before_multiplier_start():
+    assert float(_delayed(2)[0]) == pytest.approx(0.5)
+
+
+def test_dual_ascent_reports_the_share_before_multiplier_start():
+    assert float(_delayed(2)[1]) == pytest.approx(0.25)
+
+
+def test_dual_ascent_steps_from_the_update_that_reaches_multiplier_start():
+    assert float(_delayed(3)[0]) == pytest.approx(2.5)
 
 
 _TERMINATION = _flags([[0, 1, 0, 0], [0, 0, 0, 1], [0, 0, 0, 0]])
@@ -106,6 +127,23 @@ def test_update_steps_the_multiplier_after_the_batch():
     assert float(new.multiplier) == pytest.approx(7.5)
 
 
+def _delayed_update(updates):
+    """The batch above after update number `updates`, the ascent starting at 12 env steps (update 1)."""
+    lagrangian = _ppo(failure_budget=0.05, multiplier_lr=10.0, multiplier_start=12)
+    state = lagrangian.init(jax.random.PRNGKey(3)).replace(multiplier=jnp.float32(3.0), updates=jnp.int32(updates))
+    new, _ = lagrangian.update(state, _batch(lagrangian, _TERMINATION, _TRUNCATION), jax.random.PRNGKey(4),
+                               Parallel(4))
+    return float(new.multiplier)
+
+
+def test_update_holds_the_multiplier_before_multiplier_start():
+    assert _delayed_update(0) == pytest.approx(3.0)
+
+
+def test_update_steps_the_multiplier_from_multiplier_start():
+    assert _delayed_update(1) == pytest.approx(7.5)
+
+
 def test_dual_ascent_counts_the_episodes_of_every_device():
     """Two devices (a vmapped axis with the mesh's name): one failure of 2 ended episodes on the first, none of 2 on
     the second. Both take the global share 0.25 (0.5 + 10 x 0.2 = 2.5), not their own 0.5 and 0."""
@@ -115,7 +153,7 @@ def test_dual_ascent_counts_the_episodes_of_every_device():
     batches = [_batch(ppo, termination[d], truncation[d]) for d in range(2)]
     stacked = jax.tree.map(lambda *x: jnp.stack(x), *batches)
     par = Parallel(4, num_devices=2, axis_name="dev")
-    multiplier, _ = jax.vmap(lambda b: ppo.dual_ascent(jnp.float32(0.5), b, par), axis_name="dev")(stacked)
+    multiplier, _ = jax.vmap(lambda b: ppo.dual_ascent(jnp.float32(0.5), b, par, 0), axis_name="dev")(stacked)
     assert np.allclose(np.asarray(multiplier), 2.5)
 
 
@@ -123,10 +161,23 @@ def test_a_state_without_a_budget_holds_no_multiplier():
     assert _ppo().init(jax.random.PRNGKey(0)).multiplier is None
 
 
-@pytest.mark.parametrize("field, value", [("failure_budget", 1.5), ("failure_budget", -0.1), ("multiplier_lr", 0.0)])
+@pytest.mark.parametrize("field, value", [("failure_budget", 1.5), ("failure_budget", -0.1), ("multiplier_lr", 0.0),
+                                          ("multiplier_start", -1), ("multiplier_start", 2.5)])
 def test_impossible_lagrangian_settings_are_refused_naming_the_field(field, value):
     with pytest.raises(ValueError, match=f"algo.{field}"):
-        PPOConfig(**{field: value}).validate()
+        PPOConfig(**{"failure_budget": 0.05, field: value}).validate()
+
+
+def test_a_multiplier_start_without_a_budget_is_refused():
+    with pytest.raises(ValueError, match="algo.multiplier_start=100 is invalid without algo.failure_budget"):
+        PPOConfig(multiplier_start=100).validate()
+
+
+def test_a_multiplier_start_past_the_run_is_refused():
+    config = TrainConfig(env_name="point-mass", env=envs.default_config("point-mass"), num_timesteps=1000,
+                         algo=PPOConfig(failure_budget=0.05, multiplier_start=1000))
+    with pytest.raises(ValueError, match="algo.multiplier_start=1000 is invalid with num_timesteps=1000"):
+        validate(config)
 
 
 def test_a_budget_is_refused_where_reaching_terminates():
