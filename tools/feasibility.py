@@ -151,7 +151,7 @@ def main(argv: list[str] | None = None) -> dict:
     env = arm_env(args.env, options)
     made = provenance.stamp(provenance.command(None if argv is None else [__file__] + list(argv)))
     result = feasibility(env, args.episodes, args.seed, search)
-    print(f"{args.env} {options or ''}: {result['feasible']:.2%} of {args.episodes} episodes feasible "
+    print(f"{args.env}{' ' + str(options) if options else ''}: {result['feasible']:.2%} of {args.episodes} episodes feasible "
           f"(target configuration clear in {result['target_pose_clear']:.2%}, {result['found_by_search']} more "
           f"found by the search; {len(result['infeasible_episodes'])} infeasible)")
     if args.json:
