@@ -146,6 +146,20 @@ def total_updates(config: TrainConfig) -> int:
     return math.ceil(config.num_timesteps / env_steps_per_update(config))
 
 
+def _check_multiplier_start(config: TrainConfig) -> None:
+    """A delayed PPO-Lagrangian multiplier must act on some update: its first step follows the first update that
+    begins at or after `multiplier_start`, and only the updates after that step see it."""
+    start = getattr(config.algo, "multiplier_start", 0)
+    if not start:
+        return
+    per_update = env_steps_per_update(config)
+    latest = max(total_updates(config) - 2, 0) * per_update
+    if start > latest:
+        raise ValueError(f"algo.multiplier_start={start} is invalid with num_timesteps={config.num_timesteps}: the "
+                         f"multiplier would act on no update; allowed is at most {latest} (whole updates of "
+                         f"{per_update} env steps, two before the run's end).")
+
+
 def validate(config: TrainConfig) -> None:
     """Raises a ValueError naming the field, the value and what is allowed; compiles nothing."""
     registry.of_config(config.algo)
@@ -161,13 +175,11 @@ def validate(config: TrainConfig) -> None:
         raise ValueError(f"algo.failure_budget={config.algo.failure_budget!r} is invalid with "
                          "env.success='reach_and_terminate': the budget counts terminations as failures, and there "
                          "reaching terminates too; allowed is env.success='reach_and_stay' (or no budget).")
-    if getattr(config.algo, "multiplier_start", 0) >= config.num_timesteps:
-        raise ValueError(f"algo.multiplier_start={config.algo.multiplier_start} is invalid with num_timesteps="
-                         f"{config.num_timesteps}: the multiplier would never start; allowed is fewer env steps.")
     for name, low in (("num_timesteps", 1), ("seeds", 1), ("keep_checkpoints", 1), ("eval_last_steps", 1),
                       ("checkpoint_every", 0), ("log_every", 0), ("stop_after_steps", 0), ("eval_envs", 0)):
         if int(getattr(config, name)) < low:
             raise ValueError(f"{name}={getattr(config, name)!r} is invalid: allowed is an integer >= {low}.")
+    _check_multiplier_start(config)
     for name in ("seeds", "keep_checkpoints", "eval_last_steps", "eval_envs"):  # array sizes and counts in JAX
         integer(name, int(getattr(config, name)), 0)
     for name in ("seed", "eval_seed"):  # PRNG seeds, int32 inside JAX

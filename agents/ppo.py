@@ -102,8 +102,8 @@ class PPOConfig(networks.NetworkConfig):
     episodes ending in a failure - failure_budget), floored at 0. Per update, so its pace follows
     env_steps_per_update."""
     multiplier_start: int = 0
-    """Env steps before that dual ascent begins: the multiplier stays 0 until then, so the agent learns to reach
-    before failures cost it more (a curriculum). Counted in whole updates of env_steps_per_update."""
+    """Env steps before that dual ascent begins: updates that begin earlier leave the multiplier at 0, so the agent
+    learns to reach before failures cost it more (a curriculum). Counted in whole updates of env_steps_per_update."""
 
     @property
     def env_steps_per_update(self) -> int:
@@ -141,7 +141,7 @@ class PPOConfig(networks.NetworkConfig):
         if self.failure_budget is not None:
             validation.in_range("algo.failure_budget", self.failure_budget, 0.0, 1.0)
         validation.positive("algo.multiplier_lr", self.multiplier_lr)
-        validation.integer("algo.multiplier_start", self.multiplier_start, 0)
+        validation.integer("algo.multiplier_start", self.multiplier_start, 0, 10 ** 15)  # env steps, never in JAX
         if self.multiplier_start and self.failure_budget is None:
             raise ValueError(f"algo.multiplier_start={self.multiplier_start} is invalid without algo.failure_budget: "
                              "allowed is 0, or a budget beside it.")
@@ -449,7 +449,7 @@ class PPO:
 
     def dual_ascent(self, multiplier, batch: Transition, par: Parallel, updates):
         """PPO-Lagrangian's multiplier step after update number `updates` (from 0): (new multiplier, the share of
-        the batch's ended episodes that failed). A batch in which no episode ended, or one collected before
+        the batch's ended episodes that failed). A batch in which no episode ended, or one begun before
         `multiplier_start` env steps, leaves the multiplier as it is."""
         c = self.config
         failures, ended = par.psum((jnp.sum(batch.termination), jnp.sum(batch.done)))

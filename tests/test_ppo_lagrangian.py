@@ -12,6 +12,7 @@ from agents.checkpoint import Checkpointer
 from agents.config import TrainConfig, validate
 from agents.loop import Parallel, Transition
 from agents.ppo import PPO, PPOConfig
+from agents.sac import SACConfig
 import envs
 
 _SMALL = dict(num_envs=4, batch_size=2, num_minibatches=2, unroll_length=3, updates_per_batch=2,
@@ -173,10 +174,27 @@ def test_a_multiplier_start_without_a_budget_is_refused():
         PPOConfig(multiplier_start=100).validate()
 
 
-def test_a_multiplier_start_past_the_run_is_refused():
-    config = TrainConfig(env_name="point-mass", env=envs.default_config("point-mass"), num_timesteps=1000,
-                         algo=PPOConfig(failure_budget=0.05, multiplier_start=1000))
-    with pytest.raises(ValueError, match="algo.multiplier_start=1000 is invalid with num_timesteps=1000"):
+def _point_mass(multiplier_start, num_timesteps=36):
+    """3 updates of 12 env steps: the ascent may begin at update 1 at the latest (12 env steps), so that update 2
+    sees the multiplier."""
+    algo = PPOConfig(**_SMALL, failure_budget=0.05, multiplier_start=multiplier_start)
+    return TrainConfig(env_name="point-mass", env=envs.default_config("point-mass"), num_timesteps=num_timesteps,
+                       algo=algo)
+
+
+def test_a_multiplier_start_that_acts_on_no_update_is_refused():
+    with pytest.raises(ValueError, match="algo.multiplier_start=13 is invalid with num_timesteps=36: .* at most 12"):
+        validate(_point_mass(13))
+
+
+def test_the_latest_multiplier_start_that_acts_is_accepted():
+    validate(_point_mass(12))  # raises if refused
+
+
+@pytest.mark.parametrize("algo", [PPOConfig(**_SMALL), SACConfig()])
+def test_a_run_without_steps_is_refused_naming_num_timesteps(algo):
+    config = TrainConfig(env_name="point-mass", env=envs.default_config("point-mass"), num_timesteps=0, algo=algo)
+    with pytest.raises(ValueError, match="^num_timesteps=0 is invalid"):
         validate(config)
 
 
