@@ -4,7 +4,6 @@ import json
 
 import jax
 import jax.numpy as jnp
-import numpy as np
 import pytest
 
 from tools import feasibility as fz
@@ -66,44 +65,41 @@ def test_the_target_configuration_reaches_its_target(ur5e, info):
     assert float(fz.pose_check(ur5e, info, info["target_qpos"])[0]) < 1e-5
 
 
-def test_the_report_counts_the_infeasible_episodes(tmp_path):
-    path = tmp_path / "feasibility.json"
-    fz.main(["ur5e-reach-avoid", "--episodes", "16", "--restarts", "4", "--iterations", "50",
-             "--json", str(path)])
-    report = json.loads(path.read_text())
-    assert report["feasible"] == pytest.approx(1 - len(report["infeasible_episodes"]) / 16)
-
-
 def test_the_report_names_its_command(tmp_path):
     path = tmp_path / "feasibility.json"
     fz.main(["ur5e-reach-avoid", "--episodes", "4", "--restarts", "2", "--iterations", "10", "--json", str(path)])
     assert "tools.feasibility" in json.loads(path.read_text())["command"]
 
 
-def test_searched_episodes_are_those_whose_target_configuration_collides(ur5e):
-    """With a 0.3 m obstacle many target configurations collide; the search adds no more episodes than those."""
-    result = fz.feasibility(ur5e, 32, seed=0, search=fz.SearchConfig(restarts=2, iterations=10))
-    blocked = int(round((1 - result["target_pose_clear"]) * 32))
-    assert result["found_by_search"] <= blocked
+@pytest.fixture(scope="module")
+def four(ur5e):
+    """The report on four episodes among 0.3 m obstacles: all far away but in the third, which swallows the target;
+    in the fourth the target is moved out of reach."""
+    infos = fz.reset_infos(ur5e, 4, seed=0)
+    far_obstacles = infos["obstacle_pos"].at[:].set(_FAR)
+    infos = {**infos, "obstacle_pos": far_obstacles.at[2].set(infos["target_pos"][2])}
+    infos = {**infos, "target_pos": infos["target_pos"].at[3].set(_FAR / 2)}
+    return fz.feasibility(ur5e, infos, seed=0, search=fz.SearchConfig(restarts=4, iterations=50))
+
+
+def test_the_report_names_the_infeasible_episodes(four):
+    assert four["infeasible_episodes"] == [2, 3]
+
+
+def test_the_target_configuration_is_clear_in_half_of_them(four):
+    """Episodes 0 and 1 (obstacles far away, targets set by their own poses); not 2 (swallowed) nor 3 (moved)."""
+    assert four["target_pose_clear"] == 0.5
 
 
 def _found(env, clearance_step):
     search = fz.SearchConfig(restarts=2, iterations=100, clearance_step=clearance_step)
-    return fz.feasibility(env, 64, seed=0, search=search)["found_by_search"]
+    return fz.feasibility(env, fz.reset_infos(env, 64, seed=0), seed=1, search=search)["found_by_search"]
 
 
 def test_the_null_space_step_finds_poses_that_plain_least_squares_misses(ur5e):
     """64 episodes among 0.3 m obstacles, two starts each: pushing away from the nearest collision finds a clear
-    pose in more of the blocked episodes (5 against 3 when measured)."""
+    pose in more of the blocked episodes (4 against 2 when measured)."""
     assert _found(ur5e, 0.5) > _found(ur5e, 1e-9)
-
-
-def test_the_clearances_are_the_target_configurations(ur5e):
-    result = fz.feasibility(ur5e, 4, seed=0, search=fz.SearchConfig(restarts=2, iterations=10))
-    infos = jax.vmap(lambda k: ur5e.reset(k).info)(jax.random.split(jax.random.PRNGKey(0), 4))
-    expected = [float(fz.pose_check(ur5e, jax.tree.map(lambda x: x[i], infos), infos["target_qpos"][i])[1])
-                for i in range(4)]
-    assert np.allclose(result["target_pose_clearance"], expected, atol=1e-6)
 
 
 @pytest.mark.parametrize("field, value", [("restarts", 0), ("iterations", 1.5), ("damping", 0.0),

@@ -5,13 +5,15 @@
     python -m tools.feasibility ur5e-reach-avoid --option obstacle_radius=0.15
 
 An episode is feasible when some joint configuration within the joint ranges puts the end effector in the target
-(closer than `target_radius`) free of self and obstacle collisions (negative signed distance), by the env's own
-kinematics and collision distances. The configuration that defined the target (a random pose free of self
+(closer than `target_radius`) with no collision (no negative signed distance, as the env counts one), by the env's
+own kinematics and collision distances. The configuration that defined the target (a random pose free of self
 collisions) is tried first; where an obstacle touches it, damped least-squares inverse kinematics from random
-joint configurations searches for another, stepping in the task's null space away from the nearest collision.
-Whether a collision-free path leads there from the start pose is not checked, so the feasible share bounds any
-agent's reached rate from above; it estimates nothing below that. Static obstacles only: with moving ones the
-answer depends on when the target is reached.
+joint configurations searches for another, stepping (approximately) in the null space of the end effector's
+Jacobian away from the nearest collision. The search can miss a pose, so the share it finds is a lower estimate of
+the feasible share; the feasible share itself bounds any agent's reached rate from above, since whether a
+collision-free path leads there from the start pose is not checked. A found share well above an aim shows that the
+aim is not beyond the task's goals. Static obstacles only: with moving ones the answer depends on when the target
+is reached.
 """
 
 from __future__ import annotations
@@ -105,23 +107,30 @@ def search_episode(env, info, key, search: SearchConfig):
                                 maxval=jnp.asarray(robot.joint_high))
     ends = jax.vmap(lambda q: solve(env, info, q, search))(starts)
     distance, clearance = jax.vmap(lambda q: pose_check(env, info, q))(ends)
-    ok = (distance < env.config.target_radius) & (clearance > 0)
-    return jnp.any(ok), jnp.min(jnp.where(clearance > 0, distance, jnp.inf))
+    ok = (distance < env.config.target_radius) & (clearance >= 0)
+    return jnp.any(ok), jnp.min(jnp.where(clearance >= 0, distance, jnp.inf))
 
 
-def feasibility(env, episodes: int, seed: int, search: SearchConfig = SearchConfig()) -> dict:
-    """The episodes of `env.reset` under keys split from `seed`: for each, whether its target configuration is
-    free of collisions (`target_pose_clear`) and whether it or a searched configuration is (`feasible`)."""
+def reset_infos(env, episodes: int, seed: int) -> dict:
+    """The `info` of `episodes` resets of `env` under keys split from `seed`, stacked."""
     keys = jax.random.split(jax.random.PRNGKey(seed), episodes)
-    infos = jax.jit(jax.vmap(lambda k: env.reset(k).info))(keys)
+    return jax.jit(jax.vmap(lambda k: env.reset(k).info))(keys)
+
+
+def feasibility(env, infos: dict, seed: int, search: SearchConfig = SearchConfig()) -> dict:
+    """For each episode of the stacked `infos`: whether its target configuration is free of collisions
+    (`target_pose_clear`, a share) and whether it or a configuration the search finds (from keys split from
+    `seed`) is (`feasible`, a share; `infeasible_episodes`, the indices of the others)."""
+    episodes = len(infos["target_pos"])
     distance, clearance = jax.jit(jax.vmap(lambda info: pose_check(env, info, info["target_qpos"])))(infos)
-    clear = np.asarray((distance < env.config.target_radius) & (clearance > 0))
+    clear = np.asarray((distance < env.config.target_radius) & (clearance >= 0))
     blocked = np.flatnonzero(~clear)
     found = np.zeros(episodes, bool)
     if blocked.size:
         picked = jax.tree.map(lambda x: x[blocked], infos)
-        search_keys = jax.random.split(jax.random.fold_in(jax.random.PRNGKey(seed), 1), episodes)[blocked]
-        found[blocked], _ = jax.jit(jax.vmap(lambda i, k: search_episode(env, i, k, search)))(picked, search_keys)
+        search_keys = jax.random.split(jax.random.PRNGKey(seed), episodes)[blocked]
+        ok, _ = jax.jit(jax.vmap(lambda i, k: search_episode(env, i, k, search)))(picked, search_keys)
+        found[blocked] = np.asarray(ok)
     feasible = clear | found
     return {"episodes": episodes, "target_pose_clear": float(clear.mean()), "found_by_search": int(found.sum()),
             "feasible": float(feasible.mean()), "infeasible_episodes": np.flatnonzero(~feasible).tolist(),
@@ -134,7 +143,7 @@ def main(argv: list[str] | None = None) -> dict:
     p.add_argument("--option", action="append", default=[], metavar="FIELD=VALUE",
                    help="an env config field, repeatable (e.g. obstacle_radius=0.15, workspace=front)")
     p.add_argument("--episodes", type=int, default=4096)
-    p.add_argument("--seed", type=int, default=7, help="seed of the episodes' resets (default 7)")
+    p.add_argument("--seed", type=int, default=7, help="seed of the episodes' resets (default 7); the search's starts take seed + 1")
     p.add_argument("--restarts", type=int, default=SearchConfig.restarts)
     p.add_argument("--iterations", type=int, default=SearchConfig.iterations)
     p.add_argument("--json", metavar="PATH", help="write the summary with its provenance")
@@ -150,7 +159,7 @@ def main(argv: list[str] | None = None) -> dict:
     search = SearchConfig(restarts=args.restarts, iterations=args.iterations)
     env = arm_env(args.env, options)
     made = provenance.stamp(provenance.command(None if argv is None else [__file__] + list(argv)))
-    result = feasibility(env, args.episodes, args.seed, search)
+    result = feasibility(env, reset_infos(env, args.episodes, args.seed), args.seed + 1, search)
     print(f"{args.env}{' ' + str(options) if options else ''}: {result['feasible']:.2%} of {args.episodes} episodes feasible "
           f"(target configuration clear in {result['target_pose_clear']:.2%}, {result['found_by_search']} more "
           f"found by the search; {len(result['infeasible_episodes'])} infeasible)")
