@@ -1,6 +1,6 @@
 """Experiments as code: each of the paper's tables and figures (and our own studies) is a named `Experiment`
-(`tools/experiment_registry.py`): its training runs (`Run`: preset, overrides, seeds, budget), cross-evaluations
-and the table and figure built from them.
+(registered in `tools/registry_paper_tasks.py` and `tools/registry_obstacles.py`): its training runs (`Run`:
+preset, overrides, seeds, budget), cross-evaluations and the table and figure built from them.
 
     python -m tools.experiments list                                 # every experiment: done, partly trained, missing
     python -m tools.experiments launch reward                        # one Slurm job per part still to train

@@ -305,7 +305,7 @@ register(Experiment(
          "collisions from 3.5 to 0.3 % and the moving-obstacle rows (obstacles-dodge-clear) still rose past 2x the "
          "presets' budgets; the weak joint-limit penalty added 2.2 points to a moving-obstacle row of "
          "obstacles-dodge (one seed). Screened on "
-         "one seed a row first. ur5e-plus-dense-cp10 joins the two best UR5e levers so far: the -plus settings "
+         "one seed a row first. ur5e-plus-dense-cp10 joins the two best UR5e levers before it: the -plus settings "
          "(88.5 %, 5 seeds at 160M) and reach-avoid-reward's dense reward with a collision penalty of 10 (89.6 %, 3 "
          "seeds at 192M, with the paper's observation and a joint-limit penalty of 1.0, and 3.5 % self and 4.7 % "
          "obstacle collisions); it trains 192M steps."))
