@@ -28,6 +28,7 @@ import numpy as np
 
 import envs
 from agents import provenance
+from envs import validation
 from tools import literal_or_text, run_cli
 
 
@@ -49,13 +50,9 @@ class SearchConfig:
 
     def __post_init__(self):
         for name in ("restarts", "iterations"):
-            value = getattr(self, name)
-            if not isinstance(value, int) or isinstance(value, bool) or value < 1:
-                raise ValueError(f"{name}={value!r} is invalid: allowed is an integer >= 1.")
+            validation.integer(name, getattr(self, name), 1)
         for name in ("damping", "clearance_step", "margin"):
-            value = getattr(self, name)
-            if not isinstance(value, (int, float)) or isinstance(value, bool) or not value > 0:
-                raise ValueError(f"{name}={value!r} is invalid: allowed is a number > 0.")
+            validation.positive(name, getattr(self, name))
 
 
 def arm_env(name: str, options: dict | None = None):
