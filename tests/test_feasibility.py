@@ -32,7 +32,7 @@ def test_the_search_reaches_a_target_set_by_a_known_pose(ur5e, info):
     target = ur5e.robot.kinematics(pose).ee_pos
     free = _with(info, target_pos=target, obstacle_pos=_FAR)
     assert float(fz.pose_check(ur5e, free, pose)[1]) > 0.0  # the pose itself is collision-free
-    found, _ = fz.search_episode(ur5e, free, jax.random.PRNGKey(0), fz.SearchConfig(restarts=8))
+    found = fz.search_episode(ur5e, free, jax.random.PRNGKey(0), fz.SearchConfig(restarts=8))
     assert bool(found)
 
 
@@ -51,7 +51,7 @@ def test_no_pose_is_clear_inside_an_obstacle_that_swallows_the_target(ur5e, info
     """A sphere of radius 0.3 m centred on the target: an end effector within 2 cm of its centre has its last
     link inside it, so no configuration counts."""
     swallowed = _with(info, obstacle_pos=info["target_pos"])
-    found, _ = fz.search_episode(ur5e, swallowed, jax.random.PRNGKey(0), fz.SearchConfig(restarts=8))
+    found = fz.search_episode(ur5e, swallowed, jax.random.PRNGKey(0), fz.SearchConfig(restarts=8))
     assert not bool(found)
 
 

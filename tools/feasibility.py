@@ -76,6 +76,12 @@ def pose_check(env, info, qpos):
             jnp.min(env.collision_distances(kin.geom_xpos, kin.geom_xmat, info)))
 
 
+def in_target_and_clear(env, distance, clearance):
+    """Whether a pose at these (target distance, collision distance) counts: in the target, no collision (the env
+    counts a negative distance as one)."""
+    return (distance < env.config.target_radius) & (clearance >= 0)
+
+
 def solve(env, info, qpos, search: SearchConfig):
     """`qpos` moved by damped least-squares inverse kinematics towards the target, pushed in the null space of the
     end effector's Jacobian away from the nearest collision while it is closer than `search.margin`."""
@@ -86,9 +92,9 @@ def solve(env, info, qpos, search: SearchConfig):
     eye3, eye = jnp.eye(3), jnp.eye(robot.nq)
 
     def step(q, _):
-        jac = jax.jacfwd(ee)(q)
+        jac, position = jax.jacfwd(lambda x: (ee(x),) * 2, has_aux=True)(q)  # one pass for both
         pinv = jac.T @ jnp.linalg.inv(jac @ jac.T + search.damping ** 2 * eye3)
-        task = pinv @ (info["target_pos"] - ee(q))
+        task = pinv @ (info["target_pos"] - position)
         clearance, grad = jax.value_and_grad(nearest)(q)
         away = jnp.where(clearance < search.margin, search.clearance_step, 0.0) * (eye - pinv @ jac) @ grad
         return jnp.clip(q + task + away, low, high), None
@@ -97,15 +103,13 @@ def solve(env, info, qpos, search: SearchConfig):
 
 
 def search_episode(env, info, key, search: SearchConfig):
-    """Whether any restart of `solve` ends in the target free of collisions, and the best such end's distance
-    from the target (inf when none is clear)."""
+    """Whether any restart of `solve` ends in the target free of collisions."""
     robot = env.robot
     starts = jax.random.uniform(key, (search.restarts, robot.nq), minval=jnp.asarray(robot.joint_low),
                                 maxval=jnp.asarray(robot.joint_high))
     ends = jax.vmap(lambda q: solve(env, info, q, search))(starts)
     distance, clearance = jax.vmap(lambda q: pose_check(env, info, q))(ends)
-    ok = (distance < env.config.target_radius) & (clearance >= 0)
-    return jnp.any(ok), jnp.min(jnp.where(clearance >= 0, distance, jnp.inf))
+    return jnp.any(in_target_and_clear(env, distance, clearance))
 
 
 def reset_infos(env, episodes: int, seed: int) -> dict:
@@ -120,14 +124,14 @@ def feasibility(env, infos: dict, seed: int, search: SearchConfig = SearchConfig
     `seed`) is (`feasible`, a share; `infeasible_episodes`, the indices of the others)."""
     episodes = len(infos["target_pos"])
     distance, clearance = jax.jit(jax.vmap(lambda info: pose_check(env, info, info["target_qpos"])))(infos)
-    clear = np.asarray((distance < env.config.target_radius) & (clearance >= 0))
+    clear = np.asarray(in_target_and_clear(env, distance, clearance))
     blocked = np.flatnonzero(~clear)
     found = np.zeros(episodes, bool)
     if blocked.size:
         picked = jax.tree.map(lambda x: x[blocked], infos)
         search_keys = jax.random.split(jax.random.PRNGKey(seed), episodes)[blocked]
-        ok, _ = jax.jit(jax.vmap(lambda i, k: search_episode(env, i, k, search)))(picked, search_keys)
-        found[blocked] = np.asarray(ok)
+        search_each = jax.jit(jax.vmap(lambda i, k: search_episode(env, i, k, search)))
+        found[blocked] = np.asarray(search_each(picked, search_keys))
     feasible = clear | found
     return {"episodes": episodes, "target_pose_clear": float(clear.mean()), "found_by_search": int(found.sum()),
             "feasible": float(feasible.mean()), "infeasible_episodes": np.flatnonzero(~feasible).tolist(),
