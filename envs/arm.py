@@ -416,6 +416,7 @@ class ArmEnv(Env):
             "prev_action": lambda: info["prev_action"],
             "joint_sin_cos": lambda: jnp.concatenate([jnp.sin(data.qpos), jnp.cos(data.qpos)]),
             "self_dist": lambda: self.robot.self_distances(data.geom_xpos, data.geom_xmat),
+            "link_pos": lambda: self.robot.link_positions(xpos),  # [nlinks, 3], link-major once ravelled
         }
 
     def observation(self, data, xpos, ee, info) -> jax.Array:

@@ -25,13 +25,13 @@ INIT_RANGES = ("full", "limited")
 LINK_DISTANCES = ("origin", "surface")
 REACH_OBSERVATIONS = (
     "joint_pos", "joint_vel", "joint_acc", "ee_pos", "ee_vel", "target_pos", "ee_to_target", "prev_action",
-    "joint_sin_cos", "self_dist",
+    "joint_sin_cos", "self_dist", "link_pos",
 )
 BACKENDS = ("auto", "mjx", "mujoco")
 JOINT_NOISE_MODELS = ("angles", "encoders")
 # Observation parts computed from the joint angles: with joint_noise_model="encoders" they come from the noisy ones.
-KINEMATIC_OBSERVATIONS = ("ee_pos", "ee_to_target", "self_dist", "link_obstacle_dist", "link_obstacle_ahead",
-                          "link_obstacle_ahead_moving")
+KINEMATIC_OBSERVATIONS = ("ee_pos", "ee_to_target", "self_dist", "link_pos", "link_obstacle_dist",
+                          "link_obstacle_ahead", "link_obstacle_ahead_moving")
 MAX_LOOKAHEADS = 8
 """Most horizons of the link_obstacle_ahead(_moving) observations (each adds one number per link)."""
 OBSTACLE_OBSERVATIONS = ("obstacle_pos", "obstacle_size", "link_obstacle_dist", "obstacle_radius", "obstacle_vel",
@@ -69,11 +69,13 @@ class ReachConfig:
     a zero action holds the commanded pose exactly (not in the paper; results/fidelity)."""
     observation: tuple[str, ...] = ("joint_pos", "ee_pos", "target_pos", "ee_to_target")
     """Observation parts, concatenated in this order. Reach: joint_pos, joint_vel, joint_acc,
-    ee_pos, ee_vel, target_pos, ee_to_target, prev_action, and two not in the paper: joint_sin_cos
+    ee_pos, ee_vel, target_pos, ee_to_target, prev_action, and three not in the paper: joint_sin_cos
     (sin and cos of each joint angle: one value per physical pose, where a UR5e joint's 720 degree
-    range gives each pose up to two angles) and self_dist (signed distance of each self-collision
-    pair, < 0 in collision); reach-avoid adds obstacle_pos, obstacle_size, link_obstacle_dist and, beyond
-    the paper, obstacle_radius and obstacle_vel (see ReachAvoidConfig)."""
+    range gives each pose up to two angles), self_dist (signed distance of each self-collision
+    pair, < 0 in collision) and link_pos (the world position of each link frame origin that eq. 3's
+    d_i measures from, 3 per link: where the links are, without learning the arm's kinematics);
+    reach-avoid adds obstacle_pos, obstacle_size, link_obstacle_dist and, beyond the paper,
+    obstacle_radius and obstacle_vel (see ReachAvoidConfig)."""
     reward: Literal["sparse", "semi_sparse", "dense"] = "dense"
     """Reward formulation: sparse (+1 in target), semi_sparse (paper eq. 1), dense (paper eq. 2)."""
     w_reach: float = 1.0
@@ -137,9 +139,9 @@ class ReachConfig:
     episode's reset key and the step count, so the same key gives the same noise."""
     joint_noise_model: Literal["angles", "encoders"] = "angles"
     """Which observation parts the joint noise reaches: `angles`, only joint_pos and joint_sin_cos; `encoders`,
-    also every part a real arm computes from its encoder readings (ee_pos, ee_to_target, self_dist and, with
-    obstacles, link_obstacle_dist, link_obstacle_ahead and link_obstacle_ahead_moving: the forward kinematics of the
-    noisy angles). ee_vel is refused with
+    also every part a real arm computes from its encoder readings (ee_pos, ee_to_target, self_dist, link_pos and,
+    with obstacles, link_obstacle_dist, link_obstacle_ahead and link_obstacle_ahead_moving: the forward kinematics of
+    the noisy angles). ee_vel is refused with
     `encoders` (it would need the previous step's noisy pose). Physics, reward and collisions stay exact."""
     action_latency: int = 0
     """0: a step applies its own action; 1: it applies the action of the step before (prev_action, so

@@ -554,15 +554,15 @@ def test_noise_is_seeded_fresh_each_step_and_only_in_the_observation(sensing):
     assert not np.allclose(step_obstacle, obstacle)  # fresh every step
 
 
-ENCODER_PARTS = ("joint_pos", "ee_pos", "target_pos", "ee_to_target", "self_dist", "obstacle_pos", "link_obstacle_dist",
-                 "link_obstacle_ahead")
+ENCODER_PARTS = ("joint_pos", "ee_pos", "target_pos", "ee_to_target", "self_dist", "link_pos", "obstacle_pos",
+                 "link_obstacle_dist", "link_obstacle_ahead")
 
 
 def test_encoder_noise_reaches_every_part_computed_from_the_joints():
-    """joint_noise_model="encoders": ee_pos, ee_to_target, self_dist, link_obstacle_dist and _ahead are those of the noisy
-    angles that joint_pos reports, by CPU MuJoCo's kinematics at those angles; the state keeps the true pose. With
-    "angles" (the default) the same key gives the same noisy angles and the true end effector. Reset only: it
-    compiles no physics."""
+    """joint_noise_model="encoders": ee_pos, ee_to_target, self_dist, link_pos, link_obstacle_dist and _ahead are those
+    of the noisy angles that joint_pos reports, by CPU MuJoCo's kinematics at those angles; the state keeps the true
+    pose. With "angles" (the default) the same key gives the same noisy angles and the true end effector. Reset only:
+    it compiles no physics."""
     options = dict(joint_noise_std=0.05, observation=ENCODER_PARTS, substeps=2)
     keys = jax.random.split(jax.random.PRNGKey(11), N)
     encoders = envs.make("ur5e-reach-avoid", joint_noise_model="encoders", **options)
@@ -590,6 +590,7 @@ def test_encoder_noise_reaches_every_part_computed_from_the_joints():
         data.qpos[:] = q
         mujoco.mj_kinematics(model, data)
         links = data.xpos[robot.link_bodies]
+        np.testing.assert_allclose(parts["link_pos"][i].reshape(-1, 3), links, atol=2e-5)
         d = np.linalg.norm(links - parts["obstacle_pos"][i], axis=-1) - radius  # the paper's d_i, from link origins
         np.testing.assert_allclose(parts["link_obstacle_dist"][i], d, atol=2e-5)
         np.testing.assert_allclose(parts["link_obstacle_ahead"][i], np.tile(d, 2), atol=2e-5)  # static obstacle
