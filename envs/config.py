@@ -72,8 +72,9 @@ class ReachConfig:
     ee_pos, ee_vel, target_pos, ee_to_target, prev_action, and three not in the paper: joint_sin_cos
     (sin and cos of each joint angle: one value per physical pose, where a UR5e joint's 720 degree
     range gives each pose up to two angles), self_dist (signed distance of each self-collision
-    pair, < 0 in collision) and link_pos (the world position of each link frame origin that eq. 3's
-    d_i measures from, 3 per link: where the links are, without learning the arm's kinematics);
+    pair, < 0 in collision) and link_pos (the world position of each link frame origin, from which
+    eq. 3's d_i is measured with the default link_distance="origin", 3 per link: where the links are,
+    without learning the arm's kinematics);
     reach-avoid adds obstacle_pos, obstacle_size, link_obstacle_dist and, beyond the paper,
     obstacle_radius and obstacle_vel (see ReachAvoidConfig)."""
     reward: Literal["sparse", "semi_sparse", "dense"] = "dense"

@@ -613,25 +613,6 @@ def test_joint_sin_cos_and_self_distance_observations():
     assert obs[18:].min() > 0  # a reset pose is collision-free
 
 
-def test_link_positions_are_cpu_mujocos_link_frames_and_the_link_distances_origins():
-    """link_pos against CPU MuJoCo's kinematics of the same angles, and eq. 3's d_i recomputed from it by hand."""
-    env = envs.make("ur5e-reach-avoid", num_obstacles=2, obstacle_radius_range=(0.05, 0.1),
-                    observation=("joint_pos", "link_pos", "obstacle_pos", "obstacle_radius", "link_obstacle_dist"))
-    m = env.robot.mj_model
-    names = ("upper_arm_link", "forearm_link", "wrist_1_link", "wrist_2_link", "wrist_3_link")
-    assert env.observation_size == 6 + 3 * 5 + 2 * 3 + 2 + 5
-    obs = np.asarray(env.reset(jax.random.PRNGKey(5)).obs)
-    links = obs[6:21].reshape(5, 3)
-    d = mujoco.MjData(m)
-    d.qpos[:] = obs[:6]
-    mujoco.mj_kinematics(m, d)
-    expected = np.stack([d.body(name).xpos for name in names])
-    np.testing.assert_allclose(links, expected, atol=1e-5)
-    centers, radii = obs[21:27].reshape(2, 3), obs[27:29]
-    by_hand = np.min(np.linalg.norm(links[None] - centers[:, None], axis=-1) - radii[:, None], axis=0)
-    np.testing.assert_allclose(obs[29:], by_hand, atol=1e-5)
-
-
 @pytest.mark.parametrize("options, field", [
     (dict(workspace="kitchen"), "workspace"),
     (dict(action="torque"), "action"),
