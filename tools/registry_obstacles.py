@@ -103,8 +103,9 @@ register(Experiment(
 # the first link: results/obstacles/README.md): the runs above trained on the old one and are not mixed with these.
 register(Experiment(
     "obstacles-dodge-clear", "Among 3 moving obstacles drawn clear of the base, every robot geom checked: predicted "
-    "link distances (the arm held still or moving on), a joint-limit penalty, collision penalties, a failure budget "
-    "(PPO-Lagrangian) and longer training (screening: 1 seed a row; two long rows have 5 planned)",
+    "link distances (the arm held still or moving on), the links' positions, a joint-limit penalty, collision "
+    "penalties, a failure budget (PPO-Lagrangian), fast SAC and longer training (screening: 1 seed a row; two long "
+    "rows have 5 planned)",
     "not in the paper (the future work of its Discussion)",
     (Run("ur5e-ahead-jl", "ur5e-reach-avoid-ppo-moving3", {**_PLUS_AHEAD, **_JL},
          seeds=1, shares=False, label="ur5e, + link_obstacle_ahead, joint-limit penalty 0.05"),
@@ -180,8 +181,8 @@ register(Experiment(
          num_timesteps=600_000_000, label="panda, plus observation + link_obstacle_ahead, PPO-Lagrangian with a 3 % "
                                           "failure budget, 600M steps"),
      Run("ur5e-sac-fast-ahead", "ur5e-reach-avoid-sac-fast",
-         {**_MOVING3, "env.observation": _MOVING3_PLUS_OBS + _AHEAD}, seeds=1, shares=False, label="ur5e, fast SAC (the preset: joint-limit penalty 1.0), plus observation + "
-                                      "link_obstacle_ahead"),
+         {**_MOVING3, "env.observation": _MOVING3_PLUS_OBS + _AHEAD}, seeds=1, shares=False,
+         label="ur5e, fast SAC (the preset: joint-limit penalty 1.0), plus observation + link_obstacle_ahead"),
      Run("ur5e-sac-fast-ahead-jl", "ur5e-reach-avoid-sac-fast",
          {**_MOVING3, "env.observation": _MOVING3_PLUS_OBS + _AHEAD, **_JL}, seeds=1, shares=False,
          label="ur5e, fast SAC, plus observation + link_obstacle_ahead, joint-limit penalty 0.05"),
@@ -192,7 +193,8 @@ register(Experiment(
          {"env.observation": _MOVING3_PLUS_OBS + _AHEAD + _LINKS}, seeds=1, shares=False, num_timesteps=300_000_000,
          label="panda, plus observation + link_obstacle_ahead and link_pos, 300M steps"),
      Run("panda-sac-fast-ahead", "panda-reach-avoid-sac-fast",
-         {**_MOVING3, "env.observation": _MOVING3_PLUS_OBS + _AHEAD}, seeds=1, shares=False, label="panda, fast SAC, plus observation + link_obstacle_ahead")),
+         {**_MOVING3, "env.observation": _MOVING3_PLUS_OBS + _AHEAD}, seeds=1, shares=False,
+         label="panda, fast SAC, plus observation + link_obstacle_ahead")),
     metrics=AVOID_METRICS, curves=AVOID_CURVES,
     paper="Not in the paper. The shipped -moving3 policies (trained on the old task) evaluated on this one: UR5e "
           "68.0 % reached with 4.9 % obstacle collisions, Panda 67.7 % with 6.9 % (results/obstacles/README.md); the "

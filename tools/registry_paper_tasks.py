@@ -313,7 +313,7 @@ register(Experiment(
          "(88.5 %, 5 seeds at 160M) and reach-avoid-reward's dense reward with a collision penalty of 10 (89.6 %, 3 "
          "seeds at 192M, with the paper's observation and a joint-limit penalty of 1.0, and 3.5 % self and 4.7 % "
          "obstacle collisions); it trains 192M steps. The sac-fast rows give the best static learners, fast SAC "
-         "(sac-fast: UR5e 90.0 ± 0.4 % at its preset's 200M steps, Panda 96.2 ± 0.2 % at 200M, 95.4 ± 0.3 % at 100M), "
-         "twice the steps: their training episodes still reached more at 200M than at 152M (UR5e 90.2-91.3 % against "
-         "89.1-89.9 %, Panda's seeds but one 96.8-98.1 % against 96.2-96.5 %). About 25 minutes a seed on one H200 "
-         "(about 0.3M steps a second)."))
+         "(sac-fast: UR5e 90.0 ± 0.4 % at its preset's 200M steps, Panda 96.2 ± 0.2 % at 200M, 95.4 ± 0.4 % at "
+         "100M), twice the steps: their training episodes still reached more by 200M than by 152M (logged intervals ending "
+         "there: UR5e 90.3-91.2 % against 89.1-89.9 %, Panda 96.6-96.9 % against 96.2-96.5 %, five seeds each). "
+         "About 25 minutes a seed on one H200 (about 0.3M steps a second)."))
