@@ -99,6 +99,26 @@ register(Experiment(
          "that is best on one static obstacle (ur5e-reach-avoid-sac-fast, 90.0 %), without its joint-limit "
          "penalty as the PPO preset here."))
 
+_BEST_UNPENALISED = {
+    "ur5e": ("ur5e-reach-avoid-ppo-moving3", {**_PLUS_AHEAD, **_JL},
+             "ur5e, + link_obstacle_ahead, joint-limit penalty 0.05"),
+    "panda": ("panda-reach-avoid-ppo-moving3", _PLUS_AHEAD, "panda, plus observation + link_obstacle_ahead"),
+}
+"""Per robot, the preset, overrides and label of the best unpenalised settings on the corrected moving task."""
+
+
+def _budget(name: str, robot: str, budget: float, num_timesteps: int | None = None, more: dict | None = None,
+            what: str = "") -> Run:
+    """A one-seed PPO-Lagrangian row (`algo.failure_budget`) on `robot`'s best unpenalised settings, with `more`
+    overrides that `what` names in the label."""
+    preset, overrides, label = _BEST_UNPENALISED[robot]
+    label += f", PPO-Lagrangian with a {round(budget * 100)} % failure budget{what}"
+    if num_timesteps is not None:
+        label += f", {num_timesteps // 1_000_000}M steps"
+    return Run(name, preset, {**overrides, "algo.failure_budget": budget, **(more or {})}, seeds=1, shares=False,
+               num_timesteps=num_timesteps, label=label)
+
+
 # The same levers on the corrected moving-obstacle task (every robot geom checked, paths drawn clear of the base and
 # the first link: results/obstacles/README.md): the runs above trained on the old one and are not mixed with these.
 register(Experiment(
@@ -143,43 +163,17 @@ register(Experiment(
          {**_PLUS_AHEAD, "env.collision_penalty": 100.0}, seeds=1, shares=False,
          num_timesteps=300_000_000, label="panda, plus observation + link_obstacle_ahead, collision penalty 100, 300M "
                                           "steps"),
-     Run("ur5e-ahead-jl-budget4", "ur5e-reach-avoid-ppo-moving3",
-         {**_PLUS_AHEAD, **_JL, "algo.failure_budget": 0.04}, seeds=1, shares=False,
-         label="ur5e, + link_obstacle_ahead, joint-limit penalty 0.05, PPO-Lagrangian with a 4 % failure budget"),
-     Run("ur5e-ahead-jl-budget4-lr10", "ur5e-reach-avoid-ppo-moving3",
-         {**_PLUS_AHEAD, **_JL, "algo.failure_budget": 0.04,
-          "algo.multiplier_lr": 10.0}, seeds=1, shares=False,
-         label="ur5e, + link_obstacle_ahead, joint-limit penalty 0.05, PPO-Lagrangian with a 4 % failure budget, "
-               "multiplier step 10"),
-     Run("panda-plus-ahead-budget4-300m", "panda-reach-avoid-ppo-moving3",
-         {**_PLUS_AHEAD, "algo.failure_budget": 0.04}, seeds=1, shares=False,
-         num_timesteps=300_000_000, label="panda, plus observation + link_obstacle_ahead, PPO-Lagrangian with a 4 % "
-                                          "failure budget, 300M steps"),
-     Run("ur5e-ahead-jl-budget4-400m", "ur5e-reach-avoid-ppo-moving3",
-         {**_PLUS_AHEAD, **_JL, "algo.failure_budget": 0.04}, seeds=1, shares=False, num_timesteps=400_000_000,
-         label="ur5e, + link_obstacle_ahead, joint-limit penalty 0.05, PPO-Lagrangian with a 4 % failure budget, "
-               "400M steps"),
-     Run("ur5e-ahead-jl-budget3-400m", "ur5e-reach-avoid-ppo-moving3",
-         {**_PLUS_AHEAD, **_JL, "algo.failure_budget": 0.03}, seeds=1, shares=False, num_timesteps=400_000_000,
-         label="ur5e, + link_obstacle_ahead, joint-limit penalty 0.05, PPO-Lagrangian with a 3 % failure budget, "
-               "400M steps"),
-     Run("ur5e-ahead-jl-budget4-from200m-400m", "ur5e-reach-avoid-ppo-moving3",
-         {**_PLUS_AHEAD, **_JL, "algo.failure_budget": 0.04, "algo.multiplier_start": 200_000_000}, seeds=1,
-         shares=False, num_timesteps=400_000_000,
-         label="ur5e, + link_obstacle_ahead, joint-limit penalty 0.05, PPO-Lagrangian with a 4 % failure budget from "
-               "200M steps on, 400M steps"),
-     Run("panda-plus-ahead-budget4-600m", "panda-reach-avoid-ppo-moving3",
-         {**_PLUS_AHEAD, "algo.failure_budget": 0.04}, seeds=1, shares=False,
-         num_timesteps=600_000_000, label="panda, plus observation + link_obstacle_ahead, PPO-Lagrangian with a 4 % "
-                                          "failure budget, 600M steps"),
-     Run("ur5e-ahead-jl-budget3-600m", "ur5e-reach-avoid-ppo-moving3",
-         {**_PLUS_AHEAD, **_JL, "algo.failure_budget": 0.03}, seeds=1, shares=False, num_timesteps=600_000_000,
-         label="ur5e, + link_obstacle_ahead, joint-limit penalty 0.05, PPO-Lagrangian with a 3 % failure budget, "
-               "600M steps"),
-     Run("panda-plus-ahead-budget3-600m", "panda-reach-avoid-ppo-moving3",
-         {**_PLUS_AHEAD, "algo.failure_budget": 0.03}, seeds=1, shares=False,
-         num_timesteps=600_000_000, label="panda, plus observation + link_obstacle_ahead, PPO-Lagrangian with a 3 % "
-                                          "failure budget, 600M steps"),
+     _budget("ur5e-ahead-jl-budget4", "ur5e", 0.04),
+     _budget("ur5e-ahead-jl-budget4-lr10", "ur5e", 0.04, more={"algo.multiplier_lr": 10.0},
+             what=", multiplier step 10"),
+     _budget("panda-plus-ahead-budget4-300m", "panda", 0.04, 300_000_000),
+     _budget("ur5e-ahead-jl-budget4-400m", "ur5e", 0.04, 400_000_000),
+     _budget("ur5e-ahead-jl-budget3-400m", "ur5e", 0.03, 400_000_000),
+     _budget("ur5e-ahead-jl-budget4-from200m-400m", "ur5e", 0.04, 400_000_000,
+             more={"algo.multiplier_start": 200_000_000}, what=" from 200M steps on"),
+     _budget("panda-plus-ahead-budget4-600m", "panda", 0.04, 600_000_000),
+     _budget("ur5e-ahead-jl-budget3-600m", "ur5e", 0.03, 600_000_000),
+     _budget("panda-plus-ahead-budget3-600m", "panda", 0.03, 600_000_000),
      Run("ur5e-sac-fast-ahead", "ur5e-reach-avoid-sac-fast",
          {**_MOVING3, "env.observation": _MOVING3_PLUS_OBS + _AHEAD}, seeds=1, shares=False,
          label="ur5e, fast SAC (the preset: joint-limit penalty 1.0), plus observation + link_obstacle_ahead"),
