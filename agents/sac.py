@@ -7,11 +7,8 @@ environments (as in Brax), inserted into the buffer, then `grad_updates_per_step
 are uniform random and no gradient step is applied (Brax's prefill; these steps count towards
 num_timesteps).
 
-The buffer is a circular array of shape (max_replay_size / num_envs, num_envs, ...): row t holds
-every env's transition of one step. Its env axis is split over devices like the environments.
-Sampling is stratified over envs (each env contributes batch_size / num_envs samples at uniformly
-drawn rows, or each block of num_envs / batch_size envs one sample) with random numbers keyed by
-global sample index, so a run on two devices reproduces the one-device run.
+The buffer (`agents.replay`) holds max_replay_size / num_envs rows of every env's transition of one
+step, its env axis split over devices like the environments.
 
 Bootstrapping: the critic target uses the stored `next_obs`, which on a truncated step is the
 terminal observation, and drops the bootstrap only on real terminations.
@@ -21,6 +18,10 @@ Switches for thousands of environments and large batches (as in FastTD3 / FastSA
 `distributional` critic: a categorical return distribution on `num_atoms` atoms in [v_min, v_max]
 trained by cross-entropy against the projected target (Bellemare et al. 2017), with the clipped
 double-Q choice made per sample by the two target critics' means.
+
+A failure budget (`failure_budget`, SAC-Lagrangian: Ha et al. 2020; Ray et al. 2019) adds twin cost critics that
+estimate the discounted chance of a failure ahead (a termination), and a multiplier learned by dual ascent that
+weighs them in the actor's objective.
 """
 
 from __future__ import annotations
@@ -32,9 +33,10 @@ import jax.numpy as jnp
 import optax
 from flax import struct
 
-from agents import networks, normalizer, offpolicy
+from agents import networks, normalizer, offpolicy, replay as buffer
 from agents.distributions import TanhNormal
 from agents.loop import Parallel, Transition, env_random, per_env_keys
+from agents.replay import Replay
 from envs import validation
 
 
@@ -91,6 +93,19 @@ class SACConfig(networks.NetworkConfig):
     stacked_critics: bool = False
     """The twin critics as one network with stacked parameters (`networks.TwinQ.stacked`): the same functions with
     fewer GPU kernels in the critics' layers; parameters initialised from other random numbers than separate critics."""
+    failure_budget: float | None = None
+    """SAC-Lagrangian: the share of the training episodes allowed to end in a failure (a termination: a collision,
+    or NaN physics, in tasks where reaching does not terminate), as PPOConfig.failure_budget. Twin cost critics
+    learn the discounted failures ahead, Q_c (the pessimistic one, their maximum, is used); the actor maximises
+    min Q - reward_scaling x multiplier x Q_c, as if the multiplier (env-reward units) were subtracted from each
+    failure step's reward. Their networks are the critics' (q_hidden_sizes) with one scalar output. None: no
+    multiplier and no cost critics."""
+    multiplier_lr: float = 0.001
+    """Dual-ascent step of that multiplier per ended episode: after each update it grows by multiplier_lr x (the
+    update's failed episodes - failure_budget x its ended episodes), floored at 0; none while the buffer fills
+    (logged as lagrange/failed_episodes and lagrange/ended_episodes per update: their means' ratio is the share).
+    0.001 is about PPOConfig's default pace per env step on the reach-avoid presets (3 per update of 327,680 steps,
+    about 2,800 episodes)."""
 
     @property
     def env_steps_per_update(self) -> int:
@@ -142,6 +157,9 @@ class SACConfig(networks.NetworkConfig):
         validation.choice("algo.compute_dtype", self.compute_dtype, tuple(networks.COMPUTE_DTYPES))
         if not isinstance(self.stacked_critics, bool):
             raise ValueError(f"algo.stacked_critics={self.stacked_critics!r} is invalid: allowed are True, False.")
+        if self.failure_budget is not None:
+            validation.in_range("algo.failure_budget", self.failure_budget, 0.0, 1.0)
+        validation.positive("algo.multiplier_lr", self.multiplier_lr)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -175,37 +193,19 @@ def polyak(target, online, tau: float):
     return jax.tree.map(lambda t, o: (1.0 - tau) * t + tau * o, target, online)
 
 
+def cost_critic_target(cost, next_cost_q, discount):
+    """y_c = c + discount x max_i Q'_c,i(s', a'): the discounted failures ahead, with the pessimistic (larger) of
+    the twin target cost critics. `cost` and `discount` from the (n-step) window, `next_cost_q`: (..., 2)."""
+    return cost + discount * jnp.max(next_cost_q, axis=-1)
+
+
+def dual_ascent(multiplier, failures, ended, failure_budget: float, multiplier_lr: float):
+    """The Lagrange multiplier after one update: multiplier + multiplier_lr x (failures - failure_budget x ended),
+    floored at 0 (the dual ascent of Ray et al. 2019, per ended episode)."""
+    return jnp.maximum(multiplier + multiplier_lr * (failures - failure_budget * ended), 0.0)
+
+
 # ----------------------------------------------------------------------------------------------
-
-
-def _draw(key, sample_ids, draw):
-    """`draw(key)` for each sample with its key folded from the global sample id, shaped like `sample_ids`."""
-    return jax.vmap(draw)(per_env_keys(key, sample_ids.reshape(-1))).reshape(sample_ids.shape)
-
-
-def _take(x, group: int, rows, offset):
-    """Buffer entries by block of `group` neighbouring envs: out[b] = x[rows[b], b * group + offset[b]].
-
-    `x` (buffer rows, local envs, ...); `rows` (blocks, ...) and `offset` broadcastable to it. A gather batched
-    over the block axis: with the env axis split over devices, each device reads only its own envs (plain indexing
-    into the split axis makes XLA's partitioner gather the batch on every device and sum it across them)."""
-    blocks = x.reshape((x.shape[0], x.shape[1] // group, group) + x.shape[2:])
-    return jax.vmap(lambda xb, r, o: xb[r, o], in_axes=(1, 0, 0))(blocks, rows, jnp.broadcast_to(offset, rows.shape))
-
-
-def _flat(x, axis: int):
-    """`x` with its axes `axis` and `axis + 1` merged into one."""
-    return x.reshape(x.shape[:axis] + (-1,) + x.shape[axis + 2:])
-
-
-@struct.dataclass
-class Replay:
-    data: dict
-    """obs, action, reward, termination, next_obs; leaves (rows, num_envs, ...)."""
-    position: jax.Array
-    """Next row to write (int32)."""
-    rows: jax.Array
-    """Rows filled so far, at most the capacity (int32)."""
 
 
 @struct.dataclass
@@ -219,6 +219,12 @@ class SACState:
     alpha_opt: optax.OptState
     obs_stats: normalizer.RunningStats
     replay: Replay
+    cost_q_params: dict | None = None
+    """The twin cost critics of `failure_budget` (and below, their targets, optimiser state and the multiplier);
+    None without a budget."""
+    target_cost_q_params: dict | None = None
+    cost_q_opt: optax.OptState | None = None
+    multiplier: jax.Array | None = None
 
 
 class SAC:
@@ -240,6 +246,8 @@ class SAC:
         self.q_net = networks.q_network(c.q_hidden_sizes, c.activation, c.kernel_init, c.layer_norm,
                                         c.num_atoms if c.distributional else 1, c.compute_dtype, c.stacked_critics)
         self.support = offpolicy.categorical_support(c.v_min, c.v_max, c.num_atoms) if c.distributional else None
+        self.cost_net = None if c.failure_budget is None else networks.q_network(
+            c.q_hidden_sizes, c.activation, c.kernel_init, c.layer_norm, 1, c.compute_dtype, c.stacked_critics)
         clip = [optax.clip_by_global_norm(c.max_grad_norm)] if c.max_grad_norm > 0 else []
         # On one flat vector per network: few large GPU kernels per gradient step (see agents/ppo.py).
         self.optimizer = optax.flatten(optax.chain(*clip, optax.adam(c.learning_rate)))
@@ -259,18 +267,16 @@ class SAC:
         policy_params = self.policy_net.init(k_pi, obs)
         q_params = self.q_net.init(k_q, obs, jnp.zeros((1, self.action_size)))
         log_alpha = jnp.log(jnp.asarray(c.init_alpha, jnp.float32))
-        z = lambda *shape: jnp.zeros((self.rows, c.num_envs) + shape)
-        data = {"obs": z(self.observation_size), "action": z(self.action_size), "reward": z(),
-                "termination": z(), "next_obs": z(self.observation_size)}
-        if c.n_step > 1:  # n-step windows stop at time-outs too
-            data["truncation"] = z()
-        replay = Replay(
-            data=data,
-            position=jnp.zeros((), jnp.int32), rows=jnp.zeros((), jnp.int32),
-        )
-        return SACState(policy_params, q_params, q_params, log_alpha, self.optimizer.init(policy_params),
-                        self.optimizer.init(q_params), self.optimizer.init(log_alpha),
-                        normalizer.init(self.observation_size), replay)
+        replay = buffer.empty(self.rows, c.num_envs, self.observation_size, self.action_size, c.n_step)
+        state = SACState(policy_params, q_params, q_params, log_alpha, self.optimizer.init(policy_params),
+                         self.optimizer.init(q_params), self.optimizer.init(log_alpha),
+                         normalizer.init(self.observation_size), replay)
+        if c.failure_budget is None:
+            return state
+        # Its own key, so that a run without a budget draws exactly what it drew before budgets existed.
+        cost_q_params = self.cost_net.init(jax.random.fold_in(key, 1), obs, jnp.zeros((1, self.action_size)))
+        return state.replace(cost_q_params=cost_q_params, target_cost_q_params=cost_q_params,
+                             cost_q_opt=self.optimizer.init(cost_q_params), multiplier=jnp.zeros(()))
 
     def env_axes(self, state: SACState):
         """The replay buffer's env axis (1) is split over devices; everything else is replicated."""
@@ -309,53 +315,12 @@ class SAC:
 
     @jax.named_scope("insert")
     def insert(self, replay: Replay, batch: Transition) -> Replay:
-        steps = batch.reward.shape[0]
-        rows = (replay.position + jnp.arange(steps)) % self.rows
-        new = {"obs": batch.obs, "action": batch.action, "reward": batch.reward,
-               "termination": batch.termination, "next_obs": batch.next_obs, "truncation": batch.truncation}
-        new = {k: new[k] for k in replay.data}
-        data = jax.tree.map(lambda buf, x: buf.at[rows].set(x), replay.data, new)
-        return Replay(data, (replay.position + steps) % self.rows, jnp.minimum(replay.rows + steps, self.rows))
+        return buffer.insert(replay, batch, self.rows)
 
     @jax.named_scope("sample")
     def sample(self, replay: Replay, key, par: Parallel):
-        """This device's share of a stratified batch; returns (transitions, global sample ids).
-
-        The local envs form blocks of `group` neighbours (1 when batch_size >= num_envs); each block gives
-        `per_block` samples, in the order of their global ids, at rows drawn uniformly (and, in a block of
-        several envs, from one env drawn uniformly)."""
-        c = self.config
-        ids = par.env_ids()
-        k_env, k_row = jax.random.split(key)
-        if c.batch_size >= c.num_envs:
-            group, per_block = 1, c.batch_size // c.num_envs
-            sample_ids = ids[:, None] * per_block + jnp.arange(per_block)
-            offset = jnp.zeros(sample_ids.shape, jnp.int32)
-        else:
-            group, per_block = c.num_envs // c.batch_size, 1
-            sample_ids = (ids[0] // group + jnp.arange(par.local_envs // group))[:, None]
-            offset = _draw(k_env, sample_ids, lambda k: jax.random.randint(k, (), 0, group))
-        if c.n_step == 1:
-            rows = _draw(k_row, sample_ids, lambda k: jax.random.randint(k, (), 0, replay.rows))
-            mb = jax.tree.map(lambda x: _flat(_take(x, group, rows, offset), 0), replay.data)
-            return {**mb, "discount": c.discount * (1.0 - mb["termination"])}, sample_ids.reshape(-1)
-        return self._sample_nstep(replay, group, sample_ids, offset, k_row), sample_ids.reshape(-1)
-
-    def _sample_nstep(self, replay: Replay, group: int, sample_ids, offset, key):
-        """n-step transitions: a window of n consecutive rows per sample, its first row uniform over
-        the rows whose window is fully written, summed by `offpolicy.nstep_targets`."""
-        c = self.config
-        oldest = (replay.position - replay.rows) % self.rows
-        first = _draw(key, sample_ids, lambda k: jax.random.randint(k, (), 0, replay.rows - c.n_step + 1))
-        rows = (oldest + first[:, None, :] + jnp.arange(c.n_step)[:, None]) % self.rows  # (blocks, n, per_block)
-        window = jax.tree.map(lambda x: _flat(jnp.moveaxis(_take(x, group, rows, offset[:, None, :]), 1, 0), 1),
-                              replay.data)  # leaves (n, samples, ...)
-        returns, discounts, offsets = offpolicy.nstep_targets(window["reward"], window["termination"],
-                                                              window["truncation"], c.discount, c.n_step)
-        # Batched over samples like `_take`: no gather across devices.
-        next_obs = jax.vmap(lambda obs, k: obs[k], in_axes=(1, 0))(window["next_obs"], offsets[0])
-        return {"obs": window["obs"][0], "action": window["action"][0], "reward": returns[0],
-                "discount": discounts[0], "next_obs": next_obs}
+        """This device's share of a stratified batch: (transitions, global sample ids), `agents.replay.sample`."""
+        return buffer.sample(replay, key, par, self.config, self.rows)
 
     # -- the objectives (each one overridable) --------------------------------------------------
 
@@ -385,13 +350,24 @@ class SAC:
         loss = jnp.mean(jnp.sum(offpolicy.categorical_cross_entropy(q, target[:, None]), axis=-1))
         return loss, jnp.mean(offpolicy.categorical_mean(q, self.support, is_logits=True))
 
-    def actor_loss(self, policy_params, q_params, obs, noise, alpha):
-        """E[alpha log pi(a|s) - min Q(s, a)] with reparameterised actions (eq. 7); returns (loss, log-probs)."""
+    def actor_loss(self, policy_params, q_params, obs, noise, alpha, cost=None):
+        """E[alpha log pi(a|s) - min Q(s, a)] with reparameterised actions (eq. 7); returns (loss, log-probs).
+        With a failure budget, `cost` = (cost critics' parameters, multiplier) and the actor maximises
+        min Q - reward_scaling x multiplier x max Q_c instead of min Q."""
         action, _, log_prob = self._dist(policy_params, obs).sample_with_noise(noise)
         q = self.q_net.apply(q_params, obs, action)
         if self.config.distributional:
             q = offpolicy.categorical_mean(q, self.support, is_logits=True)
+        if cost is not None:
+            cost_q_params, multiplier = cost
+            cost_q = jnp.max(self.cost_net.apply(cost_q_params, obs, action), axis=-1)
+            q = q - (self.config.reward_scaling * multiplier * cost_q)[..., None]
         return actor_loss(log_prob, q, alpha), log_prob
+
+    def cost_critic_loss(self, cost_q_params, obs, action, target):
+        """Both cost critics' squared error against the (constant) target; returns (loss, mean Q_c)."""
+        cost_q = self.cost_net.apply(cost_q_params, obs, action)
+        return critic_loss(cost_q, target), jnp.mean(cost_q)
 
     def temperature_loss(self, log_alpha, log_prob):
         """Automatic temperature (eq. 18) towards the entropy target."""
@@ -419,9 +395,14 @@ class SAC:
             q_updates, q_opt = self.optimizer.update(q_grads, s.q_opt, s.q_params)
             q_params = optax.apply_updates(s.q_params, q_updates)
 
+        cost, cost_metrics = None, {}
+        if s.multiplier is not None:
+            s, cost_metrics = self._cost_critic_step(s, mb, obs, next_obs, self._noise(k_next, ids), par)
+            cost = (s.cost_q_params, s.multiplier)
+
         with jax.named_scope("actor_update"):
             (pi_loss, log_prob), pi_grads = jax.value_and_grad(self.actor_loss, has_aux=True)(
-                s.policy_params, q_params, obs, self._noise(k_pi, ids), alpha)
+                s.policy_params, q_params, obs, self._noise(k_pi, ids), alpha, cost)
             pi_grads, pi_loss = par.mean_gradients(pi_grads), par.pmean(pi_loss)
             pi_updates, policy_opt = self.optimizer.update(pi_grads, s.policy_opt, s.policy_params)
             policy_params = optax.apply_updates(s.policy_params, pi_updates)
@@ -438,12 +419,30 @@ class SAC:
                       target_q_params=target_q_params,
                       policy_opt=policy_opt, q_opt=q_opt, alpha_opt=alpha_opt)
         metrics = {"loss/critic": q_loss, "loss/actor": pi_loss, "loss/temperature": a_loss,
-                   "sac/alpha": alpha, "sac/entropy": par.pmean(-jnp.mean(log_prob)), "sac/q_mean": q_mean}
+                   "sac/alpha": alpha, "sac/entropy": par.pmean(-jnp.mean(log_prob)), "sac/q_mean": q_mean,
+                   **cost_metrics}
         return s, metrics
+
+    @jax.named_scope("cost_critic_update")
+    def _cost_critic_step(self, s: SACState, mb: dict, obs, next_obs, next_noise, par: Parallel):
+        """One gradient step of the cost critics towards `cost_critic_target` (the next action drawn with the reward
+        critics' noise), and their Polyak average; returns (state, metrics)."""
+        next_action, _, _ = self._dist(s.policy_params, next_obs).sample_with_noise(next_noise)
+        next_cost_q = self.cost_net.apply(s.target_cost_q_params, next_obs, next_action)
+        target = cost_critic_target(mb["cost"], next_cost_q, mb["discount"])
+        (loss, cost_q_mean), grads = jax.value_and_grad(self.cost_critic_loss, has_aux=True)(
+            s.cost_q_params, obs, mb["action"], target)
+        grads, loss, cost_q_mean = par.mean_gradients(grads), par.pmean(loss), par.pmean(cost_q_mean)
+        updates, cost_q_opt = self.optimizer.update(grads, s.cost_q_opt, s.cost_q_params)
+        cost_q_params = optax.apply_updates(s.cost_q_params, updates)
+        s = s.replace(cost_q_params=cost_q_params, cost_q_opt=cost_q_opt,
+                      target_cost_q_params=polyak(s.target_cost_q_params, cost_q_params, self.config.tau))
+        return s, {"loss/cost_critic": loss, "sac/cost_q_mean": cost_q_mean}
 
     def update(self, state: SACState, batch: Transition, key, par: Parallel):
         """Inserts the step into the buffer, then `grad_updates_per_step` gradient steps (none while
-        the buffer holds fewer than `min_replay_size` transitions)."""
+        the buffer holds fewer than `min_replay_size` transitions); with a failure budget, then the multiplier's
+        dual-ascent step on the step's ended episodes (over all devices)."""
         c = self.config
         replay = self.insert(state.replay, batch)
         obs_stats = state.obs_stats
@@ -460,6 +459,14 @@ class SAC:
             metrics = jax.tree.map(lambda x: jnp.zeros(x.shape, x.dtype), jax.eval_shape(train, s)[1])
             return s, {**metrics, "sac/alpha": jnp.exp(s.log_alpha)}
 
-        state, metrics = jax.lax.cond(self._warming_up(state), skip, train, state)
+        warming_up = self._warming_up(state)
+        state, metrics = jax.lax.cond(warming_up, skip, train, state)
         metrics["replay/transitions"] = (state.replay.rows * c.num_envs).astype(jnp.float32)
+        if state.multiplier is not None:
+            failures, ended = par.psum((jnp.sum(batch.termination), jnp.sum(batch.done)))
+            stepped = dual_ascent(state.multiplier, failures, ended, c.failure_budget, c.multiplier_lr)
+            state = state.replace(multiplier=jnp.where(warming_up, state.multiplier, stepped))
+            # Counts, not their ratio: many steps end no episode, and the logged means' ratio is the interval's share.
+            metrics = {**metrics, "lagrange/multiplier": state.multiplier, "lagrange/failed_episodes": failures,
+                       "lagrange/ended_episodes": ended}
         return state, metrics

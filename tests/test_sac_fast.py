@@ -36,8 +36,9 @@ def _plain_nstep(rewards, terms, truncs, t, e, gamma, n):
 
 def test_nstep_samples_from_the_buffer_match_a_plain_loop():
     """A buffer of 9 rows x 4 envs filled with 11 steps (so it wrapped), terminations and time-outs
-    inside; every sampled transition's 3-step return, discount and bootstrap observation agree with
-    a plain-Python walk over the steps in time order, and no window reaches past the newest row."""
+    inside; every sampled transition's 3-step return, discount, bootstrap observation and failure cost (the
+    discounted terminations) agree with a plain-Python walk over the steps in time order, and no window reaches past
+    the newest row."""
     n, gamma, num_envs, steps = 3, 0.9, 4, 11
     config = SACConfig(num_envs=num_envs, batch_size=64, max_replay_size=9 * num_envs, min_replay_size=0, n_step=n,
                        discount=gamma)
@@ -46,7 +47,7 @@ def test_nstep_samples_from_the_buffer_match_a_plain_loop():
     rewards = rng.normal(size=(steps, num_envs)).astype(np.float32)
     terms = np.zeros((steps, num_envs), np.float32)
     truncs = np.zeros((steps, num_envs), np.float32)
-    terms[4, 0] = terms[8, 2] = terms[9, 1] = 1
+    terms[4, 0] = terms[8, 2] = terms[9, 1] = terms[7, 3] = 1  # env 3 fails in the step after a time-out
     truncs[5, 1] = truncs[6, 3] = truncs[9, 0] = 1
     # Observations say which (step, env) they belong to; next_obs is marked with + 0.5.
     ids = np.stack(np.meshgrid(np.arange(steps), np.arange(num_envs), indexing="ij"), -1).astype(np.float32)
@@ -59,13 +60,15 @@ def test_nstep_samples_from_the_buffer_match_a_plain_loop():
     seen = set()
     for k in range(8):
         mb, _ = sac.sample(replay, jax.random.PRNGKey(k), Parallel(num_envs))
-        for obs, ret, disc, nxt in zip(*(np.asarray(mb[key]) for key in ("obs", "reward", "discount", "next_obs"))):
+        for obs, ret, disc, nxt, cost in zip(*(np.asarray(mb[key])
+                                               for key in ("obs", "reward", "discount", "next_obs", "cost"))):
             t, e = int(obs[0]), int(obs[1])
             assert 2 <= t <= steps - n  # rows 0-1 were overwritten; the newest n - 1 rows start no window
             expected = _plain_nstep(rewards, terms, truncs, t, e, gamma, n)
             assert ret == pytest.approx(expected[0], abs=1e-5)
             assert disc == pytest.approx(expected[1], abs=1e-6)
             np.testing.assert_array_equal(nxt, [expected[2] + 0.5, e + 0.5])
+            assert cost == pytest.approx(_plain_nstep(terms, terms, truncs, t, e, gamma, n)[0], abs=1e-6)
             seen.add((t, e))
     assert len(seen) > 20  # the samples spread over the buffer
 

@@ -1,0 +1,137 @@
+"""SAC-Lagrangian (`SACConfig.failure_budget`): the cost critics' target and the multiplier's dual ascent on
+hand-computed numbers, the actor's penalty against the cost critics evaluated apart, and the multiplier stepped by
+an update."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from agents.checkpoint import Checkpointer
+from agents.loop import Parallel, Transition
+from agents.sac import SAC, SACConfig, cost_critic_target, dual_ascent
+
+_SMALL = dict(num_envs=4, batch_size=8, min_replay_size=0, max_replay_size=64, policy_hidden_sizes=(8,),
+              q_hidden_sizes=(8,))
+
+
+def _sac(**overrides) -> SAC:
+    return SAC(SACConfig(**{**_SMALL, **overrides}), 3, 2)
+
+
+def test_the_cost_target_adds_the_larger_discounted_target_cost_critic():
+    """c + discount x max(Q'_c): 1 + 0 x 0.5 = 1 (failed), 0 + 0.9 x 0.25 = 0.225, 0.81 + 0 x 0.7 = 0.81."""
+    target = cost_critic_target(jnp.array([1.0, 0.0, 0.81]), jnp.array([[0.2, 0.5], [0.25, 0.1], [0.7, 0.3]]),
+                                jnp.array([0.0, 0.9, 0.0]))
+    np.testing.assert_allclose(np.asarray(target), [1.0, 0.225, 0.81], rtol=1e-6)
+
+
+def test_dual_ascent_grows_the_multiplier_by_the_failures_over_the_budget():
+    """2 of 10 ended episodes failed, budget 5 %: 0.5 + 0.01 x (2 - 0.05 x 10) = 0.515."""
+    assert float(dual_ascent(jnp.float32(0.5), 2.0, 10.0, 0.05, 0.01)) == pytest.approx(0.515)
+
+
+def test_dual_ascent_floors_the_multiplier_at_zero():
+    """No failure among 10 ended episodes: 0.001 + 0.01 x (0 - 0.5) < 0 -> 0."""
+    assert float(dual_ascent(jnp.float32(0.001), 0.0, 10.0, 0.05, 0.01)) == 0.0
+
+
+def test_a_state_without_a_budget_holds_no_cost_critics():
+    assert _sac().init(jax.random.PRNGKey(0)).cost_q_params is None
+
+
+def test_the_budget_leaves_the_other_networks_initialisation_alone():
+    """The cost critics draw from their own key: the policy starts where it starts without a budget."""
+    plain, budget = _sac().init(jax.random.PRNGKey(0)), _sac(failure_budget=0.05).init(jax.random.PRNGKey(0))
+    for a, b in zip(jax.tree.leaves(plain.policy_params), jax.tree.leaves(budget.policy_params)):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+
+
+def test_the_actor_loss_adds_the_scaled_multiplier_times_the_larger_cost_critic():
+    """loss(cost) - loss(no cost) = reward_scaling x multiplier x mean_s max_i Q_c,i(s, a(s)), with a(s) the same
+    reparameterised actions, the cost critics evaluated here apart (min(Q - p) = min Q - p per sample)."""
+    sac = _sac(failure_budget=0.05, reward_scaling=2.0)
+    state = sac.init(jax.random.PRNGKey(0))
+    rng = np.random.default_rng(1)
+    obs = jnp.asarray(rng.normal(size=(8, 3)), jnp.float32)
+    noise = jnp.asarray(rng.normal(size=(8, 2)), jnp.float32)
+    plain, _ = sac.actor_loss(state.policy_params, state.q_params, obs, noise, 0.1)
+    penalised, _ = sac.actor_loss(state.policy_params, state.q_params, obs, noise, 0.1,
+                                  (state.cost_q_params, jnp.float32(3.0)))
+    action, _, _ = sac._dist(state.policy_params, obs).sample_with_noise(noise)
+    cost_q = np.asarray(sac.cost_net.apply(state.cost_q_params, obs, action))  # (8, 2)
+    assert float(penalised - plain) == pytest.approx(2.0 * 3.0 * cost_q.max(axis=1).mean(), rel=1e-4)
+
+
+def test_the_cost_critics_learn_the_failure_of_terminal_transitions():
+    """A batch of failing steps (cost 1, no bootstrap): 300 gradient steps bring both cost critics to 1."""
+    sac = _sac(failure_budget=0.05, learning_rate=1e-2)
+    state = sac.init(jax.random.PRNGKey(0))
+    rng = np.random.default_rng(2)
+    obs = jnp.asarray(rng.normal(size=(8, 3)), jnp.float32)
+    mb = {"action": jnp.asarray(rng.uniform(-1, 1, size=(8, 2)), jnp.float32), "cost": jnp.ones(8),
+          "discount": jnp.zeros(8)}
+    step = jax.jit(lambda s: sac._cost_critic_step(s, mb, obs, obs, jnp.zeros((8, 2)), Parallel(4))[0])
+    for _ in range(300):
+        state = step(state)
+    cost_q = np.asarray(sac.cost_net.apply(state.cost_q_params, obs, mb["action"]))
+    np.testing.assert_allclose(cost_q, 1.0, atol=0.05)
+
+
+def _step(sac: SAC, termination, truncation) -> Transition:
+    """One vector step of the 4 envs with random observations and actions, and the given episode ends."""
+    rng = np.random.default_rng(3)
+    f = lambda *shape: jnp.asarray(rng.normal(size=(1, 4) + shape), jnp.float32)  # noqa: E731
+    return Transition(obs=f(3), action=jnp.tanh(f(2)), reward=f(), termination=jnp.asarray([termination], jnp.float32),
+                      truncation=jnp.asarray([truncation], jnp.float32), next_obs=f(3), extras={})
+
+
+def test_an_update_steps_the_multiplier_on_its_ended_episodes():
+    """2 failures and 1 time-out among 4 envs: 0 + 0.1 x (2 - 0.25 x 3) = 0.125."""
+    sac = _sac(failure_budget=0.25, multiplier_lr=0.1)
+    state, _ = sac.update(sac.init(jax.random.PRNGKey(0)), _step(sac, [1, 0, 1, 0], [0, 1, 0, 0]),
+                          jax.random.PRNGKey(1), Parallel(4))
+    assert float(state.multiplier) == pytest.approx(0.125)
+
+
+@pytest.mark.parametrize("name, count", [("lagrange/failed_episodes", 2.0), ("lagrange/ended_episodes", 3.0)])
+def test_an_update_reports_its_failed_and_ended_episodes(name, count):
+    sac = _sac(failure_budget=0.25)
+    _, metrics = sac.update(sac.init(jax.random.PRNGKey(0)), _step(sac, [1, 0, 1, 0], [0, 1, 0, 0]),
+                            jax.random.PRNGKey(1), Parallel(4))
+    assert float(metrics[name]) == count
+
+
+def test_an_update_while_the_buffer_fills_leaves_the_multiplier_alone():
+    sac = _sac(failure_budget=0.25, multiplier_lr=0.1, min_replay_size=64)
+    state, _ = sac.update(sac.init(jax.random.PRNGKey(0)), _step(sac, [1, 0, 1, 0], [0, 1, 0, 0]),
+                          jax.random.PRNGKey(1), Parallel(4))
+    assert float(state.multiplier) == 0.0
+
+
+def test_an_update_moves_the_cost_critics():
+    sac = _sac(failure_budget=0.25)
+    before = sac.init(jax.random.PRNGKey(0))
+    after, _ = sac.update(before, _step(sac, [1, 0, 1, 0], [0, 1, 0, 0]), jax.random.PRNGKey(1), Parallel(4))
+    changed = [not np.array_equal(np.asarray(a), np.asarray(b))
+               for a, b in zip(jax.tree.leaves(before.cost_q_params), jax.tree.leaves(after.cost_q_params))]
+    assert all(changed)
+
+
+@pytest.mark.parametrize("field, value", [("failure_budget", 1.5), ("failure_budget", -0.1),
+                                          ("failure_budget", float("nan")), ("multiplier_lr", 0.0)])
+def test_impossible_lagrangian_settings_are_refused_naming_the_field(field, value):
+    with pytest.raises(ValueError, match=f"algo.{field}"):
+        SACConfig(**{"failure_budget": 0.05, field: value}).validate()
+
+
+def test_a_checkpoint_keeps_the_multiplier_and_the_cost_critics(tmp_path):
+    """What --resume continues from: the learner state read back from an orbax checkpoint."""
+    sac = _sac(failure_budget=0.05)
+    state = sac.init(jax.random.PRNGKey(0)).replace(multiplier=jnp.float32(7.25))
+    checkpointer = Checkpointer(str(tmp_path))
+    checkpointer.save(1, state, {})
+    restored, _ = checkpointer.restore(1, sac.init(jax.random.PRNGKey(1)))
+    assert float(restored.multiplier) == 7.25
+    for a, b in zip(jax.tree.leaves(state.cost_q_params), jax.tree.leaves(restored.cost_q_params)):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
