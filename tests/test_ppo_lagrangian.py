@@ -198,9 +198,10 @@ def test_a_run_without_steps_is_refused_naming_num_timesteps(algo):
         validate(config)
 
 
-def test_a_budget_is_refused_where_reaching_terminates():
+@pytest.mark.parametrize("algo", [PPOConfig(failure_budget=0.05), SACConfig(failure_budget=0.05)])
+def test_a_budget_is_refused_where_reaching_terminates(algo):
     env = dataclasses.replace(envs.default_config("ur5e-reach-avoid"), success="reach_and_terminate")
-    config = TrainConfig(env_name="ur5e-reach-avoid", env=env, algo=PPOConfig(failure_budget=0.05))
+    config = TrainConfig(env_name="ur5e-reach-avoid", env=env, algo=algo)
     with pytest.raises(ValueError, match="algo.failure_budget=0.05 is invalid with env.success"):
         validate(config)
 
