@@ -16,7 +16,8 @@ import pytest
 from agents import driver, presets
 from agents.loop import Parallel, Transition
 from agents.networks import TwinQ, unstack_twin_params
-from agents.sac import SAC, Replay, SACConfig
+from agents.replay import Replay
+from agents.sac import SAC, SACConfig
 from limits import HANG_GUARD_S
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))

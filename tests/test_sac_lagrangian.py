@@ -13,6 +13,8 @@ from agents.sac import SAC, SACConfig, cost_critic_target, dual_ascent
 
 _SMALL = dict(num_envs=4, batch_size=8, min_replay_size=0, max_replay_size=64, policy_hidden_sizes=(8,),
               q_hidden_sizes=(8,))
+_FAST = dict(n_step=3, distributional=True, num_atoms=11, v_min=-5.0, v_max=25.0, layer_norm=True, reward_scaling=1.0)
+"""Fast SAC's switches (agents/presets.py: SAC_FAST), small, in float32 (bfloat16 compiles slowly on a CPU)."""
 
 
 def _sac(**overrides) -> SAC:
@@ -40,17 +42,40 @@ def test_a_state_without_a_budget_holds_no_cost_critics():
     assert _sac().init(jax.random.PRNGKey(0)).cost_q_params is None
 
 
-def test_the_budget_leaves_the_other_networks_initialisation_alone():
-    """The cost critics draw from their own key: the policy starts where it starts without a budget."""
+def _same(a, b) -> bool:
+    return all(np.array_equal(np.asarray(x), np.asarray(y)) for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b)))
+
+
+@pytest.mark.parametrize("field", ["policy_params", "q_params", "target_q_params"])
+def test_the_budget_leaves_the_other_networks_initialisation_alone(field):
+    """The cost critics draw from their own key: the other networks start where they start without a budget."""
     plain, budget = _sac().init(jax.random.PRNGKey(0)), _sac(failure_budget=0.05).init(jax.random.PRNGKey(0))
-    for a, b in zip(jax.tree.leaves(plain.policy_params), jax.tree.leaves(budget.policy_params)):
-        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    assert _same(getattr(plain, field), getattr(budget, field))
 
 
-def test_the_actor_loss_adds_the_scaled_multiplier_times_the_larger_cost_critic():
+@pytest.fixture(scope="module")
+def updated_with_and_without_a_budget():
+    """One update from the same start without and with a budget, on a step in which no episode failed."""
+    step = _step(None, [0, 0, 0, 0], [0, 1, 0, 0])
+    return [sac.update(sac.init(jax.random.PRNGKey(0)), step, jax.random.PRNGKey(1), Parallel(4))[0]
+            for sac in (_sac(), _sac(failure_budget=0.05))]
+
+
+@pytest.mark.parametrize("field", ["policy_params", "q_params"])
+def test_an_update_under_a_zero_multiplier_learns_as_without_a_budget(updated_with_and_without_a_budget, field):
+    """With no failure in the step the multiplier stays 0: the policy and the critics move exactly as they do
+    without a budget (the cost critics draw no random numbers of their own)."""
+    plain, budget = updated_with_and_without_a_budget
+    assert _same(getattr(plain, field), getattr(budget, field))
+
+
+@pytest.mark.parametrize("switches", [{"reward_scaling": 2.0}, _FAST],
+                         ids=["plain", "fast"])
+def test_the_actor_loss_adds_the_scaled_multiplier_times_the_larger_cost_critic(switches):
     """loss(cost) - loss(no cost) = reward_scaling x multiplier x mean_s max_i Q_c,i(s, a(s)), with a(s) the same
     reparameterised actions, the cost critics evaluated here apart (min(Q - p) = min Q - p per sample)."""
-    sac = _sac(failure_budget=0.05, reward_scaling=2.0)
+    sac = _sac(failure_budget=0.05, **switches)
+    scaling = sac.config.reward_scaling
     state = sac.init(jax.random.PRNGKey(0))
     rng = np.random.default_rng(1)
     obs = jnp.asarray(rng.normal(size=(8, 3)), jnp.float32)
@@ -60,7 +85,7 @@ def test_the_actor_loss_adds_the_scaled_multiplier_times_the_larger_cost_critic(
                                   (state.cost_q_params, jnp.float32(3.0)))
     action, _, _ = sac._dist(state.policy_params, obs).sample_with_noise(noise)
     cost_q = np.asarray(sac.cost_net.apply(state.cost_q_params, obs, action))  # (8, 2)
-    assert float(penalised - plain) == pytest.approx(2.0 * 3.0 * cost_q.max(axis=1).mean(), rel=1e-4)
+    assert float(penalised - plain) == pytest.approx(scaling * 3.0 * cost_q.max(axis=1).mean(), rel=1e-4)
 
 
 def test_the_cost_critics_learn_the_failure_of_terminal_transitions():
@@ -78,7 +103,29 @@ def test_the_cost_critics_learn_the_failure_of_terminal_transitions():
     np.testing.assert_allclose(cost_q, 1.0, atol=0.05)
 
 
-def _step(sac: SAC, termination, truncation) -> Transition:
+def test_a_cost_critic_step_reports_the_error_against_the_bootstrapped_target():
+    """The loss of one step: 0.5 x mean over samples and both cost critics of (Q_c - (c + d x max_i Q'_c,i(s',
+    a')))^2, the target cost critics (here other parameters than the online ones) evaluated apart at the next
+    actions drawn with the given noise."""
+    sac = _sac(failure_budget=0.05)
+    state = sac.init(jax.random.PRNGKey(0))
+    state = state.replace(target_cost_q_params=sac.cost_net.init(jax.random.PRNGKey(9), jnp.zeros((1, 3)),
+                                                                 jnp.zeros((1, 2))))
+    rng = np.random.default_rng(4)
+    obs, next_obs = (jnp.asarray(rng.normal(size=(8, 3)), jnp.float32) for _ in range(2))
+    noise = jnp.asarray(rng.normal(size=(8, 2)), jnp.float32)
+    mb = {"action": jnp.asarray(rng.uniform(-1, 1, size=(8, 2)), jnp.float32),
+          "cost": jnp.asarray([0, 1, 0, 0.9, 0, 0, 1, 0], jnp.float32),
+          "discount": jnp.asarray([0.97, 0, 0.97, 0, 0.9, 0.97, 0, 0.97], jnp.float32)}
+    _, metrics = sac._cost_critic_step(state, mb, obs, next_obs, noise, Parallel(4))
+    next_action, _, _ = sac._dist(state.policy_params, next_obs).sample_with_noise(noise)
+    next_q = np.asarray(sac.cost_net.apply(state.target_cost_q_params, next_obs, next_action)).max(axis=1)
+    target = np.asarray(mb["cost"]) + np.asarray(mb["discount"]) * next_q
+    q = np.asarray(sac.cost_net.apply(state.cost_q_params, obs, mb["action"]))
+    assert float(metrics["loss/cost_critic"]) == pytest.approx(0.5 * np.mean((q - target[:, None]) ** 2), rel=1e-5)
+
+
+def _step(sac: SAC | None, termination, truncation) -> Transition:
     """One vector step of the 4 envs with random observations and actions, and the given episode ends."""
     rng = np.random.default_rng(3)
     f = lambda *shape: jnp.asarray(rng.normal(size=(1, 4) + shape), jnp.float32)  # noqa: E731
@@ -100,6 +147,18 @@ def test_an_update_reports_its_failed_and_ended_episodes(name, count):
     _, metrics = sac.update(sac.init(jax.random.PRNGKey(0)), _step(sac, [1, 0, 1, 0], [0, 1, 0, 0]),
                             jax.random.PRNGKey(1), Parallel(4))
     assert float(metrics[name]) == count
+
+
+def test_fast_sac_steps_the_multiplier_once_its_first_window_is_written():
+    """n-step 3: the first two updates fill the buffer (multiplier held), the third steps it by 0.1 x (2 - 0.25 x 3)."""
+    sac = _sac(failure_budget=0.25, multiplier_lr=0.1, **_FAST)
+    state = sac.init(jax.random.PRNGKey(0))
+    update = jax.jit(lambda s, key: sac.update(s, _step(sac, [1, 0, 1, 0], [0, 1, 0, 0]), key, Parallel(4))[0])
+    held = []
+    for k in range(3):
+        held.append(float(state.multiplier))
+        state = update(state, jax.random.PRNGKey(k))
+    assert held + [float(state.multiplier)] == pytest.approx([0.0, 0.0, 0.0, 0.125])
 
 
 def test_an_update_while_the_buffer_fills_leaves_the_multiplier_alone():
