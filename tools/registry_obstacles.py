@@ -129,8 +129,8 @@ def _budget(name: str, robot: str, budget: float, num_timesteps: int | None = No
 register(Experiment(
     "obstacles-dodge-clear", "Among 3 moving obstacles drawn clear of the base, every robot geom checked: predicted "
     "link distances (the arm held still or moving on), the links' positions, a joint-limit penalty, collision "
-    "penalties, a failure budget (PPO- and SAC-Lagrangian), fast SAC and longer training (screening: 1 seed a row; two long "
-    "rows have 5 planned)",
+    "penalties, a failure budget (PPO- and SAC-Lagrangian), fast SAC and longer training (screening: 1 seed a "
+    "row; two long rows have 5 planned)",
     "not in the paper (the future work of its Discussion)",
     (Run("ur5e-ahead-jl", "ur5e-reach-avoid-ppo-moving3", {**_PLUS_AHEAD, **_JL},
          seeds=1, shares=False, label="ur5e, + link_obstacle_ahead, joint-limit penalty 0.05"),
