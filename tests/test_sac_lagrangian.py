@@ -43,7 +43,9 @@ def test_a_state_without_a_budget_holds_no_cost_critics():
 
 
 def _same(a, b) -> bool:
-    return all(np.array_equal(np.asarray(x), np.asarray(y)) for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b)))
+    """Equal pytrees: the same number of leaves, each equal bit for bit."""
+    a, b = jax.tree.leaves(a), jax.tree.leaves(b)
+    return len(a) == len(b) and all(np.array_equal(np.asarray(x), np.asarray(y)) for x, y in zip(a, b))
 
 
 @pytest.mark.parametrize("field", ["policy_params", "q_params", "target_q_params"])
@@ -56,7 +58,7 @@ def test_the_budget_leaves_the_other_networks_initialisation_alone(field):
 @pytest.fixture(scope="module")
 def updated_with_and_without_a_budget():
     """One update from the same start without and with a budget, on a step in which no episode failed."""
-    step = _step(None, [0, 0, 0, 0], [0, 1, 0, 0])
+    step = _step([0, 0, 0, 0], [0, 1, 0, 0])
     return [sac.update(sac.init(jax.random.PRNGKey(0)), step, jax.random.PRNGKey(1), Parallel(4))[0]
             for sac in (_sac(), _sac(failure_budget=0.05))]
 
@@ -125,7 +127,7 @@ def test_a_cost_critic_step_reports_the_error_against_the_bootstrapped_target():
     assert float(metrics["loss/cost_critic"]) == pytest.approx(0.5 * np.mean((q - target[:, None]) ** 2), rel=1e-5)
 
 
-def _step(sac: SAC | None, termination, truncation) -> Transition:
+def _step(termination, truncation) -> Transition:
     """One vector step of the 4 envs with random observations and actions, and the given episode ends."""
     rng = np.random.default_rng(3)
     f = lambda *shape: jnp.asarray(rng.normal(size=(1, 4) + shape), jnp.float32)  # noqa: E731
@@ -136,7 +138,7 @@ def _step(sac: SAC | None, termination, truncation) -> Transition:
 def test_an_update_steps_the_multiplier_on_its_ended_episodes():
     """2 failures and 1 time-out among 4 envs: 0 + 0.1 x (2 - 0.25 x 3) = 0.125."""
     sac = _sac(failure_budget=0.25, multiplier_lr=0.1)
-    state, _ = sac.update(sac.init(jax.random.PRNGKey(0)), _step(sac, [1, 0, 1, 0], [0, 1, 0, 0]),
+    state, _ = sac.update(sac.init(jax.random.PRNGKey(0)), _step([1, 0, 1, 0], [0, 1, 0, 0]),
                           jax.random.PRNGKey(1), Parallel(4))
     assert float(state.multiplier) == pytest.approx(0.125)
 
@@ -144,7 +146,7 @@ def test_an_update_steps_the_multiplier_on_its_ended_episodes():
 @pytest.mark.parametrize("name, count", [("lagrange/failed_episodes", 2.0), ("lagrange/ended_episodes", 3.0)])
 def test_an_update_reports_its_failed_and_ended_episodes(name, count):
     sac = _sac(failure_budget=0.25)
-    _, metrics = sac.update(sac.init(jax.random.PRNGKey(0)), _step(sac, [1, 0, 1, 0], [0, 1, 0, 0]),
+    _, metrics = sac.update(sac.init(jax.random.PRNGKey(0)), _step([1, 0, 1, 0], [0, 1, 0, 0]),
                             jax.random.PRNGKey(1), Parallel(4))
     assert float(metrics[name]) == count
 
@@ -153,7 +155,7 @@ def test_fast_sac_steps_the_multiplier_once_its_first_window_is_written():
     """n-step 3: the first two updates fill the buffer (multiplier held), the third steps it by 0.1 x (2 - 0.25 x 3)."""
     sac = _sac(failure_budget=0.25, multiplier_lr=0.1, **_FAST)
     state = sac.init(jax.random.PRNGKey(0))
-    update = jax.jit(lambda s, key: sac.update(s, _step(sac, [1, 0, 1, 0], [0, 1, 0, 0]), key, Parallel(4))[0])
+    update = jax.jit(lambda s, key: sac.update(s, _step([1, 0, 1, 0], [0, 1, 0, 0]), key, Parallel(4))[0])
     held = []
     for k in range(3):
         held.append(float(state.multiplier))
@@ -163,7 +165,7 @@ def test_fast_sac_steps_the_multiplier_once_its_first_window_is_written():
 
 def test_an_update_while_the_buffer_fills_leaves_the_multiplier_alone():
     sac = _sac(failure_budget=0.25, multiplier_lr=0.1, min_replay_size=64)
-    state, _ = sac.update(sac.init(jax.random.PRNGKey(0)), _step(sac, [1, 0, 1, 0], [0, 1, 0, 0]),
+    state, _ = sac.update(sac.init(jax.random.PRNGKey(0)), _step([1, 0, 1, 0], [0, 1, 0, 0]),
                           jax.random.PRNGKey(1), Parallel(4))
     assert float(state.multiplier) == 0.0
 
@@ -171,7 +173,7 @@ def test_an_update_while_the_buffer_fills_leaves_the_multiplier_alone():
 def test_an_update_moves_the_cost_critics():
     sac = _sac(failure_budget=0.25)
     before = sac.init(jax.random.PRNGKey(0))
-    after, _ = sac.update(before, _step(sac, [1, 0, 1, 0], [0, 1, 0, 0]), jax.random.PRNGKey(1), Parallel(4))
+    after, _ = sac.update(before, _step([1, 0, 1, 0], [0, 1, 0, 0]), jax.random.PRNGKey(1), Parallel(4))
     changed = [not np.array_equal(np.asarray(a), np.asarray(b))
                for a, b in zip(jax.tree.leaves(before.cost_q_params), jax.tree.leaves(after.cost_q_params))]
     assert all(changed)
