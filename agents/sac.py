@@ -386,7 +386,8 @@ class SAC:
         # Device-local losses and gradients; the global-batch ones are their means over devices.
         obs, next_obs = self._obs(s.obs_stats, mb["obs"]), self._obs(s.obs_stats, mb["next_obs"])
         alpha = jnp.exp(s.log_alpha)
-        target = self.critic_target(s, mb, next_obs, self._noise(k_next, ids), alpha)
+        next_noise = self._noise(k_next, ids)  # the next actions' noise, for the cost critics' target too
+        target = self.critic_target(s, mb, next_obs, next_noise, alpha)
 
         with jax.named_scope("critic_update"):
             (q_loss, q_mean), q_grads = jax.value_and_grad(self.critic_loss, has_aux=True)(s.q_params, obs, mb["action"],
@@ -397,7 +398,7 @@ class SAC:
 
         cost, cost_metrics = None, {}
         if s.multiplier is not None:
-            s, cost_metrics = self._cost_critic_step(s, mb, obs, next_obs, self._noise(k_next, ids), par)
+            s, cost_metrics = self._cost_critic_step(s, mb, obs, next_obs, next_noise, par)
             cost = (s.cost_q_params, s.multiplier)
 
         with jax.named_scope("actor_update"):
