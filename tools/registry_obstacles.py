@@ -196,6 +196,8 @@ register(Experiment(
          label="panda, fast SAC, plus observation + link_obstacle_ahead"),
      _budget("panda-sac-fast-ahead-budget4", "panda-sac", 0.04),
      _budget("panda-sac-fast-ahead-budget3", "panda-sac", 0.03),
+     _budget("panda-sac-fast-ahead-budget3-lr0.01-80m", "panda-sac", 0.03, 80_000_000,
+             more={"algo.multiplier_lr": 0.01}, what=", multiplier step 0.01"),
      _budget("ur5e-sac-fast-ahead-jl-budget4", "ur5e-sac", 0.04)),
     metrics=AVOID_METRICS, curves=AVOID_CURVES,
     paper="Not in the paper. The shipped -moving3 policies (trained on the old task) evaluated on this one: UR5e "
