@@ -139,8 +139,9 @@ class Logger:
             [f"{si(rate)} steps/s", f"ETA {eta}"]
         parts = [f"[{self.label}] {si(step)}/{si(total)} steps ({100 * step / total:.1f}%)", *speed]
         for k in ["episode/return"] + [k for k in sorted(metrics) if k.startswith("episode/") and k != "episode/return"][:4]:
-            if k in metrics:
-                parts.append(f"{k.split('/', 1)[1]} {np.nanmean(metrics[k]):.3g}")
+            values = np.asarray(metrics.get(k, np.nan), np.float64)
+            if np.any(np.isfinite(values)):  # all NaN when no episode ended in the chunk: left out, without a warning
+                parts.append(f"{k.split('/', 1)[1]} {np.nanmean(values):.3g}")
         self.say(" | ".join(parts), transient=True)
 
     def say(self, line: str, transient: bool = False) -> None:

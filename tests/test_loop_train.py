@@ -17,7 +17,7 @@ import pytest
 
 import envs
 import train as train_cli
-from agents import driver, logger, loop, presets
+from agents import driver, loop, presets
 from agents.config import config_from_json, config_json, num_devices, total_updates, validate
 from agents.checkpoint import Checkpointer
 from agents.ppo import PPO, PPOConfig
@@ -541,29 +541,6 @@ def test_two_devices_match_one_device(tmp_path, arm_run):
         np.testing.assert_allclose(a, b, rtol=1e-3, atol=1e-5)  # the same update
 
 
-def test_a_resumed_run_logs_under_its_files_header(tmp_path, capsys):
-    """A run resumed by code that logs other metrics appends rows under the header its metrics.csv began with
-    (before: rows of another width, misaligned under it); a fresh file gets this code's columns."""
-    import csv
-
-    from agents.logger import Logger
-
-    path = tmp_path / "metrics.csv"
-    path.write_text("env_steps,seed,steps_per_second,loss/a\n10,0,5.0,1.5\n")
-    logger = Logger(str(tmp_path), seed=0, seeds=2, label="x", tensorboard=False, progress=False)
-    logger.log(20, {"loss/a": np.array([2.0, 3.0]), "loss/b": np.array([7.0, 8.0])},
-               {"steps_per_second": 9.0, "wall_seconds": 1.0})
-    with open(path, newline="") as f:
-        assert list(csv.reader(f)) == [["env_steps", "seed", "steps_per_second", "loss/a"], ["10", "0", "5.0", "1.5"],
-                                       ["20", "0", "9.0", "2.0"], ["20", "1", "9.0", "3.0"]]
-    assert "has no column for wall_seconds, loss/b" in capsys.readouterr().err
-    fresh = tmp_path / "fresh"
-    fresh.mkdir()
-    Logger(str(fresh), seed=3, seeds=1, label="x", tensorboard=False, progress=False).log(
-        5, {"loss/b": np.array([1.0])}, {"wall_seconds": 2.0})
-    assert (fresh / "metrics.csv").read_text().splitlines() == ["env_steps,seed,wall_seconds,loss/b", "5,3,2.0,1.0"]
-
-
 def test_next_steps_suggest_an_evaluation_sized_for_the_machine():
     cpu = train_cli.next_steps("runs/x", "cpu")
     assert "python eval.py --checkpoint runs/x --num-envs 64 " in cpu
@@ -575,19 +552,3 @@ def test_next_steps_keep_the_default_evaluation_on_a_gpu():
 
 def test_next_steps_name_the_extra_that_installs_tensorboard():
     assert 'tensorboard --logdir runs/x (pip install -e ".[tensorboard]")' in train_cli.next_steps("runs/x", "cpu")
-
-
-def _progress_line(tmp_path, capsys, compiled):
-    log = logger.Logger(str(tmp_path), seed=0, seeds=1, label="x", tensorboard=False)
-    log.progress(1_000, 3_000, 500.0, {}, compiled=compiled)
-    return capsys.readouterr().out
-
-
-def test_progress_gives_the_eta_of_the_remaining_steps(tmp_path, capsys):
-    assert "ETA 0:00:04" in _progress_line(tmp_path, capsys, compiled=False)  # 2,000 steps at 500 a second
-
-
-def test_progress_after_a_chunk_that_compiled_gives_no_eta(tmp_path, capsys):
-    line = _progress_line(tmp_path, capsys, compiled=True)
-    assert "incl. compiling" in line
-    assert "ETA after the next chunk" in line
