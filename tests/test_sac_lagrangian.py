@@ -2,11 +2,15 @@
 hand-computed numbers, the actor's penalty against the cost critics evaluated apart, and the multiplier stepped by
 an update."""
 
+import dataclasses
+import shutil
+
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from agents import driver, presets
 from agents.checkpoint import Checkpointer
 from agents.loop import Parallel, Transition
 from agents.sac import SAC, SACConfig, cost_critic_target, dual_ascent
@@ -196,3 +200,24 @@ def test_a_checkpoint_keeps_the_multiplier_and_the_cost_critics(tmp_path):
     assert float(restored.multiplier) == 7.25
     for a, b in zip(jax.tree.leaves(state.cost_q_params), jax.tree.leaves(restored.cost_q_params)):
         np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+
+
+def test_a_learner_only_resume_keeps_the_multiplier_and_holds_it_while_the_buffer_refills(tmp_path):
+    """A resumed run without env states (`checkpoint_envs=False`) starts from the stored multiplier and cost critics,
+    refills the buffer (the point-mass probe's min_replay_size, 1,024 transitions) without stepping them, then steps
+    again."""
+    config = presets.make_config("point-mass-sac", logdir=str(tmp_path / "a"), stop_after_steps=1_600,
+                                 num_timesteps=3_200, eval_envs=0, log_every=1_600, checkpoint_envs=False,
+                                 tensorboard=False, progress=False)
+    config = dataclasses.replace(config, algo=dataclasses.replace(config.algo, failure_budget=0.01, multiplier_lr=0.5))
+    first = driver.train(config).state.learner
+    assert float(first.multiplier[0]) > 0.0  # the probe's early episodes leave the arena: the multiplier grew
+    shutil.copytree(tmp_path / "a", tmp_path / "b")
+    # 63 vector steps of 16 envs: the buffer one step short of 1,024 transitions, no update has trained yet.
+    refilled = driver.train(dataclasses.replace(config, resume=True, stop_after_steps=1_600 + 1_008)).state.learner
+    assert int(refilled.replay.rows[0]) == 63
+    assert _same(refilled.multiplier, first.multiplier)
+    assert _same((refilled.cost_q_params, refilled.target_cost_q_params, refilled.cost_q_opt),
+                 (first.cost_q_params, first.target_cost_q_params, first.cost_q_opt))
+    resumed = driver.train(dataclasses.replace(config, logdir=str(tmp_path / "b"), resume=True, stop_after_steps=0))
+    assert float(resumed.state.learner.multiplier[0]) != float(first.multiplier[0])  # stepped after the refill
