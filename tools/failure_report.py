@@ -3,9 +3,11 @@
     python -m tools.failure_report --checkpoint results/checkpoints/ur5e-reach-ppo --num-envs 256
     python -m tools.failure_report --checkpoint RUN --env ur5e-reach-avoid --unit 2 --json report.json --plot report.png
     python -m tools.failure_report --from-json report.json --plot report.png      # the picture of a saved report
+    python -m tools.failure_report --checkpoint RUN --env.obstacle-speed-range 0 0   # the obstacles held still
 
 Runs one episode per env with the deterministic policy of one trained seed (`--unit`, an index into
-the checkpoint's seeds) through `agents.evaluation.rollout` and sorts every episode into one outcome:
+the checkpoint's seeds) through `agents.evaluation.rollout`, on the checkpoint's env config with eval.py's
+`--env.<field> VALUE` options replacing fields, and sorts every episode into one outcome:
 target reached, self collision, obstacle collision, or missed (neither). For collisions it names the
 geom pair that is closest (most penetrating) at the end of the colliding step, the step, and the
 start pose's clearance (its smallest self-collision distance); for misses the final distance.
@@ -32,9 +34,11 @@ from __future__ import annotations
 
 import argparse
 import collections
+import dataclasses
 import json
 
 import numpy as np
+import tyro
 
 from tools import run_cli
 
@@ -359,6 +363,19 @@ def figure(summary: dict, title: str, out: str | None = None):
     return plots.save(fig, out)
 
 
+def env_options(config, argv: list[str]):
+    """`config` with eval.py's `--env.<field> VALUE` options in `argv` replacing fields; any other option:
+    ValueError naming it."""
+    unknown = [a for a in argv if a.startswith("-") and not a.startswith("--env.")]
+    if unknown or (argv and not argv[0].startswith("--env.")):
+        raise ValueError(f"option {(unknown or argv)[0]!r} is unknown: allowed are this tool's options (--help) and "
+                         "--env.<field> VALUE.")
+    if not argv:
+        return config
+    args = ["--" + a[len("--env."):] if a.startswith("--env.") else a for a in argv]
+    return tyro.cli(type(config), default=config, args=args, prog="python -m tools.failure_report --env.")
+
+
 def main(argv: list[str] | None = None) -> dict:
     import envs
     from agents import evaluation, provenance
@@ -372,11 +389,15 @@ def main(argv: list[str] | None = None) -> dict:
     p.add_argument("--unit", type=int, default=0, help="index of the trained seed in the checkpoint (default 0)")
     p.add_argument("--seed", type=int, default=7, help="evaluation seed (default 7)")
     p.add_argument("--json", metavar="PATH", help="write the summary and every episode's row")
-    args = p.parse_args(argv)
+    p.add_argument("--allow-env-mismatch", action="store_true",
+                   help="as eval.py's: warn instead of refusing where the --env.* options change what the policy saw")
+    args, env_argv = p.parse_known_args(argv)
     if bool(args.checkpoint) == bool(args.from_json):
         raise ValueError("give exactly one of --checkpoint PATH (run the episodes) and --from-json PATH (a report "
                          "written earlier).")
     if args.from_json:
+        if env_argv:
+            raise ValueError(f"{env_argv[0]!r} is invalid with --from-json: allowed only with --checkpoint.")
         if not args.plot:
             raise ValueError("--from-json needs --plot PNG: allowed is drawing a report written earlier.")
         with open(args.from_json) as f:
@@ -390,15 +411,20 @@ def main(argv: list[str] | None = None) -> dict:
     if args.num_envs < 1:
         raise ValueError(f"--num-envs {args.num_envs} is invalid: allowed is an integer >= 1.")
     env_name = args.env or policy.train_env_name
-    config = envs.make_config(env_name, policy.train_env_config)
+    base = envs.make_config(env_name, policy.train_env_config)
+    config = env_options(base, env_argv)
+    changed = ", ".join(f"{f.name}={getattr(config, f.name)}" for f in dataclasses.fields(config)
+                        if getattr(config, f.name) != getattr(base, f.name))
     # What made it, read before the run: rewriting a tracked report would otherwise mark the code modified.
     made = provenance.stamp(provenance.command(None if argv is None else [__file__] + list(argv)))
-    records = evaluation.rollout(policy, env_name, config, num_envs=args.num_envs, eval_seed=args.seed, unit=args.unit)
+    records = evaluation.rollout(policy, env_name, config, num_envs=args.num_envs, eval_seed=args.seed, unit=args.unit,
+                                 allow_env_mismatch=args.allow_env_mismatch)  # checked before any episode runs
     env = envs.from_config(env_name, config)
     rows = classify(env.robot, records, getattr(config, "obstacle_radius", None), getattr(env, "checked_geoms", None),
                     getattr(config, "target_radius", None))
     summary = summarize(rows, getattr(config, "joint_limit_margin", NEAR_LIMIT))
-    title = f"{args.checkpoint} (seed {policy.units[args.unit]}) on {env_name}, eval seed {args.seed}"
+    title = f"{args.checkpoint} (seed {policy.units[args.unit]}) on {env_name}{f' ({changed})' if changed else ''}, " \
+            f"eval seed {args.seed}"
     print(markdown(summary, title))
     if args.plot:
         figure(summary, title, args.plot)
