@@ -114,8 +114,9 @@ corrected moving task."""
 
 _SURFACE = {"env.link_distance": "surface"}
 """Each link's distance to an obstacle measured to its capsules' surfaces (observed, and in eq. 3's penalty), where
-the paper's measures it from the link frame's origin, blind to contacts along a long link: the upper arm and forearm
-(UR5e), link3 and link5 (Panda) take most of the agents' collisions (results/obstacles)."""
+the paper's measures it from the link frame's origin, which puts 45-67 % of the contacts along a long link (UR5e
+upper arm and forearm, Panda link3 and link5) over 10 cm away; the UR5e agents are struck mostly on those two links
+(results/obstacles, tools/link_distance_probe.py)."""
 _FASTER = {"env.obstacle_speed_range": (0.05, 0.3)}
 """Obstacles up to 1.5 times the task's top speed in training (the -fast rows, evaluated at the task's speeds by their
 cross rows): the agents' collisions grow steeply with the obstacles' speed (results/obstacles)."""
@@ -263,7 +264,7 @@ register(Experiment(
          "task's speeds by their cross rows: with the obstacles held still the budget agents collide in 2.7-3.0 %, "
          "at the task's speeds in 5.1-6.3 %, at 0.2-0.3 m/s in 10.7-12.3 % (results/obstacles). The -surface rows "
          "measure each link's distance to the obstacles (observed and penalised) to its capsules' surfaces instead of "
-         "its frame origin (the paper's d_i), which does not see an obstacle along a long link. "
+         "its frame origin (the paper's d_i), which puts 45-67 % of the contacts along a long link over 10 cm away. "
          "The links rows add link_pos (each link's position: with obstacle_pos, the direction from each link to each "
          "obstacle, which the link distances leave out; the collisions analysed mostly need the arm's own motion) to "
          "ur5e-ahead-jl (80.5 % at 7.6 %) and panda-plus-ahead-300m (86.1 ± 0.7 % at 8.7 ± 0.7 %)."))
