@@ -47,6 +47,7 @@ def test_command_line_draws_a_saved_report(tmp_path):
     ([], "give exactly one of --checkpoint PATH"),
     (["--from-json", "r.json"], "--from-json needs --plot PNG"),
     (["--from-json", "r.json", "--plot", "r.png", "--env.substeps", "2"], "'--env.substeps' is invalid with --from-json"),
+    (["--from-json", "r.json", "--plot", "r.png", "--samples", "2"], "option '--samples' is unknown"),
 ])
 def test_command_line_refuses_incomplete_input(argv, named):
     with pytest.raises(ValueError, match=named):
@@ -55,8 +56,11 @@ def test_command_line_refuses_incomplete_input(argv, named):
 
 def test_env_options_replace_the_checkpoints_fields():
     base = envs.make_config("ur5e-reach-avoid", obstacle_motion="linear")
-    config = failure_report.env_options(base, ["--env.obstacle-speed-range", "0", "0.01", "--env.substeps", "4"])
-    assert (config.obstacle_speed_range, config.substeps) == ((0.0, 0.01), 4)
+    config = failure_report.env_options(base, ["--env.obstacle-speed-range", "0", "0.01", "--env.substeps", "4",
+                                               "--env.collision-penalty", "-1"])
+    assert config.obstacle_speed_range == (0.0, 0.01)
+    assert config.substeps == 4
+    assert config.collision_penalty == -1.0  # a negative value is a value, not an option
     assert config.obstacle_motion == "linear"  # the rest kept
 
 
@@ -66,8 +70,9 @@ def test_an_option_other_than_env_fields_is_refused_naming_it(argv):
         failure_report.env_options(envs.make_config("ur5e-reach-avoid"), argv)
 
 
-def test_an_impossible_env_value_is_refused_naming_the_field_before_any_episode():
-    with pytest.raises(ValueError, match="substeps"):
+def test_an_impossible_env_value_is_refused_naming_the_field_before_any_episode(monkeypatch):
+    monkeypatch.setattr(failure_report, "classify", lambda *a, **k: pytest.fail("episodes were run"))
+    with pytest.raises(ValueError, match=r"substeps=0 is invalid: allowed is an integer >= 1"):
         failure_report.main(["--checkpoint", SHIPPED, "--num-envs", "1", "--env.substeps", "0"])
 
 

@@ -363,24 +363,42 @@ def figure(summary: dict, title: str, out: str | None = None):
     return plots.save(fig, out)
 
 
+def _is_option(token: str) -> bool:
+    """A command-line option, not a value (a negative number is a value)."""
+    try:
+        float(token)
+        return False
+    except ValueError:
+        return token.startswith("-")
+
+
+def refuse_unknown_options(argv: list[str]) -> None:
+    """ValueError naming the first token left over by the tool's own options that is neither an `--env.<field>`
+    option nor one of its values."""
+    unknown = [a for i, a in enumerate(argv)
+               if (_is_option(a) and not a.startswith("--env.")) or (i == 0 and not _is_option(a))]
+    if unknown:
+        raise ValueError(f"option {unknown[0]!r} is unknown: allowed are this tool's options (--help) and "
+                         "--env.<field> VALUE (eval.py --checkpoint PATH --help lists the fields).")
+
+
 def env_options(config, argv: list[str]):
-    """`config` with eval.py's `--env.<field> VALUE` options in `argv` replacing fields; any other option:
-    ValueError naming it."""
-    unknown = [a for a in argv if a.startswith("-") and not a.startswith("--env.")]
-    if unknown or (argv and not argv[0].startswith("--env.")):
-        raise ValueError(f"option {(unknown or argv)[0]!r} is unknown: allowed are this tool's options (--help) and "
-                         "--env.<field> VALUE.")
+    """`config` with eval.py's `--env.<field> VALUE` options in `argv` replacing fields; any other option: ValueError
+    naming it; a bad value: tyro's message and exit status 2, as in eval.py."""
+    refuse_unknown_options(argv)
     if not argv:
         return config
     args = ["--" + a[len("--env."):] if a.startswith("--env.") else a for a in argv]
-    return tyro.cli(type(config), default=config, args=args, prog="python -m tools.failure_report --env.")
+    return tyro.cli(type(config), default=config, args=args, prog="python -m tools.failure_report --env.<field>")
 
 
 def main(argv: list[str] | None = None) -> dict:
     import envs
     from agents import evaluation, provenance
 
-    p = argparse.ArgumentParser(prog="python -m tools.failure_report", description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(prog="python -m tools.failure_report", description=__doc__.splitlines()[0],
+                                epilog="--env.<field> VALUE replaces a field of the checkpoint's env config, as in "
+                                       "eval.py (eval.py --checkpoint PATH --help lists the fields).")
     p.add_argument("--checkpoint", help="train.py logdir, checkpoint step directory or policy export")
     p.add_argument("--from-json", metavar="PATH", help="draw --plot from a report written earlier with --json")
     p.add_argument("--plot", metavar="PNG", help="the report as a picture (needs matplotlib: the viz extra)")
@@ -395,6 +413,7 @@ def main(argv: list[str] | None = None) -> dict:
     if bool(args.checkpoint) == bool(args.from_json):
         raise ValueError("give exactly one of --checkpoint PATH (run the episodes) and --from-json PATH (a report "
                          "written earlier).")
+    refuse_unknown_options(env_argv)
     if args.from_json:
         if env_argv:
             raise ValueError(f"{env_argv[0]!r} is invalid with --from-json: allowed only with --checkpoint.")

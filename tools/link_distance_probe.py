@@ -3,8 +3,9 @@
     python -m tools.link_distance_probe --env ur5e-reach-avoid --num-poses 200000 --json out.json
 
 Learner-free and kinematic: `num_poses` joint configurations drawn uniformly from the joint range, each with one
-obstacle of radius 0.05-0.1 m (the moving-obstacle task's range) centred at a random robot geom's centre moved by a
-Gaussian offset of `offset` m per axis, so that contacts are common. For each link it counts the poses where the
+obstacle of radius 0.05-0.1 m (the moving-obstacle task's range) centred at the centre of a random geom of the links
+the distance covers (`robot.obstacle_geoms`) moved by a Gaussian offset of `offset` m per axis, so that contacts are
+common. The shares therefore describe these random poses and placements, not a trained agent's episodes. For each link it counts the poses where the
 link's capsules touch the obstacle (`link_distance="surface"` < 0) and summarises what the `"origin"` distance of
 that link (the observation `link_obstacle_dist` and eq. (3)'s penalty read it) says then: its median, its 90th
 percentile and the share of contacts it puts over 10 cm away. `nearest` does the same for the smallest origin
@@ -47,13 +48,13 @@ def summarize(origin: np.ndarray, surface: np.ndarray, names: list[str]) -> dict
 
 def probe(env_name: str, num_poses: int, offset: float, seed: int) -> dict:
     """`summarize` over `num_poses` random poses of `env_name`'s robot, one obstacle near each."""
-    robot = envs.make(env_name, substeps=2).unwrapped.robot
+    robot = envs.make(env_name).unwrapped.robot  # its kinematics and capsules only: nothing is simulated
     k_pose, k_radius, k_geom, k_offset = jax.random.split(jax.random.PRNGKey(seed), 4)
     qpos = jax.random.uniform(k_pose, (num_poses, len(robot.joint_low)), minval=robot.joint_low,
                               maxval=robot.joint_high)
-    kin = jax.vmap(robot.kinematics)(qpos)
+    kin = robot.kinematics(qpos)  # batched over the poses
     radius = jax.random.uniform(k_radius, (num_poses,), minval=0.05, maxval=0.1)
-    geom = jax.random.randint(k_geom, (num_poses,), 0, kin.geom_xpos.shape[1])
+    geom = jnp.asarray(robot.obstacle_geoms)[jax.random.randint(k_geom, (num_poses,), 0, len(robot.obstacle_geoms))]
     center = kin.geom_xpos[jnp.arange(num_poses), geom] + offset * jax.random.normal(k_offset, (num_poses, 3))
 
     def distances(mode):
@@ -65,6 +66,7 @@ def probe(env_name: str, num_poses: int, offset: float, seed: int) -> dict:
 
 
 def markdown(summary: dict) -> str:
+    """The summary as a table: one row per link and one for the nearest link."""
     rows = ["| link | contacts | origin distance at contact: median | 90th percentile | share over 10 cm |",
             "|---|---:|---:|---:|---:|"]
     for name, s in [*summary["links"].items(), ("nearest link", summary["nearest"])]:
@@ -77,8 +79,9 @@ def markdown(summary: dict) -> str:
 
 
 def main(argv: list[str] | None = None) -> dict:
+    """Parses the options (refusing impossible ones, naming them), probes, prints the table, writes --json."""
     p = argparse.ArgumentParser(prog="python -m tools.link_distance_probe", description=__doc__.splitlines()[0])
-    p.add_argument("--env", default="ur5e-reach-avoid", help="an arm env with obstacles (its robot is probed)")
+    p.add_argument("--env", default="ur5e-reach-avoid", help="an arm env (its robot's links are probed)")
     p.add_argument("--num-poses", type=int, default=200_000)
     p.add_argument("--offset", type=float, default=0.12, help="std (m) of the obstacle's offset from a geom centre")
     p.add_argument("--seed", type=int, default=0)
@@ -88,8 +91,9 @@ def main(argv: list[str] | None = None) -> dict:
         raise ValueError(f"--num-poses {args.num_poses} is invalid: allowed is an integer >= 1.")
     if not args.offset > 0:
         raise ValueError(f"--offset {args.offset} is invalid: allowed is a number > 0 (m).")
-    if envs.registry.spec(args.env).robot is None:
-        raise ValueError(f"--env {args.env!r} is invalid: allowed is an arm env (it has no robot to probe).")
+    if envs.registry.spec(args.env).robot is None:  # an unknown name: ValueError listing the names
+        arms = [name for name in envs.registry.names() if envs.registry.spec(name).robot is not None]
+        raise ValueError(f"--env {args.env!r} is invalid: it has no robot to probe; allowed are {', '.join(arms)}.")
     made = provenance.stamp(provenance.command(None if argv is None else [__file__] + list(argv)))
     summary = probe(args.env, args.num_poses, args.offset, args.seed)
     print(markdown(summary))

@@ -114,9 +114,9 @@ corrected moving task."""
 
 _SURFACE = {"env.link_distance": "surface"}
 """Each link's distance to an obstacle measured to its capsules' surfaces (observed, and in eq. 3's penalty), where
-the paper's measures it from the link frame's origin, which puts 45-67 % of the contacts along a long link (UR5e
-upper arm and forearm, Panda link3 and link5) over 10 cm away; the UR5e agents are struck mostly on those two links
-(results/obstacles, tools/link_distance_probe.py)."""
+the paper's measures it from the link frame's origin, which in random poses reads over 10 cm at about half or more
+of the contacts along a long link (UR5e upper arm and forearm, Panda link3 and link5; tools/link_distance_probe.py);
+the UR5e agents are struck mostly on those two links (results/obstacles)."""
 _FASTER = {"env.obstacle_speed_range": (0.05, 0.3)}
 """Obstacles up to 1.5 times the task's top speed in training (the -fast rows, evaluated at the task's speeds by their
 cross rows): the agents' collisions grow steeply with the obstacles' speed (results/obstacles)."""
@@ -139,8 +139,8 @@ def _budget(name: str, robot: str, budget: float, num_timesteps: int | None = No
 register(Experiment(
     "obstacles-dodge-clear", "Among 3 moving obstacles drawn clear of the base, every robot geom checked: predicted "
     "link distances (the arm held still or moving on), the links' positions, a joint-limit penalty, collision "
-    "penalties, a failure budget (PPO- and SAC-Lagrangian), fast SAC, longer training and faster obstacles in "
-    "training (screening: 1 seed a "
+    "penalties, a failure budget (PPO- and SAC-Lagrangian), fast SAC, longer training, faster obstacles in "
+    "training and link distances to the capsules' surfaces (screening: 1 seed a "
     "row; two long rows have 5 planned)",
     "not in the paper (the future work of its Discussion)",
     (Run("ur5e-ahead-jl", "ur5e-reach-avoid-ppo-moving3", {**_PLUS_AHEAD, **_JL},
@@ -264,7 +264,8 @@ register(Experiment(
          "task's speeds by their cross rows: with the obstacles held still the budget agents collide in 2.7-3.0 %, "
          "at the task's speeds in 5.1-6.3 %, at 0.2-0.3 m/s in 10.7-12.3 % (results/obstacles). The -surface rows "
          "measure each link's distance to the obstacles (observed and penalised) to its capsules' surfaces instead of "
-         "its frame origin (the paper's d_i), which puts 45-67 % of the contacts along a long link over 10 cm away. "
+         "its frame origin (the paper's d_i), which in random poses reads over 10 cm at about half or more of the contacts "
+         "along a long link. "
          "The links rows add link_pos (each link's position: with obstacle_pos, the direction from each link to each "
          "obstacle, which the link distances leave out; the collisions analysed mostly need the arm's own motion) to "
          "ur5e-ahead-jl (80.5 % at 7.6 %) and panda-plus-ahead-300m (86.1 ± 0.7 % at 8.7 ± 0.7 %)."))

@@ -321,6 +321,7 @@ register(Experiment(
          "there: UR5e 90.3-91.2 % against 89.1-89.9 %, Panda 96.6-96.9 % against 96.2-96.5 %, five seeds each). "
          "About 25 minutes a seed on one H200 (about 0.3M steps a second). ur5e-sac-fast-surface measures the "
          "links' distances to the obstacle to their capsules' surfaces (observed and in eq. 3's penalty) instead of "
-         "from their frame origins (the paper's d_i), which put 45-67 % of the contacts along the upper arm and "
-         "forearm over 10 cm away (results/obstacles): the preset's 200M steps, one seed; its misses (about 7 %, "
+         "from their frame origins (the paper's d_i), which in random poses read over 10 cm at about half or more of "
+         "the contacts along the upper arm and forearm (results/obstacles): the preset's 200M steps, one seed; its "
+         "misses (about 7 %, "
          "against 2.5 % obstacle collisions) may come from keeping clear of an obstacle the agent cannot place."))
