@@ -69,7 +69,7 @@ def _names(robot, geoms) -> list[str]:
 
 def classify(robot, records: dict, obstacle_radius: float | None = None, geoms=None,
              target_radius: float | None = None) -> list[dict]:
-    """One dict per env: outcome, step (episode length), start clearance and, by outcome, the
+    """One dict per env: outcome, step (episode length), start pose's self-collision clearance and, by outcome, the
     colliding pair / geom or the final distance. `records` as `evaluation.rollout` returns them;
     with obstacles in them and their radii (`obstacle_radius`, or recorded per episode), also whether
     one lies between the end effector and the target at the start (and, for misses, at the end).
@@ -281,9 +281,9 @@ def markdown(summary: dict, title: str) -> str:
         lines += ["", "| collision | episodes |", "|---|---:|"] + [f"| {k} | {v} |" for k, v in c["by_part"].items()]
         q = c["step_quartiles"]
         lines += ["", f"collision step quartiles {q[0]:g} / {q[1]:g} / {q[2]:g}; within the first 5 steps "
-                      f"{pct(c['within_first_5_steps'])}; start clearance (median) of collided episodes "
-                      f"{c['start_clearance_median'] * 100:.1f} cm against {summary['start_clearance_median_all'] * 100:.1f} cm "
-                      "over all episodes"]
+                      f"{pct(c['within_first_5_steps'])}; start pose's self-collision clearance (median) of collided "
+                      f"episodes {c['start_clearance_median'] * 100:.1f} cm against "
+                      f"{summary['start_clearance_median_all'] * 100:.1f} cm over all episodes"]
         if "obstacle_approach" in c:
             lines += ["", f"obstacle collisions by whose motion over the last {APPROACH_STEPS} steps brought the "
                           "contact: " + ", ".join(f"{k} {v}" for k, v in c["obstacle_approach"].items())]
