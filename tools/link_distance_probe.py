@@ -5,12 +5,12 @@
 Learner-free and kinematic: `num_poses` joint configurations drawn uniformly from the joint range, each with one
 obstacle of radius 0.05-0.1 m (the moving-obstacle task's range) centred at the centre of a random geom of the links
 the distance covers (`robot.obstacle_geoms`) moved by a Gaussian offset of `offset` m per axis, so that contacts are
-common. The shares therefore describe these random poses and placements, not a trained agent's episodes. For each link it counts the poses where the
-link's capsules touch the obstacle (`link_distance="surface"` < 0) and summarises what the `"origin"` distance of
-that link (the observation `link_obstacle_dist` and eq. (3)'s penalty read it) says then: its median, its 90th
-percentile and the share of contacts it puts over 10 cm away. `nearest` does the same for the smallest origin
-distance over all links, which is what a policy could at best read off the observation. A contact along a long
-link sits far from the link's origin, so its origin distance says the obstacle is far.
+common: the shares describe these random poses and placements, not a trained agent's episodes. For each link it
+counts the poses where the link's capsules touch the obstacle (`link_distance="surface"` < 0) and summarises what
+the `"origin"` distance of that link (the observation `link_obstacle_dist` and eq. (3)'s penalty read it) says
+then: its median, its 90th percentile and the share of contacts it puts over 10 cm away. `nearest` does the same
+for the smallest origin distance over all links, which is what a policy could at best read off the observation. A
+contact along a long link sits far from the link's origin, so its origin distance says the obstacle is far.
 """
 
 from __future__ import annotations
