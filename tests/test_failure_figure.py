@@ -46,7 +46,8 @@ def test_command_line_draws_a_saved_report(tmp_path):
 @pytest.mark.parametrize("argv, named", [
     ([], "give exactly one of --checkpoint PATH"),
     (["--from-json", "r.json"], "--from-json needs --plot PNG"),
-    (["--from-json", "r.json", "--plot", "r.png", "--env.substeps", "2"], "'--env.substeps' is invalid with --from-json"),
+    (["--from-json", "r.json", "--plot", "r.png", "--env.substeps", "2"],
+     "'--env.substeps' is invalid with --from-json"),
     (["--from-json", "r.json", "--plot", "r.png", "--samples", "2"], "option '--samples' is unknown"),
 ])
 def test_command_line_refuses_incomplete_input(argv, named):
