@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 import envs
+from mujoco_reference import contact_model
 from tools import failure_report
 
 
@@ -47,9 +48,25 @@ def test_a_contact_mid_forearm_reads_over_10_cm_from_every_link_origin():
     assert row["origin_distance_before"] > 0.1
 
 
+def test_the_true_clearance_on_the_step_before_is_the_forearm_capsules_distance_to_the_sphere():
+    """Touching on the step before too: the robot's smallest capsule-to-sphere distance then, from CPU MuJoCo's
+    `mj_geomDistance` (the same obstacle and pose as at the collision, so the same clearance)."""
+    robot, records, _ = _forearm_contact(before=0.05)
+    row = failure_report.classify(robot, records)[0]
+    model = contact_model(robot, obstacle_radius=0.05)
+    data = mujoco.MjData(model)
+    data.qpos[:] = records["qpos"][2, 0]
+    data.mocap_pos[robot.obstacle_mocap] = records["obstacle_pos"][2, 0]
+    mujoco.mj_kinematics(model, data)
+    expected = min(mujoco.mj_geomDistance(model, data, model.geom("obstacle").id, int(g), 1.0, None)
+                   for g in robot.obstacle_geoms)
+    assert row["surface_distance_before"] == pytest.approx(expected, abs=1e-4)
+
+
 def test_the_summary_gives_the_median_reading_and_the_share_over_10_cm():
     rows = [{"outcome": "obstacle collision", "what": "g", "step": 9, "start_clearance": 0.1,
-             "origin_distance_before": d, "at_limit": [], "end_motion": 0.0, "joint_margin": 1.0}
-            for d in (0.05, 0.2, 0.3)]
-    reading = failure_report.summarize(rows)["collisions"]["origin_distance_before"]
-    assert reading == pytest.approx({"median": 0.2, "share_over_10cm": 2 / 3})
+             "origin_distance_before": d, "surface_distance_before": d / 10, "at_limit": [], "end_motion": 0.0,
+             "joint_margin": 1.0} for d in (0.05, 0.2, 0.3)]
+    collisions = failure_report.summarize(rows)["collisions"]
+    assert collisions["origin_distance_before"] == pytest.approx({"median": 0.2, "share_over_10cm": 2 / 3})
+    assert collisions["surface_distance_before"] == pytest.approx({"median": 0.02, "share_over_10cm": 0.0})

@@ -24,7 +24,8 @@ the end effector had been in the target before it (`steps_in_target`: a collidin
 target; > 0 when the arm was hit after reaching) and whether it was in the target on the step before
 (`in_target_before`), and what the paper's link distance read on the step the colliding action was chosen from
 (`origin_distance_before`: the nearest link frame origin's distance to an obstacle surface, which the observation
-`link_obstacle_dist` gives with `link_distance="origin"`; a contact along a long link can sit far from every origin).
+`link_obstacle_dist` gives with `link_distance="origin"`; a contact along a long link can sit far from every origin)
+beside the robot's true clearance then (`surface_distance_before`).
 Outcomes are also binned by the target's height above the robot's mounting plane (`by_target_height`), and each
 episode records how far its end effector starts from the target (`start_distance`), how far it moved
 over the episode's last `END_STEPS` steps (`end_motion`: near 0 when the arm has stopped) and the
@@ -126,9 +127,12 @@ def classify(robot, records: dict, obstacle_radius: float | None = None, geoms=N
         # What the paper's link distance read on the step the last action was chosen from: each link's frame origin
         # to the nearest obstacle's surface (the observation link_obstacle_dist with link_distance="origin").
         decided = np.maximum(last - 1, 0)
-        links = np.asarray(robot.link_positions(robot.kinematics(jnp.asarray(qpos[decided, np.arange(n)])).xpos))
+        kin_decided = robot.kinematics(jnp.asarray(qpos[decided, np.arange(n)]))
+        links = np.asarray(robot.link_positions(kin_decided.xpos))
         where, radius = at(decided)
-        origin_read = (np.linalg.norm(links[:, None] - where[:, :, None], axis=-1) - radius[:, :, None]).min(axis=(1, 2))
+        origin_read = (np.linalg.norm(links[:, None] - where[:, :, None], axis=-1)
+                       - radius[:, :, None]).min(axis=(1, 2))
+        surface_before = clearances(kin_decided, where, radius).min(axis=(1, 2))  # the true clearance then
     if between:
         # an obstacle's sphere on the segment from the end effector to the target (any of them)
         target = jnp.asarray(np.asarray(records["target_pos"])[0])
@@ -172,7 +176,8 @@ def classify(robot, records: dict, obstacle_radius: float | None = None, geoms=N
                        approach=_approach(arm_held[i], obstacles_held[i], obstacle_end[i].min()),
                        approach_clearances={"arm_held": float(arm_held[i]),
                                             "obstacles_held": float(obstacles_held[i])},
-                       origin_distance_before=float(origin_read[i]))
+                       origin_distance_before=float(origin_read[i]),
+                       surface_distance_before=float(surface_before[i]))
             if "episode/steps_in_target" in metrics:  # steps in the target before the colliding one
                 row["steps_in_target"] = int(metrics["episode/steps_in_target"][i])
             if in_target_before is not None:
@@ -239,10 +244,11 @@ def summarize(rows: list[dict], near_limit: float = NEAR_LIMIT) -> dict:
                 summary["collisions"]["obstacle_approach_after_target"] = approaches(after)
         if "in_target_before" in fields:
             summary["collisions"]["obstacle_in_target_before"] = sum(r["in_target_before"] for r in obstacle)
-        if "origin_distance_before" in fields:
-            read = np.array([r["origin_distance_before"] for r in obstacle])
-            summary["collisions"]["origin_distance_before"] = {"median": float(np.median(read)),
-                                                                "share_over_10cm": float(np.mean(read > 0.1))}
+        for name in ("origin_distance_before", "surface_distance_before"):
+            if name in fields:
+                read = np.array([r[name] for r in obstacle])
+                summary["collisions"][name] = {"median": float(np.median(read)),
+                                               "share_over_10cm": float(np.mean(read > 0.1))}
     summary["start_clearance_median_all"] = float(np.median([r["start_clearance"] for r in rows]))
     if by["missed"]:
         index, labels = _bins([r["final_distance"] for r in by["missed"]], (0.0,) + MISS_BINS)
@@ -312,6 +318,10 @@ def markdown(summary: dict, title: str) -> str:
             lines += ["", "obstacle collisions: the nearest link origin's distance to an obstacle surface on the step "
                           f"before (the paper's d_i, as observed): median {o['median'] * 100:.1f} cm, over 10 cm in "
                           f"{pct(o['share_over_10cm'])}"]
+        if "surface_distance_before" in c:
+            o = c["surface_distance_before"]
+            lines += ["", "obstacle collisions: the robot's true clearance from the obstacles on the step before: "
+                          f"median {o['median'] * 100:.1f} cm, over 10 cm in {pct(o['share_over_10cm'])}"]
     if "missed_final_distance" in summary:
         lines += ["", "missed episodes by final distance: " + ", ".join(
             f"{k}: {v}" for k, v in summary["missed_final_distance"].items())]
