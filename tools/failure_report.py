@@ -128,10 +128,10 @@ def classify(robot, records: dict, obstacle_radius: float | None = None, geoms=N
         # to the nearest obstacle's surface (the observation link_obstacle_dist with link_distance="origin").
         decided = np.maximum(last - 1, 0)
         kin_decided = robot.kinematics(jnp.asarray(qpos[decided, np.arange(n)]))
-        links = np.asarray(robot.link_positions(kin_decided.xpos))
         where, radius = at(decided)
-        origin_read = (np.linalg.norm(links[:, None] - where[:, :, None], axis=-1)
-                       - radius[:, :, None]).min(axis=(1, 2))
+        origin_read = np.min([np.asarray(robot.link_obstacle_distances(
+            kin_decided.xpos, kin_decided.geom_xpos, kin_decided.geom_xmat, jnp.asarray(where[:, j]),
+            jnp.asarray(radius[:, j, None]), "origin")) for j in range(count)], axis=(0, 2))
         surface_before = clearances(kin_decided, where, radius).min(axis=(1, 2))  # the true clearance then
     if between:
         # an obstacle's sphere on the segment from the end effector to the target (any of them)
