@@ -93,5 +93,6 @@ def test_the_summary_gives_the_median_reading_and_the_share_over_10_cm():
 
 def test_the_report_prints_both_readings():
     text = failure_report.markdown(failure_report.summarize(_rows()), "t")
-    assert "(the paper's d_i, as observed): median 20.0 cm, over 10 cm in 66.7 %" in text
-    assert "true clearance from the obstacles on the step before: median 2.0 cm, over 10 cm in 0.0 %" in text
+    assert '(the paper\'s d_i, observed with link_distance="origin"): median 20.0 cm, over 10 cm in 66.7 %' in text
+    assert ('true clearance from the obstacles on the step before (observed with link_distance="surface"): '
+            "median 2.0 cm, over 10 cm in 0.0 %") in text

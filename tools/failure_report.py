@@ -316,11 +316,12 @@ def markdown(summary: dict, title: str) -> str:
         if "origin_distance_before" in c:
             o = c["origin_distance_before"]
             lines += ["", "obstacle collisions: the nearest link origin's distance to an obstacle surface on the step "
-                          f"before (the paper's d_i, as observed): median {o['median'] * 100:.1f} cm, over 10 cm in "
-                          f"{pct(o['share_over_10cm'])}"]
+                          "before (the paper's d_i, observed with link_distance=\"origin\"): "
+                          f"median {o['median'] * 100:.1f} cm, over 10 cm in {pct(o['share_over_10cm'])}"]
         if "surface_distance_before" in c:
             o = c["surface_distance_before"]
-            lines += ["", "obstacle collisions: the robot's true clearance from the obstacles on the step before: "
+            lines += ["", "obstacle collisions: the robot's true clearance from the obstacles on the step before "
+                          "(observed with link_distance=\"surface\"): "
                           f"median {o['median'] * 100:.1f} cm, over 10 cm in {pct(o['share_over_10cm'])}"]
     if "missed_final_distance" in summary:
         lines += ["", "missed episodes by final distance: " + ", ".join(
