@@ -50,6 +50,9 @@ evaluator, Brax's: an episode that ended in a collision counts as 0 m; `distance
 Planner (`agents.planner`): `--policy mppi` plans every step with the env itself as its model (MPPI:
 `--planner.samples` sequences of `--planner.horizon` steps, weighted by return), a reference with a compute cost
 (samples x horizon x iterations simulated env steps per env step, in the JSON as `model_steps_per_step`).
+`--checkpoint PATH --shield` shields a trained policy with it (`agents.shield`): the policy acts unless its own
+rollout of `--planner.horizon` steps in the model collides; then the planner's action, refined around the policy's
+sequence, replaces it (horizon + samples x horizon x iterations model steps per env step).
 
 Video: `--video PATH` (.mp4 or .gif) renders the first `--video-envs` envs' first episodes (a grid)
 with MuJoCo's offscreen renderer (`envs.render`; headless: EGL or OSMesa, chosen
@@ -109,7 +112,10 @@ class EvalConfig(Generic[EnvConfigT]):
     policy: Annotated[str | None, tyro.conf.arg(metavar="NAME")] = None
     """What to evaluate (or --checkpoint): a baseline, one of random, standstill, pseudo_ik, or the planner, mppi."""
     planner: planners.PlannerConfig = planners.PlannerConfig()
-    """The planner's options (with --policy mppi)."""
+    """The planner's options (with --policy mppi or --shield)."""
+    shield: bool = False
+    """Shield each checkpoint's policy with the planner (`agents.shield`): the policy acts unless its own rollout of
+    --planner.horizon steps in the model collides, then the planner's action refined around it."""
     env_name: Annotated[str | None, tyro.conf.arg(name="env", metavar="NAME")] = None
     """Registered env name; None: the checkpoint's env."""
     num_envs: int = 4096
@@ -166,9 +172,12 @@ def check(args: EvalConfig) -> None:
                          f"{', '.join(POLICIES)}).")
     if args.policy is not None and args.policy not in POLICIES:
         raise ValueError(f"--policy={args.policy!r} is unknown: allowed are {', '.join(POLICIES)}.")
-    if args.planner != planners.PlannerConfig() and args.policy != planners.NAME:
+    if args.shield and args.policy:
+        raise ValueError(f"--shield is invalid with --policy {args.policy}: allowed only with --checkpoint (a baseline "
+                         "or the planner has no policy of its own to shield).")
+    if args.planner != planners.PlannerConfig() and args.policy != planners.NAME and not args.shield:
         raise ValueError(f"--planner.* options are invalid with {'--policy ' + args.policy if args.policy else '--checkpoint'}:"
-                         f" allowed only with --policy {planners.NAME}.")
+                         f" allowed only with --policy {planners.NAME} or --checkpoint PATH --shield.")
     for name in ("num_envs", "seeds", "last_steps", "video_envs"):
         if getattr(args, name) < 1:
             raise ValueError(f"--{name.replace('_', '-')}={getattr(args, name)} is invalid: allowed is an integer >= 1.")
@@ -183,6 +192,8 @@ def check(args: EvalConfig) -> None:
     for option in ("json", "csv", "video"):
         if getattr(args, option):
             check_output(f"--{option}", getattr(args, option), args.force)
+    if args.stochastic and args.shield:
+        raise ValueError("--stochastic is invalid with --shield: the shield checks the policy's deterministic rollout.")
     if args.stochastic and args.policy:
         raise ValueError(f"--stochastic is invalid with --policy {args.policy}: allowed only with --checkpoint (the "
                          "baselines and the planner have no action distribution).")
@@ -207,6 +218,8 @@ def main(argv: list[str] | None = None) -> list:
     if args.checkpoint:
         policies = [evaluation.with_compute_dtype(evaluation.checkpoint_policy(path), args.compute_dtype)
                     for path in args.checkpoint]
+        if args.shield:
+            policies = [evaluation.shielded_policy(policy, args.planner) for policy in policies]
     elif args.policy == planners.NAME:
         policies = [evaluation.planner_policy(args.planner)]
     else:

@@ -29,7 +29,7 @@ import jax
 import numpy as np
 
 import envs
-from agents import baselines, driver, export, intervals, planner as planners, program_store, registry
+from agents import baselines, driver, export, intervals, planner as planners, program_store, registry, shield
 from agents.compatibility import LAYOUT_FIELDS, check, check_compatible, unseen_constants  # noqa: F401 (evaluation.check, ...)
 from envs import physics
 from agents.loop import make_evaluate, make_evaluate_stacked
@@ -61,14 +61,14 @@ class Policy:
     """What to evaluate: a checkpoint's policy (one unit per trained seed), a baseline or the planner."""
 
     kind: str
-    """"checkpoint", "baseline" or "planner"."""
+    """"checkpoint", "baseline", "planner" or "shielded" (a checkpoint's policy shielded by the planner)."""
     name: str
     """The baseline's or planner's name, or the checkpoint's path as given."""
     units: list
     """Labels of the policy's units: trained seeds (checkpoint) or [None] (baseline, planner)."""
     export: export.PolicyExport | None = None
     planner: planners.PlannerConfig | None = None
-    """The planner's options (kind "planner")."""
+    """The planner's options (kind "planner"; kind "shielded": its fallback's, `agents.shield`)."""
     compute_dtype: str | None = None
     """The number format of the network's hidden layers in this evaluation (learners with a `compute_dtype`
     field, `with_compute_dtype`); None: as trained."""
@@ -92,7 +92,7 @@ class Policy:
         return self.export.config.env if self.export else None
 
     def describe(self) -> dict:
-        if self.planner is not None:
+        if self.planner is not None and self.export is None:
             return {"kind": self.kind, "name": self.name, "planner": dataclasses.asdict(self.planner),
                     "model_steps_per_step": self.planner.model_steps_per_step}
         if self.export is None:
@@ -103,6 +103,9 @@ class Policy:
                "train_config": e.meta["config"]}
         if self.compute_dtype:
             out["compute_dtype"] = self.compute_dtype
+        if self.planner is not None:
+            out.update(planner=dataclasses.asdict(self.planner), model_steps_per_step=shield.model_steps_per_step(
+                self.planner))
         return out
 
 
@@ -130,6 +133,14 @@ def baseline_policy(name: str) -> Policy:
 def planner_policy(config: planners.PlannerConfig = planners.PlannerConfig()) -> Policy:
     """The MPPI planner (`agents.planner`) with `config`: it plans with the env itself, on any env."""
     return Policy("planner", planners.NAME, [None], planner=config)
+
+
+def shielded_policy(policy: Policy, config: planners.PlannerConfig = planners.PlannerConfig()) -> Policy:
+    """`policy`, a checkpoint's, shielded by the planner with `config` (`agents.shield`); ValueError for a baseline or
+    the planner, which have no policy of their own to shield."""
+    if policy.export is None:
+        raise ValueError(f"shielding the {policy.kind} {policy.name!r} is invalid: allowed only for checkpoints.")
+    return dataclasses.replace(policy, kind="shielded", planner=config)
 
 
 def act_params(policy: Policy):
@@ -184,7 +195,13 @@ class Program:
 def evaluate_fn(env, algo_config, obs_size: int, act_size: int, num_envs: int, length: int, last_steps: int,
                 stochastic: bool = False, planner: planners.PlannerConfig | None = None) -> Callable:
     """The unjitted `evaluate(params, key) -> (per-env metrics, records)` on the batched `env` (`_evaluator`, `agents.sweep`
-    jit it): the planner's, else a baseline's (no `algo_config`), else the network's of `algo_config`."""
+    jit it): the network's of `algo_config` shielded by `planner` where both are given (`agents.shield`), else the
+    planner's, else a baseline's (no `algo_config`), else the network's."""
+    if planner is not None and algo_config is not None:
+        learner = registry.make_learner(algo_config, obs_size, act_size)
+        unit_act, unit_memory = shield.make_unit_act(env, learner, planner)
+        return make_evaluate_stacked(env, learner, num_envs, length, last_steps, per_env=True, record=_record,
+                                     unit_act=unit_act, unit_memory=unit_memory)
     if planner is not None:
         act, memory = planners.make_act(env, planner)
         return make_evaluate(env, None, num_envs, length, last_steps, act=act, per_env=True, record=_record, memory=memory)
@@ -309,6 +326,9 @@ def check_stochastic(policy: Policy, stochastic: bool) -> None:
     if stochastic and policy.export is None:
         raise ValueError(f"stochastic=True is invalid for the {policy.kind} {policy.name!r}: allowed only for checkpoints "
                          f"(the {policy.kind} has no action distribution).")
+    if stochastic and policy.planner is not None:
+        raise ValueError(f"stochastic=True is invalid for the shielded {policy.name!r}: allowed only for unshielded "
+                         "checkpoints (the shield checks the policy's deterministic rollout).")
 
 
 def run(policy: Policy, env_name: str, env_config, num_envs: int = 4096, eval_seeds=(DEFAULT_EVAL_SEED,),
@@ -375,6 +395,8 @@ def label(result: Result) -> str:
     if p.export is None:
         return p.name
     mode = (", stochastic" if result.stochastic else "") + (f", {p.compute_dtype}" if p.compute_dtype else "")
+    if p.planner is not None:
+        mode += f", shielded by {planners.NAME} {p.planner.samples} x {p.planner.horizon}"
     return f"{p.name} ({p.export.config.algo_name}, {p.export.env_steps:,} steps{mode})"
 
 

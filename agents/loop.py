@@ -362,13 +362,16 @@ def make_evaluate(env, learner: Learner, num_envs: int, episode_length: int, las
 
 
 def make_evaluate_stacked(env, learner: Learner, num_envs: int, episode_length: int, last_steps: int = 10,
-                          stochastic: bool = False, per_env: bool = False, record=None):
+                          stochastic: bool = False, per_env: bool = False, record=None, unit_act=None,
+                          unit_memory=None):
     """`evaluate(learner_states, key)`: `make_evaluate`'s evaluation of every learner state along a leading axis
     (trained seeds), each on the same `num_envs` episodes, outputs stacked along that axis (records: `(units, T + 1,
     num_envs, ...)`). The units' envs run side by side as one batch in one scan; `jax.vmap` over the units gives the
     same numbers, but batching a scan traces its body again (and the physics' substep scan inside it).
     `stochastic`: actions drawn from the policy (one key per step,
-    the same for every unit, as a `vmap` with a shared key)."""
+    the same for every unit, as a `vmap` with a shared key). `unit_act(state, env_states, key, mem) -> (actions, mem)`
+    replaces the policy over one unit's batch of env states, with a memory per env across steps that
+    `unit_memory(start)` begins for every env of the batch (the shield of `agents.shield`, which reads the env state)."""
 
     def evaluate(states, key):
         units = jax.tree.leaves(states)[0].shape[0]
@@ -381,8 +384,19 @@ def make_evaluate_stacked(env, learner: Learner, num_envs: int, episode_length: 
             actions = jax.vmap(policy, in_axes=(0, 0, None))(states, obs, k)
             return actions.reshape(units * num_envs, *actions.shape[2:])
 
-        run = make_evaluate(env, learner, num_envs, episode_length, last_steps, act=act, per_env=True,
-                            record=record, copies=units)
+        by_unit = lambda tree: jax.tree.map(lambda x: x.reshape(units, num_envs, *x.shape[1:]), tree)
+        flat = lambda tree: jax.tree.map(lambda x: x.reshape(units * num_envs, *x.shape[2:]), tree)
+
+        def act_with_memory(states, env_state, start, k, mem):
+            actions, mem = jax.vmap(unit_act, in_axes=(0, 0, None, 0))(states, by_unit(env_state), k, by_unit(mem))
+            return flat(actions), flat(mem)
+
+        if unit_act is None:
+            run = make_evaluate(env, learner, num_envs, episode_length, last_steps, act=act, per_env=True,
+                                record=record, copies=units)
+        else:
+            run = make_evaluate(env, learner, num_envs, episode_length, last_steps, act=act_with_memory, per_env=True,
+                                record=record, memory=unit_memory, copies=units)
         out, records = run(states, key) if record is not None else (run(states, key), None)
         out = {k: v.reshape(units, num_envs) if per_env else jnp.mean(v.reshape(units, num_envs), axis=1)
                for k, v in out.items()}

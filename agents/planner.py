@@ -74,22 +74,40 @@ def initial_action(env, start_state):
     return joint_target_action(base.config, robot, data.qpos, delta_base)
 
 
-def sequence_returns(step, state, actions, discount: float):
-    """Discounted returns `(K,)` of the `(K, H, A)` action sequences simulated from one env `state` by the
-    single-env `step`; rewards after a simulated episode's end (termination or time limit) do not count."""
+FAILURE_METRICS = ("self_collision", "obstacle_collision")
+"""The per-step env metrics that make a simulated step a failure (the arms' collisions, `envs.arm`)."""
+
+
+def failed(state) -> jax.Array:
+    """Whether a simulated step collided: any of `FAILURE_METRICS` the env reports (False for envs without
+    collisions)."""
+    flags = [state.metrics[name] > 0 for name in FAILURE_METRICS if name in state.metrics]
+    return jnp.any(jnp.stack(flags), axis=0) if flags else jnp.zeros(jnp.shape(state.reward), bool)
+
+
+def sequence_outcomes(step, state, actions, discount: float):
+    """`(returns (K,), fails (K,))` of the `(K, H, A)` action sequences simulated from one env `state` by the
+    single-env `step`: discounted returns, where rewards after a simulated episode's end (termination or time
+    limit) do not count, and whether a sequence collides before its episode ends (`failed`)."""
     states = jax.tree.map(lambda x: jnp.broadcast_to(x, (actions.shape[0],) + jnp.shape(x)), state)
 
     def advance(carry, action_t):
-        states, alive, total, weight = carry
+        states, alive, total, weight, fails = carry
         states = jax.vmap(step)(states, action_t)
         total = total + alive * weight * states.reward
+        fails = fails | ((alive > 0) & failed(states))
         alive = alive * (1.0 - states.done)
-        return (states, alive, total, weight * discount), None
+        return (states, alive, total, weight * discount, fails), None
 
     ones = jnp.ones(actions.shape[:1])
-    (_, _, total, _), _ = jax.lax.scan(advance, (states, ones, jnp.zeros_like(ones), jnp.ones(())),
-                                       jnp.swapaxes(actions, 0, 1))
-    return total
+    start = (states, ones, jnp.zeros_like(ones), jnp.ones(()), jnp.zeros(actions.shape[:1], bool))
+    (_, _, total, _, fails), _ = jax.lax.scan(advance, start, jnp.swapaxes(actions, 0, 1))
+    return total, fails
+
+
+def sequence_returns(step, state, actions, discount: float):
+    """The discounted returns `(K,)` of `sequence_outcomes`."""
+    return sequence_outcomes(step, state, actions, discount)[0]
 
 
 def mppi_weights(returns, temperature: float):
