@@ -371,7 +371,7 @@ def make_evaluate_stacked(env, learner: Learner, num_envs: int, episode_length: 
     `stochastic`: actions drawn from the policy (one key per step,
     the same for every unit, as a `vmap` with a shared key). `unit_act(state, env_states, key, mem) -> (actions, mem)`
     replaces the policy over one unit's batch of env states, with a memory per env across steps that
-    `unit_memory(start)` begins for every env of the batch (the shield of `agents.shield`, which reads the env state)."""
+    `unit_memory(start)` begins for every env of the batch (`agents.shield`, which reads the env state)."""
 
     def evaluate(states, key):
         units = jax.tree.leaves(states)[0].shape[0]
