@@ -265,8 +265,8 @@ register(Experiment(
          "at the task's speeds in 5.1-6.3 %, at 0.2-0.3 m/s in 10.7-12.3 % (results/obstacles). The -surface rows "
          "measure each link's distance to the obstacles (observed and penalised) to its capsules' surfaces instead of "
          "its frame origin (the paper's d_i), which in random poses reads over 10 cm at about half or more of the contacts "
-         "along a long link: on the UR5e it cut the unbudgeted row's collisions from 7.6 to 5.4 % and left the 3 % "
-         "budget row's at 4.7 % (4.9 % before), with 1.4 and 2.8 points less reach. "
+         "along a long link: on the UR5e (one seed each) the surface distance cut the unbudgeted row's collisions from "
+         "7.6 to 5.4 % and left the 3 % budget row's at 4.7 % (4.9 % before), with 1.4 and 2.8 points less reach. "
          "The links rows add link_pos (each link's position: with obstacle_pos, the direction from each link to each "
          "obstacle, which the link distances leave out; the collisions analysed mostly need the arm's own motion) to "
          "ur5e-ahead-jl (80.5 % at 7.6 %) and panda-plus-ahead-300m (86.1 ± 0.7 % at 8.7 ± 0.7 %)."))
