@@ -51,8 +51,9 @@ Planner (`agents.planner`): `--policy mppi` plans every step with the env itself
 `--planner.samples` sequences of `--planner.horizon` steps, weighted by return), a reference with a compute cost
 (samples x horizon x iterations simulated env steps per env step, in the JSON as `model_steps_per_step`).
 `--checkpoint PATH --shield` shields a trained policy with it (`agents.shield`): the policy acts unless its own
-rollout of `--planner.horizon` steps in the model collides; then the planner's action, refined around the policy's
-sequence, replaces it (horizon + samples x horizon x iterations model steps per env step).
+rollout of `--planner.horizon` steps in the model collides; then the first action of the best-return sampled sequence
+(`--planner.samples`) that the model shows clear replaces it (horizon + samples x horizon x iterations model steps
+per env step).
 
 Video: `--video PATH` (.mp4 or .gif) renders the first `--video-envs` envs' first episodes (a grid)
 with MuJoCo's offscreen renderer (`envs.render`; headless: EGL or OSMesa, chosen
@@ -114,8 +115,8 @@ class EvalConfig(Generic[EnvConfigT]):
     planner: planners.PlannerConfig = planners.PlannerConfig()
     """The planner's options (with --policy mppi or --shield)."""
     shield: bool = False
-    """Shield each checkpoint's policy with the planner (`agents.shield`): the policy acts unless its own rollout of
-    --planner.horizon steps in the model collides, then the planner's action refined around it."""
+    """Shield each checkpoint's policy with the planner's model (`agents.shield`): the policy acts unless its own
+    rollout of --planner.horizon steps in the model collides, then the best sampled sequence the model shows clear."""
     env_name: Annotated[str | None, tyro.conf.arg(name="env", metavar="NAME")] = None
     """Registered env name; None: the checkpoint's env."""
     num_envs: int = 4096
@@ -193,7 +194,8 @@ def check(args: EvalConfig) -> None:
         if getattr(args, option):
             check_output(f"--{option}", getattr(args, option), args.force)
     if args.stochastic and args.shield:
-        raise ValueError("--stochastic is invalid with --shield: the shield checks the policy's deterministic rollout.")
+        raise ValueError("--stochastic is invalid with --shield: allowed only without --stochastic (the shield checks "
+                         "the policy's deterministic rollout).")
     if args.stochastic and args.policy:
         raise ValueError(f"--stochastic is invalid with --policy {args.policy}: allowed only with --checkpoint (the "
                          "baselines and the planner have no action distribution).")

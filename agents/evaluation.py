@@ -9,7 +9,8 @@ and tools/paper_tables.py).
     print(evaluation.markdown([result]))
 
 A policy is a checkpoint's policy export (`agents.export`, one unit per trained seed), a baseline
-(`agents.baselines`) or the MPPI planner (`agents.planner`). Every unit (trained seed x evaluation seed) runs `num_envs` environments for
+(`agents.baselines`), the MPPI planner (`agents.planner`) or a checkpoint's policy shielded by the planner's model
+(`agents.shield`). Every unit (trained seed x evaluation seed) runs `num_envs` environments for
 one episode each with the deterministic policy (`agents.loop.make_evaluate`); the same evaluation
 seed gives every policy the same episodes. Reported per unit: the mean over episodes of each paper
 metric (`PAPER_METRICS`); summarised as mean and standard deviation over units, plus the standard
@@ -65,7 +66,7 @@ class Policy:
     name: str
     """The baseline's or planner's name, or the checkpoint's path as given."""
     units: list
-    """Labels of the policy's units: trained seeds (checkpoint) or [None] (baseline, planner)."""
+    """Labels of the policy's units: trained seeds (checkpoint, shielded) or [None] (baseline, planner)."""
     export: export.PolicyExport | None = None
     planner: planners.PlannerConfig | None = None
     """The planner's options (kind "planner"; kind "shielded": its fallback's, `agents.shield`)."""
@@ -91,10 +92,17 @@ class Policy:
     def train_env_config(self):
         return self.export.config.env if self.export else None
 
+    @property
+    def model_steps_per_step(self) -> int | None:
+        """Env steps simulated in the model per executed one: the planner's or the shield's; None for the others."""
+        if self.planner is None:
+            return None
+        return self.planner.model_steps_per_step if self.export is None else shield.model_steps_per_step(self.planner)
+
     def describe(self) -> dict:
         if self.planner is not None and self.export is None:
             return {"kind": self.kind, "name": self.name, "planner": dataclasses.asdict(self.planner),
-                    "model_steps_per_step": self.planner.model_steps_per_step}
+                    "model_steps_per_step": self.model_steps_per_step}
         if self.export is None:
             return {"kind": self.kind, "name": self.name}
         e = self.export
@@ -104,8 +112,7 @@ class Policy:
         if self.compute_dtype:
             out["compute_dtype"] = self.compute_dtype
         if self.planner is not None:
-            out.update(planner=dataclasses.asdict(self.planner), model_steps_per_step=shield.model_steps_per_step(
-                self.planner))
+            out.update(planner=dataclasses.asdict(self.planner), model_steps_per_step=self.model_steps_per_step)
         return out
 
 
@@ -396,7 +403,7 @@ def label(result: Result) -> str:
         return p.name
     mode = (", stochastic" if result.stochastic else "") + (f", {p.compute_dtype}" if p.compute_dtype else "")
     if p.planner is not None:
-        mode += f", shielded by {planners.NAME} {p.planner.samples} x {p.planner.horizon}"
+        mode += f", shielded: {p.planner.samples} samples x {p.planner.horizon} steps"
     return f"{p.name} ({p.export.config.algo_name}, {p.export.env_steps:,} steps{mode})"
 
 

@@ -369,7 +369,7 @@ def make_evaluate_stacked(env, learner: Learner, num_envs: int, episode_length: 
     num_envs, ...)`). The units' envs run side by side as one batch in one scan; `jax.vmap` over the units gives the
     same numbers, but batching a scan traces its body again (and the physics' substep scan inside it).
     `stochastic`: actions drawn from the policy (one key per step,
-    the same for every unit, as a `vmap` with a shared key). `unit_act(state, env_states, key, mem) -> (actions, mem)`
+    the same for every unit, as a `vmap` with a shared key). `unit_act(params, env_states, key, mem) -> (actions, mem)`
     replaces the policy over one unit's batch of env states, with a memory per env across steps that
     `unit_memory(start)` begins for every env of the batch (`agents.shield`, which reads the env state)."""
 

@@ -74,13 +74,12 @@ def initial_action(env, start_state):
     return joint_target_action(base.config, robot, data.qpos, delta_base)
 
 
-FAILURE_METRICS = ("self_collision", "obstacle_collision")
-"""The per-step env metrics that make a simulated step a failure (the arms' collisions, `envs.arm`)."""
+FAILURE_METRICS = ("self_collision", "obstacle_collision", "physics_nan")
+"""The per-step env metrics that make a simulated step a failure (the arms' collisions and a NaN step, `envs.arm`)."""
 
 
 def failed(state) -> jax.Array:
-    """Whether a simulated step collided: any of `FAILURE_METRICS` the env reports (False for envs without
-    collisions)."""
+    """Whether a simulated step failed: any of `FAILURE_METRICS` the env reports (False for envs without them)."""
     flags = [state.metrics[name] > 0 for name in FAILURE_METRICS if name in state.metrics]
     return jnp.any(jnp.stack(flags), axis=0) if flags else jnp.zeros(jnp.shape(state.reward), bool)
 

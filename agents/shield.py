@@ -47,13 +47,13 @@ def policy_rollout(step, policy_fn, state, horizon: int):
     return actions, fails
 
 
-def safest(step, state, plan, policy_plan, key, config: PlannerConfig):
-    """One sampling iteration of the fallback for one env: `samples` sequences, the policy's own `policy_plan` and
-    `plan` `(H, A)` unperturbed and the rest sampled around `plan`, simulated; returns the best-return sequence among
-    those that do not collide (if none is clear, the best-return one). The best verified sequence rather than MPPI's
+def safest(step, state, plan, key, config: PlannerConfig):
+    """One sampling iteration of the fallback for one env: `samples` sequences, `plan` `(H, A)` unperturbed and the
+    rest sampled around it, simulated; returns the best-return sequence among those that do not collide (if none is
+    clear, the best-return one). The best verified sequence rather than MPPI's
     weighted mean, which can collide where none of the samples it averages does."""
     noise = config.noise * jax.random.normal(key, (config.samples,) + plan.shape)
-    candidates = jnp.clip(plan[None] + noise.at[0].set(0.0), -1.0, 1.0).at[1].set(policy_plan)
+    candidates = jnp.clip(plan[None] + noise.at[0].set(0.0), -1.0, 1.0)
     returns, fails = planners.sequence_outcomes(step, state, candidates, config.discount)
     score = returns - fails * (1.0 + jnp.max(returns) - jnp.min(returns))  # every clear one above every failing one
     return candidates[jnp.argmax(score)]
@@ -67,7 +67,7 @@ def shield_one(step, policy_fn, state, key, backup, config: PlannerConfig):
     actions, fails = policy_rollout(step, policy_fn, state, config.horizon)
     plan, active = backup
     around = jnp.where(active, plan, actions)
-    plan, _ = jax.lax.scan(lambda p, k: (safest(step, state, p, actions, k, config), None), around,
+    plan, _ = jax.lax.scan(lambda p, k: (safest(step, state, p, k, config), None), around,
                            jax.random.split(key, config.iterations))
     action = jnp.where(fails, plan[0], actions[0])
     return action, fails, (jnp.concatenate([plan[1:], plan[-1:]]), fails)

@@ -1,6 +1,7 @@
 """The planner's shield over a trained policy (agents/shield.py) and eval.py --shield: a policy that sweeps the UR5e
-into an obstacle is overruled only where its own rollout collides, the collision is avoided, the state planned from
-is left alone; without collisions to foresee (the point mass) the shielded policy is the policy; options refused."""
+into an obstacle is overruled exactly from the step its rollout reaches the collision, the collision is avoided, the
+backup sequence is followed on; without collisions to foresee (the point mass) the shielded policy is the policy;
+options refused."""
 
 import json
 
@@ -39,15 +40,16 @@ def sweep_env():
 
 def _run(step, start, act, memory, steps: int = SWEEP["episode_length"]):
     """Executes `act(state, key, memory) -> (actions, overruled, memory)`: (states after each step, actions,
-    overruled flags)."""
-    state, states, actions, flags = start, [], [], []
+    overruled flags, the memory after each step)."""
+    state, states, actions, flags, memories = start, [], [], [], []
     for key in jax.random.split(jax.random.PRNGKey(0), steps):
         action, overruled, memory = act(state, key, memory)
         state = step(state, action)
         states.append(state)
         actions.append(action)
         flags.append(np.asarray(overruled))
-    return states, actions, np.stack(flags)
+        memories.append(memory)
+    return states, actions, np.stack(flags), memories
 
 
 @pytest.fixture(scope="module")
@@ -69,39 +71,60 @@ def _collision_step(states):
 
 
 def test_the_sweep_first_collides_on_step_7(swept):
-    (plain_states, _, _), _ = swept
+    (plain_states, _, _, _), _ = swept
     assert _collision_step(plain_states) == COLLIDES_AT
 
 
 def test_the_shielded_sweep_does_not_collide(swept):
-    _, (states, _, _) = swept
+    _, (states, _, _, _) = swept
     assert _collision_step(states) is None
 
 
+OVERRULED_FROM = COLLIDES_AT - 4
+"""The first step (0-based) whose 4-step rollout reaches the collision on step 7: the policy's rollout from the state
+after 3 steps covers steps 4-7."""
+
+
 def test_the_shield_leaves_the_policy_alone_while_its_rollout_is_clear(swept):
-    """The 4-step rollout from step 0 ends before the collision on step 7: the first actions are the policy's."""
-    _, (_, actions, flags) = swept
-    assert not flags[:2].any()
+    _, (_, _, flags, _) = swept
+    assert not flags[:OVERRULED_FROM].any()
+
+
+def test_the_shield_overrules_the_policy_from_the_step_its_rollout_collides(swept):
+    _, (_, _, flags, _) = swept
+    assert flags[OVERRULED_FROM]
 
 
 def test_an_action_left_alone_is_the_policys_bit_for_bit(swept):
-    _, (_, actions, _) = swept
+    _, (_, actions, _, _) = swept
     np.testing.assert_array_equal(np.asarray(actions[0][0]), np.asarray(_sweep(None)))
 
 
-def test_the_shield_overrules_the_policy_before_the_collision(swept):
-    _, (_, _, flags) = swept
-    assert flags[:COLLIDES_AT - 1].any()
+def test_an_overruled_steps_backup_is_its_sequence_moved_on_with_the_last_action_repeated(swept):
+    _, (_, _, _, memories) = swept
+    plan, _ = memories[OVERRULED_FROM]
+    np.testing.assert_array_equal(np.asarray(plan[0, -1]), np.asarray(plan[0, -2]))
 
 
-def test_the_executed_trajectory_is_a_replay_of_the_chosen_actions(sweep_env, swept):
-    """The shield simulates copies of the state: stepping with the chosen actions alone gives the same poses."""
-    _, step, start = sweep_env
-    _, (states, actions, _) = swept
-    state = start
-    for action, executed in zip(actions, states):
-        state = step(state, action)
-        np.testing.assert_array_equal(np.asarray(state.pipeline_state.qpos), np.asarray(executed.pipeline_state.qpos))
+def test_an_overruled_step_marks_its_backup_active(swept):
+    _, (_, _, _, memories) = swept
+    assert bool(memories[OVERRULED_FROM][1][0])
+
+
+def test_a_clear_step_leaves_no_backup_active(swept):
+    _, (_, _, _, memories) = swept
+    assert not bool(memories[0][1][0])
+
+
+def test_the_next_step_searches_around_the_backup(sweep_env, swept):
+    """With the backup active and next to no noise every sample is the backup itself: its first action acts."""
+    env, _, _ = sweep_env
+    _, (states, _, _, memories) = swept
+    config = planner.PlannerConfig(samples=2, horizon=4, noise=1e-9)
+    one = lambda s, b: shield.shield_one(env.env.step, _sweep, s, jax.random.PRNGKey(1), b, config)
+    state, backup = jax.tree.map(lambda x: x[0], (states[OVERRULED_FROM], memories[OVERRULED_FROM]))
+    action, _, _ = jax.jit(one)(state, backup)
+    np.testing.assert_allclose(np.asarray(action), np.asarray(backup[0][0]), atol=1e-6)
 
 
 @pytest.mark.parametrize("horizon, fails", [(COLLIDES_AT - 1, False), (COLLIDES_AT, True)])
@@ -151,9 +174,14 @@ def test_without_collisions_to_foresee_the_shielded_policy_is_the_policy(point_r
     assert shielded["units"][0]["metrics"] == plain["units"][0]["metrics"]
 
 
-def test_the_report_names_the_shield_and_its_cost(point_reports):
+def test_the_report_names_the_shield(point_reports):
     _, shielded = point_reports
-    assert (shielded["policy"]["kind"], shielded["policy"]["model_steps_per_step"]) == ("shielded", 36)
+    assert shielded["policy"]["kind"] == "shielded"
+
+
+def test_the_report_gives_the_rollout_plus_the_samples_as_the_cost(point_reports):
+    _, shielded = point_reports
+    assert shielded["policy"]["model_steps_per_step"] == 36
 
 
 def test_shield_with_a_baseline_is_refused():

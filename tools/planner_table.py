@@ -73,7 +73,7 @@ def row(result: evaluation.Result, episode_length: int) -> dict:
     out = {"policy": policy.describe(), "summary": result.summary(), "units": result.units,
            "episodes": result.num_envs * len(result.units), "seed_seconds": result.seed_seconds}
     if policy.planner is not None:
-        out["model_steps_per_step"] = policy.planner.model_steps_per_step
+        out["model_steps_per_step"] = policy.model_steps_per_step
         out["ms_per_control_step"] = 1000.0 * result.seed_seconds[-1] / episode_length
     return out
 
