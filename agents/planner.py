@@ -90,8 +90,8 @@ def sequence_outcomes(step, state, actions, discount: float):
     limit) do not count, and whether a sequence collides before its episode ends (`failed`)."""
     states = jax.tree.map(lambda x: jnp.broadcast_to(x, (actions.shape[0],) + jnp.shape(x)), state)
 
-    def advance(carry, action_t):
-        states, alive, total, weight, fails = carry
+    def advance(loop, action_t):
+        states, alive, total, weight, fails = loop
         states = jax.vmap(step)(states, action_t)
         total = total + alive * weight * states.reward
         fails = fails | ((alive > 0) & failed(states))

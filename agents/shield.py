@@ -34,8 +34,8 @@ def policy_rollout(step, policy_fn, state, horizon: int):
     """`(actions (H, A), fails)`: the deterministic `policy_fn(obs) -> action` rolled `horizon` steps from one env
     `state` by the single-env `step`; `fails` is True if a step collides before the simulated episode ends."""
 
-    def advance(carry, _):
-        s, fails, alive = carry
+    def advance(loop, _):
+        s, fails, alive = loop
         action = policy_fn(s.obs)
         s = step(s, action)
         fails = fails | (alive & planners.failed(s))
