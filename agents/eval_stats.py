@@ -100,6 +100,12 @@ def jsonable(obj):
     return obj
 
 
+def overruled_share(units: list) -> float:
+    """A shielded policy's overruled steps over all executed steps of `units`' episodes (each unit's means over the
+    same number of episodes, so the ratio of their sums is the pooled share)."""
+    return (sum(u["metrics"]["overruled_steps"] for u in units) / sum(u["metrics"]["episode_length"] for u in units))
+
+
 def seed_line(k: int, n: int, eval_seed: int, units: list, seconds: float) -> str:
     """"eval seed k of n (seed): x% reached, y% self collision ..., elapsed" over one seed's units."""
     parts = []
@@ -107,6 +113,8 @@ def seed_line(k: int, n: int, eval_seed: int, units: list, seconds: float) -> st
                        ("obstacle_collision", "obstacle collision")):
         if name in units[0]["metrics"]:
             parts.append(f"{100 * np.mean([u['metrics'][name] for u in units]):.1f} % {what}")
+    if "overruled_steps" in units[0]["metrics"]:  # a shielded policy: the share of executed steps it overruled
+        parts.append(f"{100 * overruled_share(units):.1f} % of steps overruled")
     each = ", ".join(f"{100 * u['metrics'].get('target_reached', np.nan):.1f}" for u in units)  # the log keeps them
     over = f" (mean over {len(units)} trained seeds; reached % each: {each})" if len(units) > 1 else ""
     return f"eval seed {k + 1} of {n} ({eval_seed}): {', '.join(parts)}{over}; {seconds:.0f} s elapsed"

@@ -46,9 +46,10 @@ is read from; all are an episode's values at its last step. `distance` is the me
 target distance over the episode's last 10 steps (the env's `distance_last10`)."""
 EXTRA_METRICS = {"episode_length": "episode/length", "return": "episode/return", "physics_nan": "episode/physics_nan",
                  "reset_fallback": "episode/reset_fallback", "mean_joint_vel": "episode/mean_joint_vel",
-                 "mean_joint_acc": "episode/mean_joint_acc"}
+                 "mean_joint_acc": "episode/mean_joint_acc", "overruled_steps": "episode/overruled_steps"}
 """Also reported (JSON / CSV), not part of the paper's tables; `mean_joint_vel` and `mean_joint_acc` (rad/s,
-rad/s^2) are an episode's mean joint speed and acceleration norms (`envs.arm.METRICS`)."""
+rad/s^2) are an episode's mean joint speed and acceleration norms (`envs.arm.METRICS`); `overruled_steps`, a
+shielded policy's steps not its own (`agents.shield`)."""
 DEFAULT_EVAL_SEED = 1_000_000
 """The training driver's `eval_seed`: eval.py on a run's own env config reproduces its eval.json."""
 
@@ -208,7 +209,7 @@ def evaluate_fn(env, algo_config, obs_size: int, act_size: int, num_envs: int, l
         learner = registry.make_learner(algo_config, obs_size, act_size)
         unit_act, unit_memory = shield.make_unit_act(env, learner, planner)
         return make_evaluate_stacked(env, learner, num_envs, length, last_steps, per_env=True, record=_record,
-                                     unit_act=unit_act, unit_memory=unit_memory)
+                                     unit_act=unit_act, unit_memory=unit_memory, memory_metrics=shield.memory_metrics)
     if planner is not None:
         act, memory = planners.make_act(env, planner)
         return make_evaluate(env, None, num_envs, length, last_steps, act=act, per_env=True, record=_record, memory=memory)

@@ -310,7 +310,7 @@ def episode_metrics(done, reward, metrics: dict, last_steps: int = 10) -> dict:
 
 
 def make_evaluate(env, learner: Learner, num_envs: int, episode_length: int, last_steps: int = 10,
-                  act=None, per_env: bool = False, record=None, memory=None, copies: int = 1):
+                  act=None, per_env: bool = False, record=None, memory=None, copies: int = 1, memory_metrics=None):
     """`evaluate(learner_state, key) -> metrics`: one episode per env with the deterministic policy.
 
     `env` is the batched environment. Each env's *first* episode counts (it ends by termination or
@@ -326,7 +326,9 @@ def make_evaluate(env, learner: Learner, num_envs: int, episode_length: int, las
     that pytree for the reset state and after every step, stacked along a leading time axis of
     `episode_length + 1` (e.g. joint positions for rendering).
     `memory(start) -> pytree` gives `act` a state of its own across steps (a planner's plan, `agents.planner`):
-    it is then called `act(learner_state, state, start, key, mem)` and returns `(actions, mem)`.
+    it is then called `act(learner_state, state, start, key, mem)` and returns `(actions, mem)`;
+    `memory_metrics(mem) -> {name: (envs,)}` adds per-step metrics read off the memory after each step (reported as
+    the env's are: "episode/<name>" is its value at the episode's last step, e.g. a count kept in the memory).
     The reset keys depend on `key` alone, so every policy sees the same episodes for one key.
     `copies` > 1: the batch holds the `num_envs` episodes `copies` times over, copy after copy (policies side by
     side, `make_evaluate_stacked`); the outputs then cover all `copies * num_envs` envs.
@@ -346,7 +348,8 @@ def make_evaluate(env, learner: Learner, num_envs: int, episode_length: int, las
                 action, mem = act(ls, s, start, k, mem)
             nxt = env.step(s, action)
             extra = () if record is None else record(nxt)
-            return (nxt, mem), (nxt.done, nxt.reward, nxt.metrics, extra)
+            metrics = nxt.metrics if memory_metrics is None else {**nxt.metrics, **memory_metrics(mem)}
+            return (nxt, mem), (nxt.done, nxt.reward, metrics, extra)
 
         first = () if memory is None else memory(start)
         _, (done, reward, metrics, records) = jax.lax.scan(step, (start, first), act_keys)
@@ -363,7 +366,7 @@ def make_evaluate(env, learner: Learner, num_envs: int, episode_length: int, las
 
 def make_evaluate_stacked(env, learner: Learner, num_envs: int, episode_length: int, last_steps: int = 10,
                           stochastic: bool = False, per_env: bool = False, record=None, unit_act=None,
-                          unit_memory=None):
+                          unit_memory=None, memory_metrics=None):
     """`evaluate(learner_states, key)`: `make_evaluate`'s evaluation of every learner state along a leading axis
     (trained seeds), each on the same `num_envs` episodes, outputs stacked along that axis (records: `(units, T + 1,
     num_envs, ...)`). The units' envs run side by side as one batch in one scan; `jax.vmap` over the units gives the
@@ -371,7 +374,8 @@ def make_evaluate_stacked(env, learner: Learner, num_envs: int, episode_length: 
     `stochastic`: actions drawn from the policy (one key per step,
     the same for every unit, as a `vmap` with a shared key). `unit_act(params, env_states, key, mem) -> (actions, mem)`
     replaces the policy over one unit's batch of env states, with a memory per env across steps that
-    `unit_memory(start)` begins for every env of the batch (`agents.shield`, which reads the env state)."""
+    `unit_memory(start)` begins for every env of the batch (`agents.shield`, which reads the env state);
+    `memory_metrics` as `make_evaluate`'s, over the memory of all units' envs."""
 
     def evaluate(states, key):
         units = jax.tree.leaves(states)[0].shape[0]
@@ -396,7 +400,7 @@ def make_evaluate_stacked(env, learner: Learner, num_envs: int, episode_length: 
                                 record=record, copies=units)
         else:
             run = make_evaluate(env, learner, num_envs, episode_length, last_steps, act=act_with_memory, per_env=True,
-                                record=record, memory=unit_memory, copies=units)
+                                record=record, memory=unit_memory, copies=units, memory_metrics=memory_metrics)
         out, records = run(states, key) if record is not None else (run(states, key), None)
         out = {k: v.reshape(units, num_envs) if per_env else jnp.mean(v.reshape(units, num_envs), axis=1)
                for k, v in out.items()}

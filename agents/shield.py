@@ -10,8 +10,8 @@ and safety can be had together by an agent overruled only where its own plan wou
 reference with a compute cost, `model_steps_per_step`).
 
 `make_unit_act(env, learner, config)` returns the per-trained-seed action function and memory that
-`agents.loop.make_evaluate_stacked` takes (`unit_act`, `unit_memory`); eval.py evaluates it with `--checkpoint PATH
---shield`.
+`agents.loop.make_evaluate_stacked` takes (`unit_act`, `unit_memory`, with `memory_metrics` for the count of steps
+overruled); eval.py evaluates it with `--checkpoint PATH --shield`.
 """
 
 from __future__ import annotations
@@ -63,19 +63,26 @@ def shield_one(step, policy_fn, state, key, backup, config: PlannerConfig):
     """`(action, overruled, backup)` for one env: the policy's action while its rollout is clear, else the first
     action of the sequence `safest` picks, searched `iterations` times around the previous step's `backup` (its
     chosen sequence moved on a step) if that step was overruled, else around the policy's sequence: a plan found
-    clear is followed on, rather than searched for anew from the policy's failing one each step."""
+    clear is followed on, rather than searched for anew from the policy's failing one each step. The backup also
+    counts the steps overruled so far (`memory_metrics`)."""
     actions, fails = policy_rollout(step, policy_fn, state, config.horizon)
-    plan, active = backup
+    plan, active, overruled = backup
     around = jnp.where(active, plan, actions)
     plan, _ = jax.lax.scan(lambda p, k: (safest(step, state, p, k, config), None), around,
                            jax.random.split(key, config.iterations))
     action = jnp.where(fails, plan[0], actions[0])
-    return action, fails, (jnp.concatenate([plan[1:], plan[-1:]]), fails)
+    return action, fails, (jnp.concatenate([plan[1:], plan[-1:]]), fails, overruled + fails)
 
 
 def no_backup(state, config: PlannerConfig, action_size: int):
-    """The shield's memory for one env at an episode's start: no backup sequence."""
-    return jnp.zeros((config.horizon, action_size)), jnp.zeros((), bool)
+    """The shield's memory for one env at an episode's start: no backup sequence, no step overruled."""
+    return jnp.zeros((config.horizon, action_size)), jnp.zeros((), bool), jnp.zeros((), jnp.float32)
+
+
+def memory_metrics(backups) -> dict:
+    """`{"overruled_steps": ...}`: how many of each env's executed steps so far were not the policy's; at an episode's
+    end over its length, the share of the episode the shield acted in."""
+    return {"overruled_steps": backups[2]}
 
 
 def make_unit_act(env, learner, config: PlannerConfig):

@@ -25,6 +25,7 @@ import envs
 import eval as eval_cli
 from agents import baselines, driver, evaluation, export, presets, registry
 from agents.config import config_json
+from agents.eval_stats import overruled_share
 from agents.loop import episode_metrics, make_evaluate, make_evaluate_stacked
 from mujoco_reference import colliding_configuration, colliding_pairs, contact_model, ee_position
 from limits import HANG_GUARD_S
@@ -163,6 +164,23 @@ def test_driver_writes_policy_exports_that_reproduce_its_evaluation(point_run):
     assert older.export.env_steps == 5120
     assert not np.allclose(older.export.state.params["policy"]["params"]["out"]["kernel"],
                            policy.export.state.params["policy"]["params"]["out"]["kernel"])
+
+
+def test_a_memory_metric_is_reported_at_the_episodes_last_step():
+    """A memory counting the executed steps, read by `memory_metrics`, ends each episode at the episode's length (the
+    point mass's episodes end at their time limit or on reaching, so the lengths differ)."""
+    env = envs.wrap(envs.make("point-mass", episode_length=20), autoreset=False)
+    act = lambda ls, state, start, k, count: (jnp.ones((state.obs.shape[0], env.action_size)), count + 1.0)
+    evaluate = make_evaluate(env, None, 8, 20, act=act, per_env=True, memory=lambda start: jnp.zeros(8),
+                             memory_metrics=lambda count: {"executed": count})
+    out = jax.jit(evaluate)(None, jax.random.PRNGKey(0))
+    np.testing.assert_array_equal(out["episode/executed"], out["episode/length"])
+
+
+def test_the_overruled_share_pools_the_units_steps():
+    units = [{"metrics": {"overruled_steps": 2.0, "episode_length": 10.0}},
+             {"metrics": {"overruled_steps": 4.0, "episode_length": 30.0}}]
+    assert overruled_share(units) == pytest.approx(0.15)
 
 
 def test_trained_seeds_side_by_side_act_as_each_seed_alone(point_run):

@@ -102,7 +102,7 @@ def test_an_action_left_alone_is_the_policys_bit_for_bit(swept):
 
 def test_an_overruled_steps_backup_is_its_sequence_moved_on_with_the_last_action_repeated(swept):
     _, (_, _, _, memories) = swept
-    plan, _ = memories[OVERRULED_FROM]
+    plan = memories[OVERRULED_FROM][0]
     np.testing.assert_array_equal(np.asarray(plan[0, -1]), np.asarray(plan[0, -2]))
 
 
@@ -114,6 +114,11 @@ def test_an_overruled_step_marks_its_backup_active(swept):
 def test_a_clear_step_leaves_no_backup_active(swept):
     _, (_, _, _, memories) = swept
     assert not bool(memories[0][1][0])
+
+
+def test_the_backup_counts_the_steps_overruled(swept):
+    _, (_, _, flags, memories) = swept
+    assert float(memories[-1][2][0]) == flags[:, 0].sum()
 
 
 def test_the_next_step_searches_around_the_backup(sweep_env, swept):
@@ -171,7 +176,18 @@ def point_reports(point_export, tmp_path_factory):
 def test_without_collisions_to_foresee_the_shielded_policy_is_the_policy(point_reports):
     """The point mass reports no collisions, so no rollout fails and every action is the policy's."""
     plain, shielded = point_reports
-    assert shielded["units"][0]["metrics"] == plain["units"][0]["metrics"]
+    own = {name: value for name, value in shielded["units"][0]["metrics"].items() if name != "overruled_steps"}
+    assert own == plain["units"][0]["metrics"]
+
+
+def test_without_collisions_to_foresee_no_step_is_overruled(point_reports):
+    _, shielded = point_reports
+    assert shielded["units"][0]["metrics"]["overruled_steps"] == 0.0
+
+
+def test_an_unshielded_report_counts_no_overruled_steps(point_reports):
+    plain, _ = point_reports
+    assert "overruled_steps" not in plain["units"][0]["metrics"]
 
 
 def test_the_report_names_the_shield(point_reports):
