@@ -170,34 +170,55 @@ def _scaled(summary: dict, key: str, scale: float) -> str:
     return text + (f" ± {scale * std:.{digits}f}" if std is not None and s.get("units", 1) > 1 else "")
 
 
-def plot_budget(budget_rows: list[dict], task: dict | None, title: str, path: str) -> None:
+BUDGET_METRICS = (("target_reached", "reached"), ("obstacle_collision", "obstacle collision"),
+                  ("self_collision", "self collision"))
+"""The metrics `plot_budget` draws (summary key, label), in this order and colour cycle."""
+
+
+def plot_budget(budget_rows: list[dict], task: dict | None, title: str, path: str, who: str = "planner",
+                method: str = "MPPI", references: list[tuple[str, float, str]] | None = None,
+                split: bool = False) -> None:
     """Reached and collision percentages against the planning budget (simulated steps per step, log scale), with
-    the task's best export's reached percentage as a dashed line (`task`: the sweep's entry of that task, if
-    evaluated: `swept_task`)."""
+    dashed `references` `(metric, percent, label)` in their metric's colour; by default the task's best export's
+    reached percentage (`task`: the sweep's entry of that task, if evaluated: `swept_task`). `who` names the lines
+    and `method` the title (the shield's sweep: `tools.shield_budget`); `split`: reach and collisions in two panels,
+    each scaled to its own values, instead of one from 0 to 100 %."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     cost = [r["model_steps_per_step"] for r in budget_rows]
-    fig, ax = plt.subplots(figsize=(6, 3.6))
-    for key, label in (("target_reached", "planner: reached"), ("obstacle_collision", "planner: obstacle collision"),
-                       ("self_collision", "planner: self collision")):
+    fig, axes = plt.subplots(2 if split else 1, 1, figsize=(6, 5.0 if split else 3.6), sharex=True, squeeze=False)
+    panel = {key: axes[int(split and key != "target_reached"), 0] for key, _ in BUDGET_METRICS}
+    if references is None:
+        exports = [r for r in (task or {}).get("rows", []) if r["policy"]["kind"] == "checkpoint"]
+        best = max(exports, key=lambda r: r["summary"]["target_reached"]["mean"]) if exports else None
+        references = [] if best is None else [
+            ("", 100.0 * best["summary"]["target_reached"]["mean"],
+             f"{os.path.basename(best['policy']['name'].rstrip('/'))}: reached")]
+    colours = {}
+    for n, (key, what) in enumerate(BUDGET_METRICS):
         if key in budget_rows[0]["summary"]:
-            ax.plot(cost, [100.0 * r["summary"][key]["mean"] for r in budget_rows], "o-", label=label)
-    exports = [r for r in (task or {}).get("rows", []) if r["policy"]["kind"] == "checkpoint"]
-    if exports:
-        best = max(exports, key=lambda r: r["summary"]["target_reached"]["mean"])
-        ax.axhline(100.0 * best["summary"]["target_reached"]["mean"], color="gray", ls="--",
-                   label=f"{os.path.basename(best['policy']['name'].rstrip('/'))}: reached")
+            colours[key] = f"C{n}"
+            panel[key].plot(cost, [100.0 * r["summary"][key]["mean"] for r in budget_rows], "o-", color=colours[key],
+                            label=f"{who}: {what}")
+    for key, percent, label in references:
+        panel.get(key, axes[0, 0]).axhline(percent, color=colours.get(key, "gray"), ls="--", label=label)
+    ax = axes[-1, 0]
     ax.set_xscale("log")
     ax.minorticks_off()
     ax.set_xticks(cost, [f"{r['policy']['planner']['samples']}x{r['policy']['planner']['horizon']}\n{c}"
                          for r, c in zip(budget_rows, cost)], fontsize=7)
     ax.set_xlabel("planning budget: samples x horizon (simulated env steps per env step)", fontsize=8)
-    ax.set_ylabel("% of episodes")
-    ax.set_ylim(0, 100)
-    ax.set_title(f"MPPI on {title}", fontsize=9)
-    ax.legend(fontsize=7, loc="lower right", bbox_to_anchor=(1.0, 0.12))
+    for a in axes[:, 0]:
+        a.set_ylabel("% of episodes")
+        a.legend(fontsize=7, loc="lower right" if not split else "best",
+                 bbox_to_anchor=None if split else (1.0, 0.12))
+    if split:
+        axes[1, 0].set_ylim(bottom=0)
+    else:
+        ax.set_ylim(0, 100)
+    axes[0, 0].set_title(f"{method} on {title}", fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
