@@ -3,12 +3,13 @@
 #
 #   REACH_AVOID_CODE_VERSION=<commit> bash dev/train_within.sh SECONDS EXPERIMENT/RUN [EXPERIMENT/RUN ...]
 #   TRAIN_GPU=1 bash dev/train_within.sh ...   # this GPU alone, its own folders and archive
+#   TRAIN_MAX_SEEDS=2 bash dev/train_within.sh ...   # seeds trained together in one process (default 1)
 #
 # TRAIN_GPU=N gives each GPU its own list of runs (one launch per GPU, started side by side), where one launch would
 # hand its parts to the GPUs in a single order. A part resumes only under the TRAIN_GPU it started with.
 #
 # Installs the wheels of .whl/, copies the tree to /tmp/x/repo (/tmp/x-gpuN/repo) and runs `tools.experiments launch
-# ... --executor local --max-seeds 1` there (one seed per GPU), recording into the copy's results/experiments: the
+# ... --executor local --max-seeds 1` there (one seed per process; TRAIN_MAX_SEEDS=N for N), recording into the copy's results/experiments: the
 # parts the tree already holds are not trained again. It shows the launch's first output after at most 30 s (a refused
 # launch ends the command then, with its exit status), waits until the launch ends or SECONDS have passed since the
 # script started, and packs the parts finished since it started (their runs/ files under results/experiments/), their
@@ -19,6 +20,11 @@
 # call in a later command on the warm host resumes them from their last checkpoint, since the runs folder is kept.
 set -u
 gpu="${TRAIN_GPU:-}"
+max_seeds="${TRAIN_MAX_SEEDS:-1}"
+if ! [[ $max_seeds =~ ^[1-9][0-9]*$ ]]; then
+  echo "TRAIN_MAX_SEEDS=$max_seeds is invalid: a number of seeds >= 1" >&2
+  exit 2
+fi
 if [ -n "$gpu" ] && ! [[ $gpu =~ ^[0-9]+$ ]]; then
   echo "TRAIN_GPU=$gpu is invalid: one GPU index (0, 1, ...)" >&2
   exit 2
@@ -75,7 +81,7 @@ touch "$work/started"
 export PYTHONPATH="$site:$PWD" PYTHONUNBUFFERED=1 REACH_AVOID_CODE_VERSION
 nvidia-smi -L
 [ -n "$gpu" ] && export CUDA_VISIBLE_DEVICES="$gpu"
-python3 -m tools.experiments launch "$@" --executor local --max-seeds 1 --runs-dir "$work/runs" \
+python3 -m tools.experiments launch "$@" --executor local --max-seeds "$max_seeds" --runs-dir "$work/runs" \
   --jobs-dir "$work/jobs" --compilation-cache "$work/jc" > "$work/launch.log" 2>&1 &
 launch=$!
 for _ in $(seq 30); do
