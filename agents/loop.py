@@ -377,6 +377,10 @@ def make_evaluate_stacked(env, learner: Learner, num_envs: int, episode_length: 
     `unit_memory(start)` begins for every env of the batch (`agents.shield`, which reads the env state);
     `memory_metrics` as `make_evaluate`'s, over the memory of all units' envs."""
 
+    if memory_metrics is not None and unit_act is None:
+        raise ValueError("memory_metrics without unit_act is invalid: allowed only with unit_act and unit_memory (the "
+                         "memory it reads).")
+
     def evaluate(states, key):
         units = jax.tree.leaves(states)[0].shape[0]
 

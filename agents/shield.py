@@ -16,12 +16,25 @@ overruled); eval.py evaluates it with `--checkpoint PATH --shield`.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import jax
 import jax.numpy as jnp
 
 from agents import planner as planners
 from agents.planner import PlannerConfig
 from envs.wrappers import VmapWrapper
+
+
+class Backup(NamedTuple):
+    """The shield's memory for one env across steps."""
+
+    plan: jax.Array
+    """(H, A): the sequence chosen on the last overruled step, moved on a step."""
+    active: jax.Array
+    """Whether the last step was overruled: the next search starts from `plan`."""
+    overruled: jax.Array
+    """The steps overruled so far (`memory_metrics`)."""
 
 
 def model_steps_per_step(config: PlannerConfig) -> int:
@@ -66,23 +79,22 @@ def shield_one(step, policy_fn, state, key, backup, config: PlannerConfig):
     clear is followed on, rather than searched for anew from the policy's failing one each step. The backup also
     counts the steps overruled so far (`memory_metrics`)."""
     actions, fails = policy_rollout(step, policy_fn, state, config.horizon)
-    plan, active, overruled = backup
-    around = jnp.where(active, plan, actions)
+    around = jnp.where(backup.active, backup.plan, actions)
     plan, _ = jax.lax.scan(lambda p, k: (safest(step, state, p, k, config), None), around,
                            jax.random.split(key, config.iterations))
     action = jnp.where(fails, plan[0], actions[0])
-    return action, fails, (jnp.concatenate([plan[1:], plan[-1:]]), fails, overruled + fails)
+    return action, fails, Backup(jnp.concatenate([plan[1:], plan[-1:]]), fails, backup.overruled + fails)
 
 
 def no_backup(state, config: PlannerConfig, action_size: int):
     """The shield's memory for one env at an episode's start: no backup sequence, no step overruled."""
-    return jnp.zeros((config.horizon, action_size)), jnp.zeros((), bool), jnp.zeros((), jnp.float32)
+    return Backup(jnp.zeros((config.horizon, action_size)), jnp.zeros((), bool), jnp.zeros((), jnp.float32))
 
 
 def memory_metrics(backups) -> dict:
     """`{"overruled_steps": ...}`: how many of each env's executed steps so far were not the policy's; at an episode's
     end over its length, the share of the episode the shield acted in."""
-    return {"overruled_steps": backups[2]}
+    return {"overruled_steps": backups.overruled}
 
 
 def make_unit_act(env, learner, config: PlannerConfig):

@@ -167,14 +167,18 @@ def test_driver_writes_policy_exports_that_reproduce_its_evaluation(point_run):
 
 
 def test_a_memory_metric_is_reported_at_the_episodes_last_step():
-    """A memory counting the executed steps, read by `memory_metrics`, ends each episode at the episode's length (the
-    point mass's episodes end at their time limit or on reaching, so the lengths differ)."""
+    """A memory counting the executed steps, read by `memory_metrics`, ends each episode at the episode's length."""
     env = envs.wrap(envs.make("point-mass", episode_length=20), autoreset=False)
     act = lambda ls, state, start, k, count: (jnp.ones((state.obs.shape[0], env.action_size)), count + 1.0)
     evaluate = make_evaluate(env, None, 8, 20, act=act, per_env=True, memory=lambda start: jnp.zeros(8),
                              memory_metrics=lambda count: {"executed": count})
     out = jax.jit(evaluate)(None, jax.random.PRNGKey(0))
     np.testing.assert_array_equal(out["episode/executed"], out["episode/length"])
+
+
+def test_memory_metrics_without_a_memory_are_refused():
+    with pytest.raises(ValueError, match="memory_metrics without unit_act is invalid"):
+        make_evaluate_stacked(None, None, 8, 20, memory_metrics=lambda mem: {})
 
 
 def test_the_overruled_share_pools_the_units_steps():

@@ -102,23 +102,23 @@ def test_an_action_left_alone_is_the_policys_bit_for_bit(swept):
 
 def test_an_overruled_steps_backup_is_its_sequence_moved_on_with_the_last_action_repeated(swept):
     _, (_, _, _, memories) = swept
-    plan = memories[OVERRULED_FROM][0]
+    plan = memories[OVERRULED_FROM].plan
     np.testing.assert_array_equal(np.asarray(plan[0, -1]), np.asarray(plan[0, -2]))
 
 
 def test_an_overruled_step_marks_its_backup_active(swept):
     _, (_, _, _, memories) = swept
-    assert bool(memories[OVERRULED_FROM][1][0])
+    assert bool(memories[OVERRULED_FROM].active[0])
 
 
 def test_a_clear_step_leaves_no_backup_active(swept):
     _, (_, _, _, memories) = swept
-    assert not bool(memories[0][1][0])
+    assert not bool(memories[0].active[0])
 
 
 def test_the_backup_counts_the_steps_overruled(swept):
     _, (_, _, flags, memories) = swept
-    assert float(memories[-1][2][0]) == flags[:, 0].sum()
+    assert float(memories[-1].overruled[0]) == flags[:, 0].sum()
 
 
 def test_the_next_step_searches_around_the_backup(sweep_env, swept):
@@ -129,7 +129,7 @@ def test_the_next_step_searches_around_the_backup(sweep_env, swept):
     one = lambda s, b: shield.shield_one(env.env.step, _sweep, s, jax.random.PRNGKey(1), b, config)
     state, backup = jax.tree.map(lambda x: x[0], (states[OVERRULED_FROM], memories[OVERRULED_FROM]))
     action, _, _ = jax.jit(one)(state, backup)
-    np.testing.assert_allclose(np.asarray(action), np.asarray(backup[0][0]), atol=1e-6)
+    np.testing.assert_allclose(np.asarray(action), np.asarray(backup.plan[0]), atol=1e-6)
 
 
 @pytest.mark.parametrize("horizon, fails", [(COLLIDES_AT - 1, False), (COLLIDES_AT, True)])

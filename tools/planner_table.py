@@ -175,14 +175,23 @@ BUDGET_METRICS = (("target_reached", "reached"), ("obstacle_collision", "obstacl
 """The metrics `plot_budget` draws (summary key, label), in this order and colour cycle."""
 
 
-def plot_budget(budget_rows: list[dict], task: dict | None, title: str, path: str, who: str = "planner",
-                method: str = "MPPI", references: list[tuple[str, float, str]] | None = None,
-                split: bool = False) -> None:
+def best_export_reference(task: dict | None) -> list[tuple[str, float, str]]:
+    """`plot_budget`'s reference for a planner sweep: the reached percentage of the best export of `task` (the
+    sweep's entry of that task, if evaluated: `swept_task`), drawn in grey; none without one."""
+    exports = [r for r in (task or {}).get("rows", []) if r["policy"]["kind"] == "checkpoint"]
+    if not exports:
+        return []
+    best = max(exports, key=lambda r: r["summary"]["target_reached"]["mean"])
+    return [("", 100.0 * best["summary"]["target_reached"]["mean"],
+             f"{os.path.basename(best['policy']['name'].rstrip('/'))}: reached")]
+
+
+def plot_budget(budget_rows: list[dict], title: str, path: str, references: list[tuple[str, float, str]],
+                who: str = "planner", method: str = "MPPI", split: bool = False) -> None:
     """Reached and collision percentages against the planning budget (simulated steps per step, log scale), with
-    dashed `references` `(metric, percent, label)` in their metric's colour; by default the task's best export's
-    reached percentage (`task`: the sweep's entry of that task, if evaluated: `swept_task`). `who` names the lines
-    and `method` the title (the shield's sweep: `tools.shield_budget`); `split`: reach and collisions in two panels,
-    each scaled to its own values, instead of one from 0 to 100 %."""
+    dashed `references` `(metric, percent, label)` in their metric's colour (grey for another key). `who` names the
+    lines and `method` the title (the shield's sweep: `tools.shield_budget`); `split`: reach and collisions in two
+    panels, each scaled to its own values, instead of one from 0 to 100 %."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -190,12 +199,6 @@ def plot_budget(budget_rows: list[dict], task: dict | None, title: str, path: st
     cost = [r["model_steps_per_step"] for r in budget_rows]
     fig, axes = plt.subplots(2 if split else 1, 1, figsize=(6, 5.0 if split else 3.6), sharex=True, squeeze=False)
     panel = {key: axes[int(split and key != "target_reached"), 0] for key, _ in BUDGET_METRICS}
-    if references is None:
-        exports = [r for r in (task or {}).get("rows", []) if r["policy"]["kind"] == "checkpoint"]
-        best = max(exports, key=lambda r: r["summary"]["target_reached"]["mean"]) if exports else None
-        references = [] if best is None else [
-            ("", 100.0 * best["summary"]["target_reached"]["mean"],
-             f"{os.path.basename(best['policy']['name'].rstrip('/'))}: reached")]
     colours = {}
     for n, (key, what) in enumerate(BUDGET_METRICS):
         if key in budget_rows[0]["summary"]:
@@ -284,7 +287,7 @@ def write(out: str, report: dict) -> None:
     if report["budgets"]:
         task = swept_task(report)
         title = report["budget_task"] + (f"\n{report['budget_source']}" if report.get("budget_source") else "")
-        plot_budget(report["budgets"], task, title, os.path.join(out, "budget.png"))
+        plot_budget(report["budgets"], title, os.path.join(out, "budget.png"), best_export_reference(task))
 
 
 def swept_task(report: dict) -> dict | None:

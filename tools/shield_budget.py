@@ -17,7 +17,7 @@ import json
 
 from tools.planner_table import plot_budget
 
-SAME = ("env_name", "num_envs", "eval_seeds")
+SAME = ("env_name", "env_config", "num_envs", "eval_seeds")
 """What every evaluation of one sweep shares (with the policy's name): the same episodes."""
 REFERENCES = (("target_reached", "reached"), ("obstacle_collision", "obstacle collision"))
 """The unshielded agent's metrics drawn as dashed lines: (summary key, label)."""
@@ -49,14 +49,22 @@ def budget_rows(paths: list[str]) -> list[dict]:
     return sorted(rows, key=lambda row: row["model_steps_per_step"])
 
 
-def unshielded_percents(path: str) -> dict:
-    """`{metric: percent}` of `REFERENCES` from eval.py's JSON (its one evaluation) or a training run's eval.json."""
+def unshielded_percents(path: str, num_envs: int) -> dict:
+    """`{metric: percent}` of `REFERENCES` from eval.py's JSON (its one evaluation) or a training run's eval.json;
+    ValueError unless it evaluated `num_envs` episodes (a seed), as the shielded evaluations did."""
     with open(path) as f:
         report = json.load(f)
     if "evaluations" in report:
-        summary = _evaluation(path)["summary"]
-        return {key: 100.0 * summary[key]["mean"] for key, _ in REFERENCES}
-    return {key: 100.0 * report["mean"][f"episode/{key}"] for key, _ in REFERENCES}
+        evaluation = _evaluation(path)
+        episodes = evaluation["num_envs"]
+        percents = {key: 100.0 * evaluation["summary"][key]["mean"] for key, _ in REFERENCES}
+    else:
+        episodes = report["eval_envs"]
+        percents = {key: 100.0 * report["mean"][f"episode/{key}"] for key, _ in REFERENCES}
+    if episodes != num_envs:
+        raise ValueError(f"--unshielded {path!r} evaluated {episodes} episodes: allowed is the shielded evaluations' "
+                         f"{num_envs}, on the same episodes.")
+    return percents
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -67,11 +75,11 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--label", help="the policy's name in the title (default: its path in the reports)")
     args = p.parse_args(argv)
     rows = budget_rows(args.shielded)
-    percents = unshielded_percents(args.unshielded)
-    references = [(key, percents[key], f"unshielded: {label}") for key, label in REFERENCES]
     first = rows[0]
+    percents = unshielded_percents(args.unshielded, first["num_envs"])
+    references = [(key, percents[key], f"unshielded: {label}") for key, label in REFERENCES]
     title = f"{first['env_name']}, {args.label or first['policy']['name']}\n{first['num_envs']} episodes a budget"
-    plot_budget(rows, None, title, args.out, who="shielded", method="the shield", references=references, split=True)
+    plot_budget(rows, title, args.out, references, who="shielded", method="the shield", split=True)
     print(f"wrote {args.out}")
 
 
