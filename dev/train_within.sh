@@ -9,8 +9,8 @@
 # hand its parts to the GPUs in a single order. A part resumes only under the TRAIN_GPU it started with.
 #
 # Installs the wheels of .whl/, copies the tree to /tmp/x/repo (/tmp/x-gpuN/repo) and runs `tools.experiments launch
-# ... --executor local --max-seeds 1` there (one seed per process; TRAIN_MAX_SEEDS=N for N), recording into the copy's results/experiments: the
-# parts the tree already holds are not trained again. It shows the launch's first output after at most 30 s (a refused
+# ... --executor local --max-seeds 1` there (one seed per process; TRAIN_MAX_SEEDS=N for N), recording into the
+# copy's results/experiments: the parts the tree already holds are not trained again. It shows the launch's first output after at most 30 s (a refused
 # launch ends the command then, with its exit status), waits until the launch ends or SECONDS have passed since the
 # script started, and packs the parts finished since it started (their runs/ files under results/experiments/), their
 # newest policy exports (exports/<experiment>/<run>/<part>/: for eval.py and tools.failure_report on a CPU), the job
