@@ -285,8 +285,8 @@ register(Experiment(
          "steps with the training reach rising from 77.9 to 80.7 %), and the 3 % budget rows' failed share was still "
          "above the budget at 600M with the multiplier at 179-201. The g0.99 rows lengthen the discount's horizon (100 "
          "steps, against the UR5e preset's 33 and the Panda's 50), which makes a collision forfeit more of the reward "
-         "to come: on one static obstacle it cut the collisions by 32-58 % at 1.2-4.3 points less reach (the -plus UR5e "
-         "and the Panda's preset; with the paper's observation the UR5e's reach fell from 71.1 to 10.5 %: "
+         "to come: on one static obstacle it cut the collisions by 32-58 % at 1.2-4.3 points less reach (the -plus "
+         "UR5e and the Panda's preset; with the paper's observation the UR5e's reach fell from 71.1 to 10.5 %: "
          "results/discount), and on the reach task it took the UR5e from 86.3 to 93.1 %, whose misses had ended at a "
          "pinned joint, as most misses here do; each is "
          "the unpenalised long row (ur5e-ahead-jl-400m, panda-plus-ahead-300m) with that discount."))
