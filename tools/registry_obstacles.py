@@ -122,16 +122,24 @@ _FASTER = {"env.obstacle_speed_range": (0.05, 0.3)}
 cross rows): the agents' collisions grow steeply with the obstacles' speed (results/obstacles)."""
 
 
-def _budget(name: str, robot: str, budget: float, num_timesteps: int | None = None, more: dict | None = None,
-            what: str = "", seeds: int = 1) -> Run:
-    """A PPO- or SAC-Lagrangian row (`algo.failure_budget`; one seed unless `seeds`) on `robot`'s best unpenalised
-    settings, with `more` overrides that `what` names in the label."""
-    preset, overrides, label, learner = _BEST_UNPENALISED[robot]
-    label += f", {learner}-Lagrangian with a {round(budget * 100)} % failure budget{what}"
+def _variant(name: str, robot: str, more: dict, what: str, num_timesteps: int | None = None, seeds: int = 1) -> Run:
+    """A row (one seed unless `seeds`) on `robot`'s best unpenalised settings with `more` overrides, which `what`
+    names in the label."""
+    preset, overrides, label, _ = _BEST_UNPENALISED[robot]
+    label += what
     if num_timesteps is not None:
         label += f", {num_timesteps // 1_000_000}M steps"
-    return Run(name, preset, {**overrides, "algo.failure_budget": budget, **(more or {})}, seeds=seeds, shares=False,
-               num_timesteps=num_timesteps, label=label)
+    return Run(name, preset, {**overrides, **more}, seeds=seeds, shares=False, num_timesteps=num_timesteps,
+               label=label)
+
+
+def _budget(name: str, robot: str, budget: float, num_timesteps: int | None = None, more: dict | None = None,
+            what: str = "", seeds: int = 1) -> Run:
+    """A PPO- or SAC-Lagrangian row (`algo.failure_budget`) on `robot`'s best unpenalised settings, with `more`
+    overrides that `what` names in the label."""
+    learner = _BEST_UNPENALISED[robot][3]
+    return _variant(name, robot, {"algo.failure_budget": budget, **(more or {})},
+                    f", {learner}-Lagrangian with a {round(budget * 100)} % failure budget{what}", num_timesteps, seeds)
 
 
 # The same levers on the corrected moving-obstacle task (every robot geom checked, paths drawn clear of the base and
@@ -223,12 +231,10 @@ register(Experiment(
      _budget("ur5e-ahead-jl-budget3-from150m-lr6-600m", "ur5e", 0.03, 600_000_000,
              more={"algo.multiplier_start": 150_000_000, "algo.multiplier_lr": 6.0},
              what=" from 150M steps on, multiplier step 6"),
-     Run("ur5e-ahead-jl-g0.99-400m", "ur5e-reach-avoid-ppo-moving3", {**_PLUS_AHEAD, **_JL, "algo.discount": 0.99},
-         seeds=1, shares=False, num_timesteps=400_000_000,
-         label="ur5e, + link_obstacle_ahead, joint-limit penalty 0.05, discount 0.99 (preset 0.97), 400M steps"),
-     Run("panda-plus-ahead-g0.99-300m", "panda-reach-avoid-ppo-moving3", {**_PLUS_AHEAD, "algo.discount": 0.99},
-         seeds=1, shares=False, num_timesteps=300_000_000,
-         label="panda, plus observation + link_obstacle_ahead, discount 0.99 (preset 0.98), 300M steps")),
+     _variant("ur5e-ahead-jl-g0.99-400m", "ur5e", {"algo.discount": 0.99}, ", discount 0.99 (preset 0.97)",
+              400_000_000),
+     _variant("panda-plus-ahead-g0.99-300m", "panda", {"algo.discount": 0.99}, ", discount 0.99 (preset 0.98)",
+              300_000_000)),
     metrics=AVOID_METRICS, curves=AVOID_CURVES,
     cross=tuple(Cross(run, f"{run}-at-0.05-0.2", {"obstacle_speed_range": (0.05, 0.2)},
                       label=f"{run}, evaluated at the task's 0.05-0.2 m/s")
