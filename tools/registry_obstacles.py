@@ -117,6 +117,7 @@ _SURFACE = {"env.link_distance": "surface"}
 the paper's measures it from the link frame's origin, which in random poses reads over 10 cm at about half or more
 of the contacts along a long link (UR5e upper arm and forearm, Panda link3 and link5; tools/link_distance_probe.py);
 the UR5e agents are struck mostly on those two links (results/obstacles)."""
+
 _HELD_BACK = {"algo.multiplier_start": 150_000_000, "algo.multiplier_lr": 6.0}
 """The failure budget's multiplier held at 0 for the first 150M steps, while the agent learns to reach, then grown at
 twice the default step (the -from150m-lr6 rows): one grown from the start stops the learning to reach when it grows
