@@ -16,16 +16,22 @@ COMMAND_VARIABLE = "REACH_AVOID_COMMAND"
 """Set by a launcher for the processes it starts (a scheduler's job runs a bootstrap, not the user's command)."""
 
 
-def code_version() -> str:
-    """The git commit of this checkout, "+modified" if tracked files differ from it. A copy without .git says
-    "unknown" unless REACH_AVOID_CODE_VERSION names it."""
+RESULTS_FOLDER = "results"
+"""Where results are written: its files are outputs, not code, and leave the code version as it is."""
+
+
+def code_version(root: str = ROOT) -> str:
+    """The git commit of the checkout at `root`, "+modified" if tracked files outside results/ differ from it (a result
+    written or edited there changes no code). A copy without .git says "unknown" unless REACH_AVOID_CODE_VERSION
+    names it."""
     if os.environ.get("REACH_AVOID_CODE_VERSION"):
         return os.environ["REACH_AVOID_CODE_VERSION"]
     try:
-        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True,
+        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=root, capture_output=True, text=True,
                                 timeout=10, check=True).stdout.strip()
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=ROOT,
-                               capture_output=True, text=True, timeout=10, check=True).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no", "--", ".",
+                                f":(exclude){RESULTS_FOLDER}"], cwd=root, capture_output=True, text=True, timeout=10,
+                               check=True).stdout.strip()
     except (OSError, subprocess.SubprocessError):
         return "unknown"
     return commit + ("+modified" if dirty else "")

@@ -2,6 +2,9 @@
 
 import datetime
 import os
+import subprocess
+
+import pytest
 
 from agents import provenance
 
@@ -23,3 +26,46 @@ def test_the_stamp_holds_code_device_and_date(monkeypatch):
     made = provenance.stamp("python eval.py --checkpoint x")
     assert made == {"command": "python eval.py --checkpoint x", "code": "abc1234",
                     "device": f"CPU, {os.cpu_count()} cores", "date": datetime.date.today().isoformat()}
+
+
+def _git(root, *args: str) -> None:
+    subprocess.run(["git", "-c", "user.name=t", "-c", "user.email=t@t", *args], cwd=root, check=True,
+                   capture_output=True)
+
+
+@pytest.fixture
+def checkout(tmp_path, monkeypatch):
+    """A git checkout with one code file and one results file, both committed: (root, its short commit)."""
+    monkeypatch.delenv("REACH_AVOID_CODE_VERSION", raising=False)
+    (tmp_path / "results").mkdir()
+    (tmp_path / "env.py").write_text("x = 1\n")
+    (tmp_path / "results" / "table.md").write_text("| a |\n")
+    _git(tmp_path, "init", "-q")
+    _git(tmp_path, "add", ".")
+    _git(tmp_path, "commit", "-q", "-m", "start")
+    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=tmp_path, capture_output=True, text=True,
+                            check=True).stdout.strip()
+    return tmp_path, commit
+
+
+def test_a_clean_checkout_is_its_commit(checkout):
+    root, commit = checkout
+    assert provenance.code_version(str(root)) == commit
+
+
+def test_an_edited_code_file_marks_the_version_modified(checkout):
+    root, commit = checkout
+    (root / "env.py").write_text("x = 2\n")
+    assert provenance.code_version(str(root)) == commit + "+modified"
+
+
+def test_a_deleted_results_file_leaves_the_version_as_it_is(checkout):
+    root, commit = checkout
+    (root / "results" / "table.md").unlink()
+    assert provenance.code_version(str(root)) == commit
+
+
+def test_a_copy_without_git_is_unknown(tmp_path, monkeypatch):
+    monkeypatch.delenv("REACH_AVOID_CODE_VERSION", raising=False)
+    monkeypatch.setenv("GIT_CEILING_DIRECTORIES", str(tmp_path.parent))
+    assert provenance.code_version(str(tmp_path)) == "unknown"
