@@ -28,9 +28,10 @@ def test_the_stamp_holds_code_device_and_date(monkeypatch):
                     "device": f"CPU, {os.cpu_count()} cores", "date": datetime.date.today().isoformat()}
 
 
-def _git(root, *args: str) -> None:
-    subprocess.run(["git", "-c", "user.name=t", "-c", "user.email=t@t", *args], cwd=root, check=True,
-                   capture_output=True)
+def _git(root, *args: str) -> str:
+    """`git args` in `root` (with an author for commits); its output."""
+    return subprocess.run(["git", "-c", "user.name=t", "-c", "user.email=t@t", *args], cwd=root, check=True,
+                          capture_output=True, text=True).stdout.strip()
 
 
 @pytest.fixture
@@ -43,9 +44,7 @@ def checkout(tmp_path, monkeypatch):
     _git(tmp_path, "init", "-q")
     _git(tmp_path, "add", ".")
     _git(tmp_path, "commit", "-q", "-m", "start")
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=tmp_path, capture_output=True, text=True,
-                            check=True).stdout.strip()
-    return tmp_path, commit
+    return tmp_path, _git(tmp_path, "rev-parse", "--short", "HEAD")
 
 
 def test_a_clean_checkout_is_its_commit(checkout):
