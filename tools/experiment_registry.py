@@ -1,7 +1,8 @@
 """The registered experiments: the paper's experiments, our own studies beyond it, and a point-mass demo that
 shows the launch machinery in two minutes on a CPU. Adding one: `register(Experiment(...))` in
 tools/registry_paper_tasks.py (the paper's four tasks) or tools/registry_obstacles.py (several and moving
-obstacles); `python -m tools.experiments list` shows it, and `tests/test_experiments.py` validates every run's config.
+obstacles); `python -m tools.experiments list` shows it, and `tests/test_experiment_registry.py` validates every
+run's config.
 
 Seeds: 5 where the paper states numbers (tables, text), 3 for comparisons it shows only as curves or words;
 fewer where a row's question was answered before its seeds were all trained (its experiment's note says so).
