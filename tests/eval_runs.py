@@ -1,5 +1,5 @@
-"""Runs and policy exports that several test files of eval.py evaluate: plain functions, so that each file's
-module-scoped fixture builds them once and shows where they come from."""
+"""Runs and policy exports that several test files of eval.py evaluate, and eval.py run as a command: plain
+functions, which conftest.py's module-scoped fixtures `point_run` and `arm_export` call once per test file."""
 
 import os
 import subprocess

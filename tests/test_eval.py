@@ -2,7 +2,7 @@
 on another workspace, rollouts and restarts, rendering, and which trained settings an evaluation may change.
 
 CPU cost is dominated by compiling MJX rollouts (~25 s each on 2 cores), so every compiled evaluation is shared:
-module-scoped fixtures, and eval.py subprocesses run the same programs as the in-process tests with the persistent
+module-scoped fixtures (`arm_export`: conftest.py), and eval.py subprocesses run the same programs as the in-process tests with the persistent
 compilation cache (`.jax_cache/`, see conftest.py) switched on. Also: test_eval_exports.py (policy exports),
 test_eval_input.py (refused input), test_baselines.py, test_plots_and_tables.py, test_failure_report.py.
 """
@@ -19,7 +19,7 @@ import pytest
 import envs
 from agents import evaluation
 from agents.loop import episode_metrics
-from eval_runs import ARM_ENV, eval_process, untrained_export
+from eval_runs import ARM_ENV, eval_process
 from mujoco_reference import colliding_configuration
 
 
@@ -124,12 +124,6 @@ def test_derived_precision_metrics_by_hand():
 
 # ------------------------------------------------------------------------------------------------
 # A checkpoint on another workspace (an untrained UR5e policy written as the driver writes exports)
-
-
-@pytest.fixture(scope="module")
-def arm_export(tmp_path_factory):
-    """An untrained UR5e reach policy's export (eval_runs.py)."""
-    return untrained_export(tmp_path_factory.mktemp("arm"), **ARM_ENV)
 
 
 def test_checkpoint_evaluated_on_another_workspace(arm_export):

@@ -17,15 +17,8 @@ from agents import evaluation, export, presets, registry
 from agents.config import config_json
 from agents.eval_stats import overruled_share
 from agents.loop import make_evaluate, make_evaluate_stacked
-from eval_runs import point_mass_run
 from tools import ship_checkpoint
 from tools.ship_checkpoint import best_seed
-
-
-@pytest.fixture(scope="module")
-def point_run(tmp_path_factory):
-    """A 2-seed point-mass PPO run with checkpoints at 5120 and 10240 env steps (eval_runs.py)."""
-    return point_mass_run(tmp_path_factory.mktemp("point"))
 
 
 def test_driver_writes_policy_exports_that_reproduce_its_evaluation(point_run):

@@ -11,19 +11,7 @@ import pytest
 
 import eval as eval_cli
 from agents import evaluation, export
-from eval_runs import ARM_ENV, eval_process, point_mass_run, untrained_export
-
-
-@pytest.fixture(scope="module")
-def point_run(tmp_path_factory):
-    """A 2-seed point-mass PPO run (eval_runs.py)."""
-    return point_mass_run(tmp_path_factory.mktemp("point"))
-
-
-@pytest.fixture(scope="module")
-def arm_export(tmp_path_factory):
-    """An untrained UR5e reach policy's export (eval_runs.py)."""
-    return untrained_export(tmp_path_factory.mktemp("arm"), **ARM_ENV)
+from eval_runs import eval_process
 
 
 @pytest.fixture

@@ -9,20 +9,8 @@ import numpy as np
 import pytest
 
 from agents import evaluation
-from eval_runs import ARM_ENV, point_mass_run, untrained_export
+from eval_runs import untrained_export
 from tools import paper_tables, plots
-
-
-@pytest.fixture(scope="module")
-def point_run(tmp_path_factory):
-    """A 2-seed point-mass PPO run (eval_runs.py)."""
-    return point_mass_run(tmp_path_factory.mktemp("point"))
-
-
-@pytest.fixture(scope="module")
-def arm_export(tmp_path_factory):
-    """An untrained UR5e reach policy's export (eval_runs.py)."""
-    return untrained_export(tmp_path_factory.mktemp("arm"), **ARM_ENV)
 
 
 def test_training_curves_from_train_logs(point_run, tmp_path):
