@@ -2,9 +2,10 @@
 on another workspace, rollouts and restarts, rendering, and which trained settings an evaluation may change.
 
 CPU cost is dominated by compiling MJX rollouts (~25 s each on 2 cores), so every compiled evaluation is shared:
-module-scoped fixtures (`arm_export`: conftest.py), and eval.py subprocesses run the same programs as the in-process tests with the persistent
-compilation cache (`.jax_cache/`, see conftest.py) switched on. Also: test_eval_exports.py (policy exports),
-test_eval_input.py (refused input), test_baselines.py, test_plots_and_tables.py, test_failure_report.py.
+module-scoped fixtures (`arm_export`: conftest.py), and eval.py subprocesses run the same programs as the in-process
+tests with the persistent compilation cache (`.jax_cache/`, see conftest.py) switched on. Also: test_eval_exports.py
+(policy exports), test_eval_input.py (refused input), test_baselines.py, test_plots_and_tables.py,
+test_failure_report.py.
 """
 
 import json
