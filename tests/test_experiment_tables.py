@@ -181,7 +181,7 @@ def test_a_partial_run_builds_a_row_of_its_done_seeds(tmp_path):
         lines = f.read().splitlines()
     head = next(line for line in lines if line.startswith("| run |")).split(" | ")
     by_run = {line.split(" | ")[0]: line.split(" | ") for line in lines if line.startswith("| ")}
-    column = head.index("device (training's last call) |")
+    column = head.index("device (where training ended) |")
     assert by_run["| b"][column] == "GPU (NVIDIA H100 80GB HBM3) (1 of 2) |"
     assert by_run["| b on sampled"][column] == " |"
     assert not tables.build([(exp, list(exp.runs))], runs_dir, str(tmp_path / "other"), complete_only=True,

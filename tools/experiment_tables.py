@@ -162,7 +162,7 @@ def build_default(experiment: Experiment, states: list[RunState], out_dir: str, 
         cells = [label, f"`{cross.run}`'s policies, evaluated with {cross.setting}"]
         add(cells, row, cross.paper, merged_evaluation(st, files) if files else None, st, st.run.seeds, timing=False)
     head = (["run", "preset and overrides"] + [h for m in metrics for h in (f"paper: {header(m)}", header(m))]
-            + ["seeds x episodes", "device (training's last call)"])
+            + ["seeds x episodes", "device (where training ended)"])
     keep = [i for i in range(len(head)) if not head[i].startswith(("paper: ", "device")) or any(r[i] for r in rows)]
     lines = [f"# {experiment.title}", "", f"Paper: {experiment.paper_ref}." + (f" {experiment.paper}" if experiment.paper else ""), ""]
     if experiment.note:
