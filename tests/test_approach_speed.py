@@ -13,7 +13,7 @@ from tools import approach_speed
 
 
 def test_the_json_names_what_made_it(tmp_path, monkeypatch):
-    """--json carries the command, code, device and date (agents/provenance.py); the measurement is stubbed."""
+    """--json holds the command, code, device and date (agents/provenance.py); the measurement is stubbed."""
     monkeypatch.delenv(provenance.COMMAND_VARIABLE, raising=False)
     monkeypatch.setattr(approach_speed, "servo_cap", lambda env: {"moving_step": [0.01] * 6,
                                                                    "moving_step_fraction_of_scale": [0.1] * 6})

@@ -251,7 +251,7 @@ def test_failure_report_bins_outcomes_by_target_height():
 
 
 def test_failure_report_json_names_what_made_it(tmp_path, monkeypatch):
-    """--json carries the command, code, device and date (agents/provenance.py); the rollout and its reading are
+    """--json holds the command, code, device and date (agents/provenance.py); the rollout and its reading are
     stubbed: only the shipped policy's export is loaded."""
     monkeypatch.delenv(provenance.COMMAND_VARIABLE, raising=False)
     monkeypatch.setattr(evaluation, "rollout", lambda *a, **k: None)

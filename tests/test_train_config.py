@@ -9,9 +9,9 @@ from agents import driver, presets
 from agents.config import total_updates, validate
 from agents.ppo import PPO, PPOConfig
 from agents.sac import SACConfig
+from eval_runs import QUIET
 
 SHORT = 30_720  # 6 updates of the PPO probe preset
-QUIET = dict(tensorboard=False, progress=False)
 
 
 def _ppo_subclass():
